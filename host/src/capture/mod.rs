@@ -1,0 +1,141 @@
+//! Frame sources: the camera side of the pipeline.
+//!
+//! Every source (image sequences, y4m, raw files, video containers through FFmpeg, and the
+//! simulator) yields greyscale [`Frame`]s in the camera's native code values together with a
+//! [`FrameFormat`] that says how code values map to light: `(code - black) / (white - black)` is
+//! the fraction of full scale. Limited-range ("tv") video has black 16 and white 235 at 8 bits.
+
+use thiserror::Error;
+
+/// Geometry, depth and timing of a frame stream.
+#[derive(Debug, Clone, PartialEq, serde::Serialize, serde::Deserialize)]
+pub struct FrameFormat {
+    /// Frame width in pixels.
+    pub width: usize,
+    /// Frame height in pixels.
+    pub height: usize,
+    /// Bits per sample (8, 10, 12 or 16).
+    pub bit_depth: u8,
+    /// Code value of zero light.
+    pub black_level: f32,
+    /// Code value of full scale.
+    pub white_level: f32,
+    /// Capture frame rate in frames per second.
+    pub fps: f64,
+}
+
+impl FrameFormat {
+    /// Full-range format: black 0, white 2^bits − 1.
+    pub fn full_range(width: usize, height: usize, bit_depth: u8, fps: f64) -> Self {
+        Self {
+            width,
+            height,
+            bit_depth,
+            black_level: 0.0,
+            white_level: ((1u32 << bit_depth) - 1) as f32,
+            fps,
+        }
+    }
+
+    /// Converts a code value to a fraction of full scale.
+    pub fn to_fraction(&self, code: f32) -> f32 {
+        (code - self.black_level) / (self.white_level - self.black_level)
+    }
+
+    /// Number of pixels in one frame.
+    pub fn pixels(&self) -> usize {
+        self.width * self.height
+    }
+}
+
+/// Native sample storage of one frame, row-major, row 0 at the top.
+#[derive(Debug, Clone, PartialEq)]
+pub enum Samples {
+    /// 8-bit samples.
+    U8(Vec<u8>),
+    /// 10/12/16-bit samples (low bits used).
+    U16(Vec<u16>),
+}
+
+impl Samples {
+    /// Number of samples.
+    pub fn len(&self) -> usize {
+        match self {
+            Self::U8(v) => v.len(),
+            Self::U16(v) => v.len(),
+        }
+    }
+
+    /// Whether there are no samples.
+    pub fn is_empty(&self) -> bool {
+        self.len() == 0
+    }
+
+    /// Sample `i` as a code value.
+    pub fn code(&self, i: usize) -> f32 {
+        match self {
+            Self::U8(v) => f32::from(v[i]),
+            Self::U16(v) => f32::from(v[i]),
+        }
+    }
+}
+
+/// One greyscale frame.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Frame {
+    /// Index of this frame in its source (after any `--start` offset).
+    pub index: usize,
+    /// The samples, `format.width * format.height` of them.
+    pub samples: Samples,
+}
+
+/// Errors reading frames.
+#[derive(Debug, Error)]
+#[non_exhaustive]
+pub enum CaptureError {
+    /// An I/O error on a named file.
+    #[error("cannot read {path}: {source}")]
+    Io {
+        /// The file.
+        path: std::path::PathBuf,
+        /// The underlying error.
+        source: std::io::Error,
+    },
+    /// A file whose content is not what its format promises.
+    #[error("{path}: {reason}")]
+    Format {
+        /// The file.
+        path: std::path::PathBuf,
+        /// What is wrong.
+        reason: String,
+    },
+    /// A frame whose size differs from the stream's.
+    #[error("frame {index} is {got_width}x{got_height}, expected {width}x{height}")]
+    SizeMismatch {
+        /// Frame index.
+        index: usize,
+        /// Size of the offending frame.
+        got_width: usize,
+        /// Size of the offending frame.
+        got_height: usize,
+        /// Size of the stream.
+        width: usize,
+        /// Size of the stream.
+        height: usize,
+    },
+    /// Anything else that makes the source unusable.
+    #[error("{0}")]
+    Other(String),
+}
+
+/// A stream of frames.
+pub trait FrameSource {
+    /// The stream's format.
+    fn format(&self) -> &FrameFormat;
+    /// The next frame, or `None` at the end of the stream.
+    fn next_frame(&mut self) -> Result<Option<Frame>, CaptureError>;
+    /// Total number of frames, when the source knows it.
+    fn frame_count_hint(&self) -> Option<usize> {
+        None
+    }
+}

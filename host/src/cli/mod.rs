@@ -1,0 +1,3 @@
+//! One module per `meb` subcommand: argument parsing and printing only.
+
+pub mod carriers;

@@ -1,0 +1,11 @@
+//! meb: synchronisation-free photometric-stereo 3-D imaging with MEB-FDMA LED lighting.
+//!
+//! Data flows one way: [`capture`] → [`demod`] → [`photometric`] → [`integrate`] → [`export`],
+//! each stage a function of typed inputs ([`types`]) plus a config struct. [`simulate`] renders
+//! captures with known ground truth and shares no code with the decoder or the reconstruction.
+//! [`device`] talks to luminaires over USB serial and runs a virtual one on a pseudo-terminal.
+
+pub mod capture;
+pub mod flicker;
+pub mod rig;
+pub mod types;

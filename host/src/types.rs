@@ -1,0 +1,42 @@
+//! Typed values passed between pipeline stages: per-LED images, normal fields, depth maps.
+//!
+//! Images are `ndarray` arrays indexed `[row, column]`, row 0 at the top of the picture.
+//! Scene coordinates follow SPEC §5: x to the right, y up (towards row 0), z towards the
+//! camera, millimetres, origin at the object centre.
+
+use ndarray::{Array2, Array3};
+
+/// One image per LED, each the on-level A_i as a fraction of full scale (SPEC §3), as if that
+/// LED alone were lit and the background removed.
+#[derive(Debug, Clone, PartialEq)]
+pub struct LedImages {
+    /// `images[i]` is LED i+1's image, all of the same shape.
+    pub images: Vec<Array2<f32>>,
+}
+
+impl LedImages {
+    /// Image height and width, or `None` when empty.
+    pub fn shape(&self) -> Option<(usize, usize)> {
+        self.images.first().map(|im| im.dim())
+    }
+}
+
+/// Unit surface normals and albedo per pixel.
+#[derive(Debug, Clone, PartialEq)]
+pub struct NormalField {
+    /// H×W×3 unit normals (x, y, z) in scene coordinates; NaN where not estimated.
+    pub normals: Array3<f32>,
+    /// H×W albedo ρ (relative units); NaN where not estimated.
+    pub albedo: Array2<f32>,
+    /// Pixels where the normal was estimated.
+    pub mask: Array2<bool>,
+}
+
+/// A depth map on the camera's pixel grid.
+#[derive(Debug, Clone, PartialEq)]
+pub struct DepthMap {
+    /// H×W depth z in mm towards the camera; NaN where not reconstructed.
+    pub depth_mm: Array2<f32>,
+    /// Grid pitch h in mm per pixel.
+    pub pitch_mm: f64,
+}

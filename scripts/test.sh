@@ -1,0 +1,8 @@
+#!/usr/bin/env bash
+# Runs every test of the workspace on a fresh machine: installs what the tests need
+# (FFmpeg for the video-container tests, the pinned Rust toolchain with the thumb target
+# for the firmware build test), then `cargo test` over the default members.
+set -euo pipefail
+cd "$(dirname "$0")/.."
+bash scripts/setup.sh
+cargo test --locked "$@"
