@@ -476,7 +476,7 @@ mod tests {
         );
         assert_eq!(
             RestoredConfig::from(decode_record(&[])),
-            RestoredConfig::Missing
+            RestoredConfig::Corrupt
         );
         let mut buf = [0u8; MAX_RECORD_LEN];
         let len = encode_record(&other_config(), &mut buf).unwrap().len();
