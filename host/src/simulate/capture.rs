@@ -338,24 +338,32 @@ impl SimulatedCapture {
         }
     }
 
+    /// Integrated light of frame `index` per pixel, as a fraction of full scale, before
+    /// noise, tone curve and quantisation (the SPEC §3 value r_j without its noise term).
+    pub fn light_image(&self, index: usize) -> Array2<f32> {
+        let t = self.frame_time(index);
+        let shading = self.shading_at(t);
+        let (w, h) = (self.format.width, self.format.height);
+        Array2::from_shape_fn((h, w), |(row, col)| {
+            let weights = self.row_weights(t, row, shading.leds.len());
+            let mut v = shading.background[[row, col]];
+            for (image, weight) in shading.leds.iter().zip(&weights) {
+                v += weight * image[[row, col]];
+            }
+            v
+        })
+    }
+
     /// Renders frame `index` (any index, in any order).
     pub fn render_frame(&self, index: usize) -> Frame {
         let t = self.frame_time(index);
-        let shading = match &self.static_shading {
-            Some(s) => Arc::clone(s),
-            None => Arc::new(self.shade(t).1),
-        };
+        let shading = self.shading_at(t);
         let (w, h) = (self.format.width, self.format.height);
         let leds = shading.leds.len();
-        let period = 1.0 / self.rig.camera.fps;
-        let exposure = self.config.exposure * period;
         let rows: Vec<Vec<u16>> = (0..h)
             .into_par_iter()
             .map(|row| {
-                let t0 = t + row as f64 * self.config.line_time_s;
-                let weights: Vec<f32> = (0..leds)
-                    .map(|i| self.waveform.on_fraction(i, t0, t0 + exposure) as f32)
-                    .collect();
+                let weights = self.row_weights(t, row, leds);
                 let mut rng =
                     ChaCha8Rng::seed_from_u64(mix(self.config.seed, index as u64, row as u64));
                 let background = shading.background.row(row);
@@ -381,6 +389,23 @@ impl SimulatedCapture {
             Samples::U16(codes.collect())
         };
         Frame { index, samples }
+    }
+
+    /// Fraction of row `row`'s exposure window each LED is on, for the frame starting at `t`.
+    fn row_weights(&self, t: f64, row: usize, leds: usize) -> Vec<f32> {
+        let exposure = self.config.exposure / self.rig.camera.fps;
+        let t0 = t + row as f64 * self.config.line_time_s;
+        (0..leds)
+            .map(|i| self.waveform.on_fraction(i, t0, t0 + exposure) as f32)
+            .collect()
+    }
+
+    /// Shading for a frame starting at `t` (cached when the scene is static).
+    fn shading_at(&self, t: f64) -> Arc<Shading> {
+        match &self.static_shading {
+            Some(s) => Arc::clone(s),
+            None => Arc::new(self.shade(t).1),
+        }
     }
 
     /// Surface and shading at time `t_s`.
@@ -486,4 +511,251 @@ fn mix(seed: u64, a: u64, b: u64) -> u64 {
     z = (z ^ (z >> 30)).wrapping_mul(0xBF58_476D_1CE4_E5B9);
     z = (z ^ (z >> 27)).wrapping_mul(0x94D0_49BB_1331_11EB);
     z ^ (z >> 31)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::rig::Camera;
+    use crate::simulate::scene::{GroundPlane, SceneObject, Shape};
+    use nalgebra::Vector3;
+
+    /// The out-of-plane rig on a small camera with the same field of view in mm.
+    fn small_rig(width: usize, height: usize) -> Rig {
+        let mut rig = Rig::preset("thesis-out-of-plane").unwrap();
+        let pitch = rig.camera.pitch_mm() * 1280.0 / width as f64;
+        rig.camera = Camera {
+            width,
+            height,
+            fps: 960.0,
+            distance_mm: 420.0,
+            fov_deg: None,
+            pixel_pitch_mm: Some(pitch),
+        };
+        rig
+    }
+
+    fn sphere() -> Scene {
+        Scene::single(SceneObject::new(Shape::Sphere { radius_mm: 24.0 }))
+    }
+
+    fn quiet(frames: usize) -> SimConfig {
+        SimConfig {
+            frames,
+            noise: NoiseModel::NONE,
+            bit_depth: 16,
+            snr_db: Some(2.0),
+            phases_chips: Some(vec![0.3, 1.7, 12.25, 29.9]),
+            ..SimConfig::default()
+        }
+    }
+
+    fn s(table: &ChipTable, led: usize, j: i64) -> f32 {
+        let n = table.chips() as i64;
+        if table.masks()[j.rem_euclid(n) as usize] & (1 << led) != 0 {
+            1.0
+        } else {
+            -1.0
+        }
+    }
+
+    /// SPEC §3 with exposure 1, no noise: r_j = B + Σ (A_i/2)((1−α)s[j+k] + α s[j+k+1]),
+    /// B = background + Σ A_i/2; the quantised frame is that value rounded to 16 bits.
+    #[test]
+    fn frames_follow_the_spec_formula() {
+        let capture = SimulatedCapture::new(small_rig(64, 36), sphere(), quiet(40)).unwrap();
+        let truth = capture.truth_at(0.0);
+        let background = capture.shading_at(0.0).background.clone();
+        assert!(background.iter().any(|&b| b > 0.0));
+        let table = ChipTable::new(4).unwrap();
+        let phases = &capture.info().phases_chips;
+        for j in [0usize, 1, 7, 31, 32, 39] {
+            let light = capture.light_image(j);
+            let frame = capture.render_frame(j);
+            for (p, ((row, col), &value)) in light.indexed_iter().enumerate() {
+                let a: Vec<f32> = truth
+                    .led_true
+                    .images
+                    .iter()
+                    .map(|im| im[[row, col]])
+                    .collect();
+                let mut want = background[[row, col]] + a.iter().sum::<f32>() / 2.0;
+                for (i, ai) in a.iter().enumerate() {
+                    let k = phases[i].floor() as i64;
+                    let alpha = (phases[i] - k as f64) as f32;
+                    let jj = j as i64 + k;
+                    want += ai / 2.0
+                        * ((1.0 - alpha) * s(&table, i, jj) + alpha * s(&table, i, jj + 1));
+                }
+                assert!(
+                    (value - want).abs() < 1e-6,
+                    "frame {j} ({row},{col}): {value} vs {want}"
+                );
+                let code = (f64::from(want).clamp(0.0, 1.0) * 65535.0).round();
+                assert!((f64::from(frame.samples.code(p)) - code).abs() <= 1.0);
+            }
+        }
+    }
+
+    /// Row r of a rolling-shutter frame sees the carriers shifted by r·line_time·rate chips.
+    #[test]
+    fn rolling_shutter_shifts_the_phase_per_row() {
+        let line_time = 0.37 / 960.0 / 36.0 * 10.0;
+        let rolling = SimConfig {
+            line_time_s: line_time,
+            ..quiet(8)
+        };
+        let capture = SimulatedCapture::new(small_rig(64, 36), sphere(), rolling).unwrap();
+        let global = SimulatedCapture::new(small_rig(64, 36), sphere(), quiet(8)).unwrap();
+        for row in [0usize, 10, 18, 35] {
+            let shift = row as f64 * line_time * 960.0;
+            let phases: Vec<f64> = global
+                .info()
+                .phases_chips
+                .iter()
+                .map(|p| p + shift)
+                .collect();
+            let shifted = SimulatedCapture::new(
+                small_rig(64, 36),
+                sphere(),
+                SimConfig {
+                    phases_chips: Some(phases),
+                    ..quiet(8)
+                },
+            )
+            .unwrap();
+            for j in 0..8 {
+                let a = capture.light_image(j);
+                let b = shifted.light_image(j);
+                let g = global.light_image(j);
+                for col in 0..64 {
+                    assert!((a[[row, col]] - b[[row, col]]).abs() < 1e-6);
+                }
+                if row == 18 && j == 0 {
+                    let differs = (0..64).any(|c| (a[[row, c]] - g[[row, c]]).abs() > 1e-4);
+                    assert!(differs, "a late row must differ from a global shutter");
+                }
+            }
+        }
+    }
+
+    #[test]
+    fn a_seed_reproduces_a_capture_bit_for_bit() {
+        let config = SimConfig {
+            frames: 4,
+            phases_chips: None,
+            noise: NoiseModel {
+                sigma: 0.01,
+                full_well_electrons: Some(5000.0),
+            },
+            seed: 42,
+            ..SimConfig::default()
+        };
+        let mut a = SimulatedCapture::new(small_rig(48, 27), sphere(), config.clone()).unwrap();
+        let mut b = SimulatedCapture::new(small_rig(48, 27), sphere(), config.clone()).unwrap();
+        let c = SimulatedCapture::new(
+            small_rig(48, 27),
+            sphere(),
+            SimConfig { seed: 43, ..config },
+        )
+        .unwrap();
+        assert_eq!(a.info().phases_chips, b.info().phases_chips);
+        assert_ne!(a.info().phases_chips, c.info().phases_chips);
+        for j in 0..4 {
+            let fa = a.next_frame().unwrap().unwrap();
+            let fb = b.next_frame().unwrap().unwrap();
+            assert_eq!(fa, fb);
+            assert_ne!(fa, c.render_frame(j));
+        }
+        assert!(a.next_frame().unwrap().is_none());
+        assert_eq!(a.frame_count_hint(), Some(4));
+    }
+
+    /// Under the out-of-plane rig, LED 1 (upper left, low) leaves the sphere's lower right in
+    /// attached shadow and casts the sphere's shadow onto a ground plane to the lower right.
+    #[test]
+    fn out_of_plane_rig_shadows_the_sphere_where_expected() {
+        let rig = small_rig(160, 90);
+        let mut scene = sphere();
+        scene.ground = Some(GroundPlane {
+            z_mm: -24.0,
+            albedo: 0.5,
+        });
+        let capture = SimulatedCapture::new(rig.clone(), scene, quiet(1)).unwrap();
+        let truth = capture.truth_at(0.0);
+        let led1 = &truth.led_true.images[0];
+        let p1 = rig.leds[0].position();
+        let (mut lit, mut attached) = (0, 0);
+        for ((row, col), &inside) in truth.mask.indexed_iter() {
+            if !inside {
+                continue;
+            }
+            let (x, y) = rig.camera.pixel_centre_xy(row as f64, col as f64);
+            let point = Vector3::new(x, y, f64::from(truth.depth_mm[[row, col]]));
+            let n = Vector3::new(
+                f64::from(truth.normals[[row, col, 0]]),
+                f64::from(truth.normals[[row, col, 1]]),
+                f64::from(truth.normals[[row, col, 2]]),
+            );
+            let facing = n.dot(&(p1 - point).normalize());
+            if facing < -0.02 {
+                assert_eq!(led1[[row, col]], 0.0, "attached shadow at ({row},{col})");
+                attached += 1;
+            } else if facing > 0.05 {
+                assert!(led1[[row, col]] > 0.0, "lit at ({row},{col})");
+                lit += 1;
+            }
+        }
+        assert!(lit > 150 && attached > 50, "lit {lit} attached {attached}");
+        // Ground point just beyond the sphere, away from LED 1: in its cast shadow.
+        let away = -(p1.xy().normalize()) * 30.0;
+        let (r, c) = rig.camera.xy_to_pixel(away.x, away.y);
+        assert!(!truth.mask[[r.round() as usize, c.round() as usize]]);
+        assert_eq!(led1[[r.round() as usize, c.round() as usize]], 0.0);
+        // The same distance towards LED 1 is lit.
+        let (r, c) = rig.camera.xy_to_pixel(-away.x, -away.y);
+        assert!(led1[[r.round() as usize, c.round() as usize]] > 0.0);
+        // The brightest LED peaks near the default 0.4 of full scale.
+        let peak = truth
+            .led_true
+            .images
+            .iter()
+            .flatten()
+            .fold(0f32, |m, &v| m.max(v));
+        assert!((0.35..=0.45).contains(&peak), "peak {peak}");
+    }
+
+    #[test]
+    fn bad_settings_are_named() {
+        let err = SimulatedCapture::new(
+            small_rig(8, 8),
+            sphere(),
+            SimConfig {
+                frames: 0,
+                ..SimConfig::default()
+            },
+        )
+        .unwrap_err();
+        assert!(err.to_string().contains("frames"), "{err}");
+        let err = SimulatedCapture::new(
+            small_rig(8, 8),
+            sphere(),
+            SimConfig {
+                bit_depth: 9,
+                ..SimConfig::default()
+            },
+        )
+        .unwrap_err();
+        assert!(err.to_string().contains("bit-depth"), "{err}");
+        let err = SimulatedCapture::new(
+            small_rig(8, 8),
+            sphere(),
+            SimConfig {
+                phases_chips: Some(vec![0.0]),
+                ..SimConfig::default()
+            },
+        )
+        .unwrap_err();
+        assert!(err.to_string().contains("phases"), "{err}");
+    }
 }
