@@ -8,4 +8,5 @@
 pub mod capture;
 pub mod flicker;
 pub mod rig;
+pub mod simulate;
 pub mod types;
