@@ -147,6 +147,11 @@ pub const fn slots_of(bank: Bank) -> [Option<u8>; 4] {
 pub const HSE_HZ: u32 = 25_000_000;
 /// SYSCLK = 25 MHz / 25 · 192 / 2.
 pub const SYSCLK_HZ: u32 = 96_000_000;
+const _: () = assert!(
+    HSE_HZ / 25 * 192 / 2 == SYSCLK_HZ,
+    "PLL settings and SYSCLK disagree"
+);
+
 /// Clock of TIM2–TIM5 (APB1 = 48 MHz, doubled for timers because the APB1 prescaler is 2).
 pub const APB1_TIMER_HZ: u32 = 96_000_000;
 

@@ -80,21 +80,19 @@ pub struct LedPins<'d> {
     pub pa0: Peri<'d, PA0>,
 }
 
+/// The four channel pins of one PWM timer.
+type BankPins<'d, T> = (
+    PwmPin<'d, T, Ch1>,
+    PwmPin<'d, T, Ch2>,
+    PwmPin<'d, T, Ch3>,
+    PwmPin<'d, T, Ch4>,
+);
+
 /// The pins in alternate-function mode; kept alive so they stay timer outputs.
 #[allow(dead_code)]
 struct PwmPins<'d> {
-    tim3: (
-        PwmPin<'d, TIM3, Ch1>,
-        PwmPin<'d, TIM3, Ch2>,
-        PwmPin<'d, TIM3, Ch3>,
-        PwmPin<'d, TIM3, Ch4>,
-    ),
-    tim5: (
-        PwmPin<'d, TIM5, Ch1>,
-        PwmPin<'d, TIM5, Ch2>,
-        PwmPin<'d, TIM5, Ch3>,
-        PwmPin<'d, TIM5, Ch4>,
-    ),
+    tim3: BankPins<'d, TIM3>,
+    tim5: BankPins<'d, TIM5>,
 }
 
 /// Why an output plan could not be loaded.
@@ -178,11 +176,6 @@ impl<'d> ChipEngine<'d> {
     /// Timer clock of the chip timer (TIM2), from the RCC state.
     pub fn chip_clock_hz(&self) -> u32 {
         self.chip_clock.get_clock_frequency().0
-    }
-
-    /// What is loaded, if anything.
-    pub fn loaded(&self) -> Option<Loaded> {
-        self.loaded
     }
 
     /// Whether the carriers are playing.

@@ -46,11 +46,7 @@ impl ConfigStore {
     /// A store over `flash`, using [`CONFIG_FLASH`].
     pub fn new(flash: Flash<'static, Async>) -> Self {
         Self {
-            map: MapStorage::new(
-                flash,
-                MapConfig::new(CONFIG_FLASH),
-                Cache::new_uncached(),
-            ),
+            map: MapStorage::new(flash, MapConfig::new(CONFIG_FLASH), Cache::new_uncached()),
             buffer: [0; ITEM_BUFFER],
         }
     }
@@ -71,7 +67,7 @@ impl ConfigStore {
             },
             Ok(None) => RestoredConfig::Missing,
             Err(error) => {
-                defmt::warn!("config storage unreadable: {}", defmt::Debug2Format(&error));
+                defmt::warn!("config storage unreadable: {}", error);
                 RestoredConfig::Corrupt
             }
         }
@@ -85,7 +81,7 @@ impl ConfigStore {
             .store_item(&mut self.buffer, &CONFIG_KEY, &bytes)
             .await
             .map_err(|error| {
-                defmt::warn!("config save failed: {}", defmt::Debug2Format(&error));
+                defmt::warn!("config save failed: {}", error);
                 SaveError::Flash
             })
     }
