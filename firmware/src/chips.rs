@@ -52,6 +52,8 @@ const SLOTS: usize = 4;
 const TIM3_STREAM: (usize, u8) = (4, 5);
 /// DMA stream and request channel of TIM5_TRIG.
 const TIM5_STREAM: (usize, u8) = (1, 6);
+/// Polls of NDTR to wait for a burst in flight (a burst is 4 APB writes, ~100 CPU cycles).
+const BURST_SPIN_LIMIT: u32 = 10_000;
 /// DCR base address of the burst: CCR1 is register 13 (offset 0x34) of a general-purpose timer.
 const DCR_BASE_CCR1: u8 = 13;
 
@@ -253,6 +255,7 @@ impl<'d> ChipEngine<'d> {
             Size::BITS32,
         );
         for regs in [tim3, tim5] {
+            set_burst(regs);
             regs.sr().write(|w| w.0 = 0);
             regs.dier().modify(|w| w.set_tde(true));
         }
@@ -271,11 +274,21 @@ impl<'d> ChipEngine<'d> {
     }
 
     fn halt(&mut self) {
+        // No new chip triggers; then let a burst in flight finish (4 transfers, well under a
+        // microsecond) so the timer's DMAR index is back at CCR1 for the next start.
         self.chip_clock.stop();
         for (regs, stream) in [
             (self.tim3.regs_gp16(), TIM3_STREAM),
             (self.tim5.regs_gp16(), TIM5_STREAM),
         ] {
+            let st = pac::DMA1.st(stream.0);
+            let mut spins = 0u32;
+            while st.cr().read().en()
+                && !usize::from(st.ndtr().read().ndt()).is_multiple_of(SLOTS)
+                && spins < BURST_SPIN_LIMIT
+            {
+                spins += 1;
+            }
             regs.dier().modify(|w| w.set_tde(false));
             stop_stream(stream.0);
         }
@@ -307,14 +320,19 @@ fn setup_pwm_bank<T: GeneralInstance4Channel>(timer: &Timer<'_, T>, trigger: Tri
         timer.set_output_compare_preload(channel, true);
         timer.enable_channel(channel, true);
     }
-    regs.dcr().write(|w| {
-        w.set_dba(DCR_BASE_CCR1);
-        w.set_dbl(SLOTS as u8 - 1);
-    });
+    set_burst(regs);
     timer.set_trigger_source(trigger);
     timer.set_slave_mode(SlaveMode::RESET_MODE);
     timer.generate_update_event();
     timer.start();
+}
+
+/// DMA burst through DMAR: CCR1..CCR4, one burst per DMA request of the timer.
+fn set_burst(regs: pac::timer::TimGp16) {
+    regs.dcr().write(|w| {
+        w.set_dba(DCR_BASE_CCR1);
+        w.set_dbl(SLOTS as u8 - 1);
+    });
 }
 
 /// Programs and enables a DMA1 stream: circular, memory → peripheral, memory increment, one
