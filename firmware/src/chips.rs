@@ -57,8 +57,12 @@ const BURST_SPIN_LIMIT: u32 = 10_000;
 /// DCR base address of the burst: CCR1 is register 13 (offset 0x34) of a general-purpose timer.
 const DCR_BASE_CCR1: u8 = 13;
 
-static TIM3_FRAMES: ConstStaticCell<[u16; MAX_CHIPS * SLOTS]> =
-    ConstStaticCell::new([0; MAX_CHIPS * SLOTS]);
+/// LEDs 1–4 repeat within 32 chips whatever N and the phases (`protocol::timing::slot_pattern_period`), so
+/// TIM3 needs 32 frames; TIM5 (LEDs 5–8) needs the full 512.
+const TIM3_MAX_CHIPS: usize = 32;
+
+static TIM3_FRAMES: ConstStaticCell<[u16; TIM3_MAX_CHIPS * SLOTS]> =
+    ConstStaticCell::new([0; TIM3_MAX_CHIPS * SLOTS]);
 static TIM5_FRAMES: ConstStaticCell<[u32; MAX_CHIPS * SLOTS]> =
     ConstStaticCell::new([0; MAX_CHIPS * SLOTS]);
 
@@ -124,9 +128,11 @@ pub struct ChipEngine<'d> {
     tim5: Timer<'d, TIM5>,
     _pins: PwmPins<'d>,
     _dma: (Peri<'d, DMA1_CH4>, Peri<'d, DMA1_CH1>),
-    tim3_frames: &'static mut [u16; MAX_CHIPS * SLOTS],
+    tim3_frames: &'static mut [u16; TIM3_MAX_CHIPS * SLOTS],
     tim5_frames: &'static mut [u32; MAX_CHIPS * SLOTS],
     loaded: Option<Loaded>,
+    /// DMA transfers of one cycle of each bank's frames (TIM3, TIM5).
+    transfers: (u16, u16),
     running: bool,
 }
 
@@ -167,6 +173,7 @@ impl<'d> ChipEngine<'d> {
             tim3_frames: TIM3_FRAMES.take(),
             tim5_frames: TIM5_FRAMES.take(),
             loaded: None,
+            transfers: (0, 0),
             running: false,
         };
         // TIM3 is triggered by ITR1 = TIM2, TIM5 by ITR0 = TIM2 (RM0383 table 54).
@@ -236,22 +243,23 @@ impl<'d> ChipEngine<'d> {
         if self.running {
             return;
         }
-        // Whole frames of 4 compare values; at most 512 chips · 4 = 2048 transfers.
-        let transfers = (loaded.chips * SLOTS) as u16;
+        if loaded.chips == 0 {
+            return;
+        }
         let tim3 = self.tim3.regs_gp16();
         let tim5 = self.tim5.regs_gp16();
         start_stream(
             TIM3_STREAM,
             tim3.dmar().as_ptr() as u32,
             self.tim3_frames.as_ptr() as u32,
-            transfers,
+            self.transfers.0,
             Size::BITS16,
         );
         start_stream(
             TIM5_STREAM,
             tim5.dmar().as_ptr() as u32,
             self.tim5_frames.as_ptr() as u32,
-            transfers,
+            self.transfers.1,
             Size::BITS32,
         );
         for regs in [tim3, tim5] {

@@ -190,10 +190,41 @@ pub const fn on_compare(brightness_permille: u16) -> u16 {
     ((permille as u32 * PWM_STEPS as u32 + 500) / 1000) as u16
 }
 
-/// Writes the compare values a PWM timer loads at each chip: `out` holds one frame of
-/// `led_of_slot.len()` values per chip in table order, slot s carrying LED `led_of_slot[s]`'s
-/// compare value (its [`on_compare`] when on during that chip, 0 when off, 0 for `None` or an
-/// LED beyond the table). Returns the number of values written (`chips · slots`).
+/// Bit mask of the table's LEDs among `led_of_slot` (LEDs beyond the table are ignored).
+fn slot_led_mask(table: &ChipTable, led_of_slot: &[Option<u8>]) -> u8 {
+    led_of_slot
+        .iter()
+        .flatten()
+        .filter(|&&led| led < table.led_count())
+        .fold(0, |mask, &led| mask | (1 << led))
+}
+
+/// Smallest number of chips after which the on/off pattern of the LEDs in `led_of_slot`
+/// repeats: a power of two dividing the frame length. LED i's carrier has period 2^(i+2) chips
+/// whatever its phase (it depends on bits 0 and i+1 of the chip index, SPEC §2), so LEDs 1–4
+/// repeat within 32 chips even in a 512-chip frame, and a bank without LEDs has period 1.
+pub fn slot_pattern_period(table: &ChipTable, led_of_slot: &[Option<u8>]) -> usize {
+    let mask = slot_led_mask(table, led_of_slot);
+    let masks = table.masks();
+    let mut period = 1;
+    while period < masks.len() {
+        let repeats = masks
+            .iter()
+            .enumerate()
+            .all(|(chip, &m)| m & mask == masks[chip % period] & mask);
+        if repeats {
+            return period;
+        }
+        period *= 2;
+    }
+    masks.len()
+}
+
+/// Writes the compare values a PWM timer loads at each chip: one frame of `led_of_slot.len()`
+/// values per chip, for the first [`slot_pattern_period`] chips (played cyclically, they repeat
+/// the whole table for these LEDs). Slot s carries LED `led_of_slot[s]`'s compare value: its
+/// [`on_compare`] when on during that chip, 0 when off, 0 for `None` or an LED beyond the
+/// table. Returns the number of values written (`period · slots`).
 pub fn fill_compare_frames<W: From<u16> + Copy>(
     table: &ChipTable,
     brightness_permille: &[u16; MAX_LEDS],
@@ -201,14 +232,14 @@ pub fn fill_compare_frames<W: From<u16> + Copy>(
     out: &mut [W],
 ) -> Result<usize, TimingError> {
     let slots = led_of_slot.len();
-    let needed = table.chips() * slots;
+    let needed = slot_pattern_period(table, led_of_slot) * slots;
     if out.len() < needed || slots == 0 {
         return Err(TimingError::FrameBuffer {
             needed,
             got: out.len(),
         });
     }
-    for (frame, &mask) in out.chunks_exact_mut(slots).zip(table.masks()) {
+    for (frame, &mask) in out[..needed].chunks_exact_mut(slots).zip(table.masks()) {
         for (value, led) in frame.iter_mut().zip(led_of_slot) {
             let compare = match *led {
                 Some(led) if led < table.led_count() && mask & (1 << led) != 0 => {
@@ -363,6 +394,7 @@ mod tests {
         let slots = [Some(1), Some(0), None, Some(5)];
         let mut out = [0xFFFFu16; 8 * 4];
         let written = fill_compare_frames(&table, &brightness, &slots, &mut out).unwrap();
+        // LED index 1 repeats every 8 chips: the whole N = 2 frame.
         assert_eq!(written, 32);
         let s0 = [1, -1, -1, 1, 1, -1, -1, 1];
         let s1 = [1, -1, 1, -1, -1, 1, -1, 1];
@@ -376,6 +408,7 @@ mod tests {
         fill_compare_frames(&table, &brightness, &slots, &mut wide).unwrap();
         assert!(wide.iter().zip(out).all(|(&w, n)| w == u32::from(n)));
         let mut short = [0u16; 31];
+        assert_eq!(slot_pattern_period(&table, &slots), 8);
         assert_eq!(
             fill_compare_frames(&table, &brightness, &slots, &mut short),
             Err(TimingError::FrameBuffer {
@@ -383,5 +416,42 @@ mod tests {
                 got: 31
             })
         );
+    }
+
+    #[test]
+    fn low_leds_repeat_within_32_chips_whatever_the_frame_length_and_phases() {
+        let bank_a = [Some(0), Some(1), Some(2), Some(3)];
+        let bank_b = [Some(7), Some(4), Some(5), Some(6)];
+        for leds in 1..=MAX_LEDS as u8 {
+            let n = crate::carriers::chips_per_frame(leds);
+            // Phases: a spread of values below n for every LED.
+            let mut phases = [0u16; MAX_LEDS];
+            for (i, p) in phases.iter_mut().enumerate() {
+                *p = ((i * 37 + 11) % n) as u16;
+            }
+            for table in [
+                ChipTable::new(leds).unwrap(),
+                ChipTable::with_phases(leds, &phases).unwrap(),
+            ] {
+                let period_a = slot_pattern_period(&table, &bank_a);
+                assert!(period_a <= 32 && period_a <= n, "N = {leds}: {period_a}");
+                assert_eq!(period_a, n.min(32), "N = {leds}");
+                let period_b = slot_pattern_period(&table, &bank_b);
+                let expected_b = if leds <= 4 { 1 } else { n };
+                assert_eq!(period_b, expected_b, "N = {leds}");
+                // Played cyclically, the short frames reproduce every chip of the table.
+                let brightness = [1000u16; MAX_LEDS];
+                let mut frames = [0u16; 32 * 4];
+                let written = fill_compare_frames(&table, &brightness, &bank_a, &mut frames);
+                assert_eq!(written, Ok(period_a * 4));
+                for (chip, &mask) in table.masks().iter().enumerate() {
+                    let frame = &frames[(chip % period_a) * 4..][..4];
+                    for (slot, led) in bank_a.iter().flatten().enumerate() {
+                        let on = *led < leds && mask & (1 << led) != 0;
+                        assert_eq!(frame[slot] == 1000, on, "N = {leds} chip {chip}");
+                    }
+                }
+            }
+        }
     }
 }
