@@ -17,6 +17,7 @@ use crate::config::{ChipRate, ConfigError, LuminaireConfig};
 use crate::framing::{
     FrameError, FrameEvent, MAX_FRAME_LEN, WireFrameReader, decode_request, encode_response,
 };
+use crate::record::RecordError;
 use crate::wire::{
     CommandError, ConfigSource, DeviceInfo, MAX_IDENTIFY_SECONDS, PROTOCOL_VERSION, ProtocolError,
     Request, Response, SEQ_UNKNOWN, SaveOutcome, SaveState, Status,
@@ -89,6 +90,27 @@ pub struct BoardInfo {
     pub board: String<32>,
 }
 
+impl BoardInfo {
+    /// Board facts from plain strings, each cut at a character boundary to fit its capacity.
+    pub fn new(firmware_version: &str, board: &str) -> Self {
+        Self {
+            firmware_version: truncated(firmware_version),
+            board: truncated(board),
+        }
+    }
+}
+
+/// The longest prefix of `text` that fits `N` bytes, cut at a character boundary.
+fn truncated<const N: usize>(text: &str) -> String<N> {
+    let mut out = String::new();
+    for c in text.chars() {
+        if out.push(c).is_err() {
+            break;
+        }
+    }
+    out
+}
+
 /// Outcome of reading the stored configuration at boot.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 #[cfg_attr(feature = "defmt", derive(defmt::Format))]
@@ -101,11 +123,13 @@ pub enum RestoredConfig {
     Corrupt,
 }
 
-impl<E> From<Result<LuminaireConfig, E>> for RestoredConfig {
-    /// Any decode error counts as corrupt; use [`RestoredConfig::Missing`] for absent storage.
-    fn from(result: Result<LuminaireConfig, E>) -> Self {
+impl From<Result<LuminaireConfig, RecordError>> for RestoredConfig {
+    /// Maps [`decode_record`](crate::record::decode_record)'s result: no magic (erased flash)
+    /// is `Missing`, any other error (including an empty or truncated record) is `Corrupt`.
+    fn from(result: Result<LuminaireConfig, RecordError>) -> Self {
         match result {
             Ok(config) if config.validate().is_ok() => Self::Ok(config),
+            Err(RecordError::BadMagic) => Self::Missing,
             _ => Self::Corrupt,
         }
     }
@@ -413,4 +437,248 @@ fn respond<'a>(
 
 fn encode_reply<'a>(seq: u32, response: &Response, buf: &'a mut [u8]) -> Option<&'a [u8]> {
     encode_response(seq, response, buf).ok()
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::framing::{decode_response, encode_request};
+
+    fn board() -> BoardInfo {
+        BoardInfo {
+            firmware_version: String::try_from("0.1.0").unwrap(),
+            board: String::try_from("test").unwrap(),
+        }
+    }
+
+    fn other_config() -> LuminaireConfig {
+        LuminaireConfig {
+            led_count: 3,
+            chip_rate: ChipRate(959_500),
+            phase_chips: [1, 2, 3, 0, 0, 0, 0, 0],
+            ..LuminaireConfig::DEFAULT
+        }
+    }
+
+    #[test]
+    fn board_info_truncates_at_char_boundaries() {
+        let info = BoardInfo::new("0.1.0-very-long-version", "ü".repeat(20).as_str());
+        assert_eq!(info.firmware_version.as_str(), "0.1.0-very-long-");
+        assert_eq!(info.board.as_str(), "ü".repeat(16));
+    }
+
+    #[test]
+    fn restored_from_record_results() {
+        use crate::record::{MAX_RECORD_LEN, decode_record, encode_record};
+        assert_eq!(
+            RestoredConfig::from(decode_record(&[0xFF; 64])),
+            RestoredConfig::Missing
+        );
+        assert_eq!(
+            RestoredConfig::from(decode_record(&[])),
+            RestoredConfig::Corrupt
+        );
+        let mut buf = [0u8; MAX_RECORD_LEN];
+        let len = encode_record(&other_config(), &mut buf).unwrap().len();
+        assert_eq!(
+            RestoredConfig::from(decode_record(&buf)),
+            RestoredConfig::Ok(other_config())
+        );
+        buf[len - 1] ^= 1;
+        assert_eq!(
+            RestoredConfig::from(decode_record(&buf)),
+            RestoredConfig::Corrupt
+        );
+    }
+
+    #[test]
+    fn boot_sources() {
+        let missing = Luminaire::new(board(), RestoredConfig::Missing);
+        assert_eq!(missing.status().config_source, ConfigSource::Defaults);
+        assert_eq!(*missing.config(), LuminaireConfig::DEFAULT);
+        assert!(missing.status().unsaved_changes);
+        let corrupt = Luminaire::new(board(), RestoredConfig::Corrupt);
+        assert_eq!(
+            corrupt.status().config_source,
+            ConfigSource::CorruptRecordDefaults
+        );
+        let restored = Luminaire::new(board(), RestoredConfig::Ok(other_config()));
+        assert_eq!(restored.status().config_source, ConfigSource::Restored);
+        assert_eq!(*restored.config(), other_config());
+        assert!(!restored.status().unsaved_changes);
+        let mut bad = other_config();
+        bad.led_count = 0;
+        let invalid = Luminaire::new(board(), RestoredConfig::Ok(bad));
+        assert_eq!(
+            invalid.status().config_source,
+            ConfigSource::CorruptRecordDefaults
+        );
+        assert_eq!(
+            restored.startup_effects().as_slice(),
+            [
+                Effect::ApplyOutput(OutputPlan::of(&other_config())),
+                Effect::Start
+            ]
+        );
+    }
+
+    #[test]
+    fn set_config_applies_only_valid_configs() {
+        let mut lum = Luminaire::new(board(), RestoredConfig::Missing);
+        let mut bad = other_config();
+        bad.brightness_permille[5] = 2000;
+        let (response, effects) = lum.handle(1, &Request::SetConfig(bad));
+        assert_eq!(
+            response,
+            Response::SetConfig(Err(ConfigError::Brightness { led: 5, got: 2000 }))
+        );
+        assert!(effects.is_empty());
+        assert_eq!(*lum.config(), LuminaireConfig::DEFAULT);
+        let (response, effects) = lum.handle(2, &Request::SetConfig(other_config()));
+        assert_eq!(response, Response::SetConfig(Ok(())));
+        assert_eq!(
+            effects.as_slice(),
+            [
+                Effect::ApplyOutput(OutputPlan::of(&other_config())),
+                Effect::Start
+            ]
+        );
+        assert_eq!(
+            lum.handle(3, &Request::GetConfig(())).0,
+            Response::GetConfig(other_config())
+        );
+        let Response::GetInfo(info) = lum.handle(4, &Request::GetInfo(())).0 else {
+            panic!("not an info response");
+        };
+        assert_eq!(
+            info.carrier_fingerprint,
+            other_config().chip_table().unwrap().fingerprint()
+        );
+        assert_eq!(
+            (info.min_chip_rate, info.max_chip_rate),
+            (ChipRate::MIN, ChipRate::MAX)
+        );
+    }
+
+    #[test]
+    fn retry_returns_cached_response_without_effects() {
+        let mut lum = Luminaire::new(board(), RestoredConfig::Missing);
+        let request = Request::SetConfig(other_config());
+        let first = lum.handle(9, &request);
+        assert!(!first.1.is_empty());
+        let retry = lum.handle(9, &request);
+        assert_eq!(retry.0, first.0);
+        assert!(retry.1.is_empty());
+        // Same seq, different body: a new request.
+        let (_, effects) = lum.handle(9, &Request::Stop(()));
+        assert_eq!(effects.as_slice(), [Effect::Stop]);
+        assert!(!lum.config().running);
+    }
+
+    #[test]
+    fn save_flow() {
+        let mut lum = Luminaire::new(board(), RestoredConfig::Missing);
+        let (response, effects) = lum.handle(1, &Request::SaveConfig(()));
+        assert_eq!(response, Response::SaveConfig(Ok(SaveOutcome::Deferred)));
+        assert_eq!(
+            effects.as_slice(),
+            [Effect::Persist(LuminaireConfig::DEFAULT)]
+        );
+        assert_eq!(lum.status().save, SaveState::Pending);
+        assert_eq!(
+            lum.handle(2, &Request::SaveConfig(())).0,
+            Response::SaveConfig(Err(CommandError::Busy))
+        );
+        // A change while saving stays unsaved after the save completes.
+        lum.handle(3, &Request::Stop(()));
+        lum.notify_saved(Ok(()));
+        let status = lum.status();
+        assert_eq!(status.save, SaveState::Idle);
+        assert!(status.unsaved_changes);
+        lum.handle(4, &Request::Start(()));
+        assert!(!lum.status().unsaved_changes);
+        assert_eq!(
+            lum.handle(5, &Request::SaveConfig(())).0,
+            Response::SaveConfig(Ok(SaveOutcome::AlreadySaved))
+        );
+        lum.handle(6, &Request::SetConfig(other_config()));
+        lum.handle(7, &Request::SaveConfig(()));
+        lum.notify_saved(Err(CommandError::StorageFailed));
+        assert_eq!(lum.status().save, SaveState::Failed);
+        assert!(lum.status().unsaved_changes);
+    }
+
+    #[test]
+    fn identify_and_ping() {
+        let mut lum = Luminaire::new(board(), RestoredConfig::Missing);
+        assert_eq!(lum.handle(1, &Request::Ping(77)).0, Response::Ping(77));
+        let (response, effects) = lum.handle(2, &Request::Identify(5));
+        assert_eq!(response, Response::Identify(Ok(())));
+        assert_eq!(effects.as_slice(), [Effect::Identify { seconds: 5 }]);
+        assert!(lum.status().identify_active);
+        lum.notify_identify_finished();
+        assert!(!lum.status().identify_active);
+        assert_eq!(
+            lum.handle(3, &Request::Identify(MAX_IDENTIFY_SECONDS + 1))
+                .0,
+            Response::Identify(Err(CommandError::InvalidArgument))
+        );
+    }
+
+    #[test]
+    fn endpoint_replies_and_counts() {
+        let mut endpoint = Endpoint::new(Luminaire::new(board(), RestoredConfig::Missing));
+        let mut buf = [0u8; MAX_FRAME_LEN];
+        let mut stream = std::vec::Vec::new();
+        stream.extend_from_slice(encode_request(5, &Request::Ping(1), &mut buf).unwrap());
+        stream.extend_from_slice(&[0x33, 0x01, 0x02, 0x00]);
+        stream.extend_from_slice(&[0x44; 2 * MAX_FRAME_LEN]);
+        stream.push(0);
+        stream.extend_from_slice(encode_request(6, &Request::Stop(()), &mut buf).unwrap());
+        let mut replies = std::vec::Vec::new();
+        for chunk in stream.chunks(5) {
+            endpoint.on_bytes(chunk, |bytes, effects| {
+                let mut raw = bytes.to_vec();
+                let (header, response) = decode_response(&mut raw).unwrap();
+                replies.push((header.seq, response, effects));
+            });
+        }
+        let seqs: std::vec::Vec<_> = replies.iter().map(|r| r.0).collect();
+        assert_eq!(seqs, [5, SEQ_UNKNOWN, SEQ_UNKNOWN, 6]);
+        assert_eq!(replies[0].1, Response::Ping(1));
+        assert_eq!(
+            replies[1].1,
+            Response::ProtocolError(ProtocolError::Malformed)
+        );
+        assert_eq!(
+            replies[2].1,
+            Response::ProtocolError(ProtocolError::FrameTooLong)
+        );
+        assert_eq!(replies[3].1, Response::Stop(Ok(())));
+        assert_eq!(replies[3].2.as_slice(), [Effect::Stop]);
+        let status = endpoint.luminaire.status();
+        assert_eq!(
+            (
+                status.rx_frames_ok,
+                status.rx_malformed,
+                status.rx_too_long,
+                status.rx_bad_crc
+            ),
+            (2, 1, 1, 0)
+        );
+        // handle_frame: a bad CRC is answered as such.
+        let mut raw = encode_request(8, &Request::Ping(2), &mut buf)
+            .unwrap()
+            .to_vec();
+        raw[4] ^= 0x01;
+        let mut reply = [0u8; MAX_FRAME_LEN];
+        let (bytes, effects) = endpoint.handle_frame(&mut raw, &mut reply);
+        let mut bytes = bytes.unwrap().to_vec();
+        assert!(effects.is_empty());
+        assert_eq!(
+            decode_response(&mut bytes).unwrap().1,
+            Response::ProtocolError(ProtocolError::BadCrc)
+        );
+        assert_eq!(endpoint.luminaire.counters().bad_crc, 1);
+    }
 }
