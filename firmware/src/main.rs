@@ -20,7 +20,6 @@ use embassy_executor::Spawner;
 use embassy_stm32::flash::{self, Flash};
 use embassy_stm32::gpio::{Level, Output, Speed};
 use embassy_stm32::{bind_interrupts, peripherals};
-use heapless::String;
 use panic_probe as _;
 use protocol::luminaire::{BoardInfo, Luminaire};
 use protocol::wire::CommandError;
@@ -67,17 +66,6 @@ async fn identify_blinker(mut led: BoardLed<'static>) -> ! {
     }
 }
 
-fn board_info() -> BoardInfo {
-    let mut firmware_version = String::new();
-    let _ = firmware_version.push_str(env!("CARGO_PKG_VERSION"));
-    let mut board = String::new();
-    let _ = board.push_str(board::BOARD_NAME);
-    BoardInfo {
-        firmware_version,
-        board,
-    }
-}
-
 #[embassy_executor::main]
 async fn main(spawner: Spawner) {
     let p = embassy_stm32::init(board::clock_config());
@@ -116,7 +104,10 @@ async fn main(spawner: Spawner) {
     let mut store = ConfigStore::new(Flash::new(p.FLASH, Irqs));
     let restored = store.restore().await;
     info!("stored config: {}", restored);
-    let luminaire = Luminaire::new(board_info(), restored);
+    let luminaire = Luminaire::new(
+        BoardInfo::new(env!("CARGO_PKG_VERSION"), board::BOARD_NAME),
+        restored,
+    );
     link::apply(&mut engine, &luminaire.startup_effects());
     link::install(luminaire);
 

@@ -58,6 +58,8 @@ impl ConfigStore {
             .fetch_item::<&[u8]>(&mut self.buffer, &CONFIG_KEY)
             .await
         {
+            // An item under our key that does not decode is corruption, even without the magic
+            // (the protocol maps a bare BadMagic to Missing for files and raw flash).
             Ok(Some(bytes)) => match decode_record(bytes) {
                 Ok(config) => RestoredConfig::Ok(config),
                 Err(error) => {
