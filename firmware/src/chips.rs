@@ -17,6 +17,10 @@
 //! interrupt, so the carriers keep running while a flash sector is erased (the CPU stalls, the
 //! DMA and timers do not) and while USB is busy or gone.
 //!
+//! Frame buffers: TIM5 (LEDs 5–8) holds the whole frame, up to 512 chips; TIM3 (LEDs 1–4) only
+//! the first 32 chips, because those carriers repeat every ≤ 32 chips whatever N and the phases;
+//! both streams are paced by the same trigger, so they stay in step.
+//!
 //! TIM5's registers are 32 bits wide, so its frames are `u32` (a 16-bit APB write would be
 //! replicated into the upper half of the compare register); TIM3's are `u16`.
 //!

@@ -22,7 +22,7 @@ pub type Serial = CdcAcmClass<'static, UsbDriver>;
 struct Buffers {
     ep_out: [u8; 256],
     config_descriptor: [u8; 256],
-    bos_descriptor: [u8; 32],
+    bos_descriptor: [u8; 256],
     control: [u8; 64],
     state: State<'static>,
 }
@@ -43,7 +43,7 @@ pub fn build(
     let buffers = BUFFERS.init(Buffers {
         ep_out: [0; 256],
         config_descriptor: [0; 256],
-        bos_descriptor: [0; 32],
+        bos_descriptor: [0; 256],
         control: [0; 64],
         state: State::new(),
     });
