@@ -18,4 +18,5 @@ pub mod config;
 pub mod framing;
 pub mod luminaire;
 pub mod record;
+pub mod timing;
 pub mod wire;
