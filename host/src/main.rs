@@ -17,12 +17,15 @@ struct Cli {
 enum Command {
     /// Print the MEB-FDMA chip table, its spectrum and its IEEE 1789 flicker class.
     Carriers(cli::carriers::CarriersArgs),
+    /// Demodulate a capture into one image per LED (led1.npy…, previews, noise, decode.json).
+    Decode(cli::decode::DecodeArgs),
 }
 
 fn main() -> ExitCode {
     let cli = Cli::parse();
     let result = match cli.command {
         Command::Carriers(args) => cli::carriers::run(&args),
+        Command::Decode(args) => cli::decode::run(&args),
     };
     match result {
         Ok(()) => ExitCode::SUCCESS,

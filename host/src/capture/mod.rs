@@ -140,4 +140,11 @@ pub trait FrameSource {
     }
 }
 
+pub mod ffmpeg;
+pub mod images;
 pub mod memory;
+pub mod open;
+pub mod raw;
+pub mod y4m;
+
+pub use open::{OpenOptions, open};
