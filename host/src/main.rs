@@ -18,7 +18,7 @@ enum Command {
     /// Print the MEB-FDMA chip table, its spectrum and its IEEE 1789 flicker class.
     Carriers(cli::carriers::CarriersArgs),
     /// Demodulate a capture into one image per LED (led1.npy…, previews, noise, decode.json).
-    Decode(cli::decode::DecodeArgs),
+    Decode(Box<cli::decode::DecodeArgs>),
 }
 
 fn main() -> ExitCode {
