@@ -19,6 +19,8 @@ enum Command {
     Carriers(cli::carriers::CarriersArgs),
     /// Demodulate a capture into one image per LED (led1.npy…, previews, noise, decode.json).
     Decode(Box<cli::decode::DecodeArgs>),
+    /// Render a synthetic MEB-FDMA capture of a scene with ground truth (or the Ch. 7 data set).
+    Simulate(Box<cli::simulate::SimulateArgs>),
 }
 
 fn main() -> ExitCode {
@@ -26,6 +28,7 @@ fn main() -> ExitCode {
     let result = match cli.command {
         Command::Carriers(args) => cli::carriers::run(&args),
         Command::Decode(args) => cli::decode::run(&args),
+        Command::Simulate(args) => cli::simulate::run(&args),
     };
     match result {
         Ok(()) => ExitCode::SUCCESS,
