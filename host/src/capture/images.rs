@@ -73,6 +73,7 @@ impl ImageSequence {
             .filter_map(|e| e.ok().map(|e| e.path()))
             .filter(|p| is_frame_file(p))
             .collect();
+        files = largest_numbered_group(files);
         files.sort();
         let Some(first_path) = files.first() else {
             return Err(CaptureError::Format {
@@ -124,6 +125,27 @@ impl FrameSource for ImageSequence {
     fn frame_count_hint(&self) -> Option<usize> {
         Some(self.files.len() - self.next)
     }
+}
+
+/// Keeps the largest group of files whose names differ only in their digits (`frame_00012.png`),
+/// so stray stills in the directory (a `mask.png`) are not taken for frames.
+fn largest_numbered_group(files: Vec<PathBuf>) -> Vec<PathBuf> {
+    let pattern = |p: &PathBuf| -> String {
+        p.file_name()
+            .map(|n| {
+                n.to_string_lossy()
+                    .replace(|c: char| c.is_ascii_digit(), "")
+            })
+            .unwrap_or_default()
+    };
+    let mut groups: std::collections::BTreeMap<String, Vec<PathBuf>> = Default::default();
+    for file in files {
+        groups.entry(pattern(&file)).or_default().push(file);
+    }
+    groups
+        .into_values()
+        .max_by_key(Vec::len)
+        .unwrap_or_default()
 }
 
 /// Checks a frame's size against the stream.
