@@ -17,6 +17,8 @@ struct Cli {
 enum Command {
     /// Print the MEB-FDMA chip table, its spectrum and its IEEE 1789 flicker class.
     Carriers(cli::carriers::CarriersArgs),
+    /// Demodulate a capture into one image per LED (led1.npy…, previews, noise, decode.json).
+    Decode(Box<cli::decode::DecodeArgs>),
     /// Render a synthetic MEB-FDMA capture of a scene with ground truth (or the Ch. 7 data set).
     Simulate(Box<cli::simulate::SimulateArgs>),
 }
@@ -25,6 +27,7 @@ fn main() -> ExitCode {
     let cli = Cli::parse();
     let result = match cli.command {
         Command::Carriers(args) => cli::carriers::run(&args),
+        Command::Decode(args) => cli::decode::run(&args),
         Command::Simulate(args) => cli::simulate::run(&args),
     };
     match result {

@@ -139,3 +139,12 @@ pub trait FrameSource {
         None
     }
 }
+
+pub mod ffmpeg;
+pub mod images;
+pub mod memory;
+pub mod open;
+pub mod raw;
+pub mod y4m;
+
+pub use open::{OpenOptions, open};

@@ -1,4 +1,5 @@
 //! One module per `meb` subcommand: argument parsing and printing only.
 
 pub mod carriers;
+pub mod decode;
 pub mod simulate;

@@ -1,0 +1,304 @@
+//! Video containers (MP4/MOV/AVI/MKV; H.264, HEVC, 8- and 10-bit) through the `ffmpeg` and
+//! `ffprobe` command-line tools (Debian package `ffmpeg`).
+//!
+//! The luma plane is read untouched: `ffmpeg -v error -nostdin -noautorotate -i IN -map 0:v:0
+//! -vf extractplanes=y -fps_mode passthrough -f rawvideo -pix_fmt gray|gray10le|gray12le -`.
+//! Grey output formats would otherwise rescale and clip video-range luma, rotation metadata
+//! would transpose frames, and a variable frame rate would pad with duplicates. Limited
+//! ("tv") range video keeps its codes; its black and white levels (16·2^(b−8) and
+//! 235·2^(b−8)) go into the [`FrameFormat`], so decoded images do not depend on the range.
+
+use super::{CaptureError, Frame, FrameFormat, FrameSource, Samples};
+use std::io::{BufReader, Read};
+use std::path::{Path, PathBuf};
+use std::process::{Child, ChildStdout, Command, Stdio};
+use std::thread::JoinHandle;
+
+/// What `ffprobe` reports about the first video stream.
+#[derive(Debug, Clone, PartialEq)]
+pub struct VideoInfo {
+    /// Coded width.
+    pub width: usize,
+    /// Coded height.
+    pub height: usize,
+    /// Luma bits per sample.
+    pub bit_depth: u8,
+    /// Whether the stream is limited ("tv") range.
+    pub limited_range: bool,
+    /// Frame rate from the container.
+    pub fps: f64,
+    /// Frame count when the container states it.
+    pub frames: Option<usize>,
+}
+
+/// Error for a missing FFmpeg tool.
+fn missing_tool(tool: &str, error: &std::io::Error) -> CaptureError {
+    CaptureError::Other(format!(
+        "cannot run `{tool}` ({error}): video files need FFmpeg — install the Debian package \
+         `ffmpeg` (sudo apt-get install ffmpeg) or convert the video to PNG/TIFF frames"
+    ))
+}
+
+/// Parses "num/den" rates.
+fn parse_rate(value: Option<&serde_json::Value>) -> Option<f64> {
+    let text = value?.as_str()?;
+    let (num, den) = text.split_once('/').unwrap_or((text, "1"));
+    let (num, den): (f64, f64) = (num.parse().ok()?, den.parse().ok()?);
+    (den > 0.0 && num > 0.0).then_some(num / den)
+}
+
+/// Runs `ffprobe` on `path`.
+pub fn probe(path: &Path) -> Result<VideoInfo, CaptureError> {
+    let output = Command::new("ffprobe")
+        .args([
+            "-v",
+            "error",
+            "-select_streams",
+            "v:0",
+            "-show_streams",
+            "-of",
+            "json",
+        ])
+        .arg(path)
+        .stdin(Stdio::null())
+        .output()
+        .map_err(|e| missing_tool("ffprobe", &e))?;
+    let bad = |reason: String| CaptureError::Format {
+        path: path.to_path_buf(),
+        reason,
+    };
+    if !output.status.success() {
+        return Err(bad(format!(
+            "ffprobe failed: {}",
+            String::from_utf8_lossy(&output.stderr).trim()
+        )));
+    }
+    let json: serde_json::Value = serde_json::from_slice(&output.stdout)
+        .map_err(|e| bad(format!("unreadable ffprobe output: {e}")))?;
+    let stream = json
+        .get("streams")
+        .and_then(|s| s.get(0))
+        .ok_or_else(|| bad("no video stream".into()))?;
+    let number = |key: &str| stream.get(key).and_then(serde_json::Value::as_u64);
+    let width = number("width").ok_or_else(|| bad("video stream has no width".into()))? as usize;
+    let height = number("height").ok_or_else(|| bad("video stream has no height".into()))? as usize;
+    let pix_fmt = stream.get("pix_fmt").and_then(|v| v.as_str()).unwrap_or("");
+    let bit_depth = if pix_fmt.contains("16") {
+        16
+    } else if pix_fmt.contains("12") {
+        12
+    } else if pix_fmt.contains("10") {
+        10
+    } else {
+        8
+    };
+    let range = stream.get("color_range").and_then(|v| v.as_str());
+    let full = range == Some("pc") || pix_fmt.starts_with("yuvj") || pix_fmt.starts_with("gray");
+    let frames = stream
+        .get("nb_frames")
+        .and_then(|v| v.as_str())
+        .and_then(|s| s.parse().ok());
+    let fps = parse_rate(stream.get("avg_frame_rate"))
+        .or_else(|| parse_rate(stream.get("r_frame_rate")))
+        .unwrap_or(0.0);
+    Ok(VideoInfo {
+        width,
+        height,
+        bit_depth,
+        limited_range: !full,
+        fps,
+        frames,
+    })
+}
+
+/// A video decoded by an `ffmpeg` child process, one frame at a time from its pipe.
+pub struct FfmpegSource {
+    format: FrameFormat,
+    info: VideoInfo,
+    path: PathBuf,
+    child: Child,
+    stdout: BufReader<ChildStdout>,
+    stderr: Option<JoinHandle<String>>,
+    index: usize,
+    done: bool,
+}
+
+impl FfmpegSource {
+    /// Probes and starts decoding `path`; `fps` overrides the container's rate.
+    pub fn open(path: &Path, fps: Option<f64>) -> Result<Self, CaptureError> {
+        let info = probe(path)?;
+        let pix_fmt = match info.bit_depth {
+            8 => "gray",
+            10 => "gray10le",
+            12 => "gray12le",
+            _ => "gray16le",
+        };
+        let mut child = Command::new("ffmpeg")
+            .args(["-v", "error", "-nostdin", "-noautorotate", "-i"])
+            .arg(path)
+            .args([
+                "-map",
+                "0:v:0",
+                "-vf",
+                "extractplanes=y",
+                "-fps_mode",
+                "passthrough",
+            ])
+            .args(["-f", "rawvideo", "-pix_fmt", pix_fmt, "-"])
+            .stdin(Stdio::null())
+            .stdout(Stdio::piped())
+            .stderr(Stdio::piped())
+            .spawn()
+            .map_err(|e| missing_tool("ffmpeg", &e))?;
+        let (Some(stdout), Some(mut stderr)) = (child.stdout.take(), child.stderr.take()) else {
+            return Err(CaptureError::Other("ffmpeg pipes unavailable".into()));
+        };
+        let stderr = std::thread::spawn(move || {
+            let mut text = String::new();
+            let _ = stderr.read_to_string(&mut text);
+            text
+        });
+        let scale = f32::from(1u16 << (info.bit_depth.min(16) - 8).min(8));
+        let mut format = FrameFormat::full_range(
+            info.width,
+            info.height,
+            info.bit_depth,
+            fps.unwrap_or(info.fps),
+        );
+        if info.limited_range {
+            format.black_level = 16.0 * scale;
+            format.white_level = 235.0 * scale;
+        }
+        Ok(Self {
+            format,
+            info,
+            path: path.to_path_buf(),
+            child,
+            stdout: BufReader::with_capacity(1 << 20, stdout),
+            stderr: Some(stderr),
+            index: 0,
+            done: false,
+        })
+    }
+
+    /// What ffprobe reported.
+    pub fn info(&self) -> &VideoInfo {
+        &self.info
+    }
+
+    /// Reads exactly `buf.len()` bytes; returns the count read before end of stream.
+    fn fill(&mut self, buf: &mut [u8]) -> Result<usize, CaptureError> {
+        let mut filled = 0;
+        while filled < buf.len() {
+            match self.stdout.read(&mut buf[filled..]) {
+                Ok(0) => break,
+                Ok(n) => filled += n,
+                Err(e) if e.kind() == std::io::ErrorKind::Interrupted => {}
+                Err(source) => {
+                    return Err(CaptureError::Io {
+                        path: self.path.clone(),
+                        source,
+                    });
+                }
+            }
+        }
+        Ok(filled)
+    }
+
+    /// Ends the stream: checks ffmpeg's exit status and error output.
+    fn finish(&mut self, partial: usize) -> Result<(), CaptureError> {
+        self.done = true;
+        let status = self.child.wait().map_err(|source| CaptureError::Io {
+            path: self.path.clone(),
+            source,
+        })?;
+        let messages = self
+            .stderr
+            .take()
+            .and_then(|h| h.join().ok())
+            .unwrap_or_default();
+        let first_line = messages.lines().next().unwrap_or("").trim().to_string();
+        let bad = |reason: String| CaptureError::Format {
+            path: self.path.clone(),
+            reason,
+        };
+        if !status.success() {
+            return Err(bad(format!("ffmpeg failed ({status}): {first_line}")));
+        }
+        if partial > 0 {
+            return Err(bad(format!(
+                "video is truncated: frame {} ends after {partial} bytes",
+                self.index
+            )));
+        }
+        if !first_line.is_empty() {
+            return Err(bad(format!(
+                "video is truncated or corrupt after {} frames: {first_line}",
+                self.index
+            )));
+        }
+        if let Some(expected) = self.info.frames
+            && self.index < expected
+        {
+            return Err(bad(format!(
+                "video is truncated: {} of {expected} frames decoded",
+                self.index
+            )));
+        }
+        Ok(())
+    }
+}
+
+impl FrameSource for FfmpegSource {
+    fn format(&self) -> &FrameFormat {
+        &self.format
+    }
+
+    fn next_frame(&mut self) -> Result<Option<Frame>, CaptureError> {
+        if self.done {
+            return Ok(None);
+        }
+        let pixels = self.format.pixels();
+        let samples = if self.format.bit_depth > 8 {
+            let mut bytes = vec![0u8; 2 * pixels];
+            let got = self.fill(&mut bytes)?;
+            if got < bytes.len() {
+                self.finish(got)?;
+                return Ok(None);
+            }
+            Samples::U16(
+                bytes
+                    .chunks_exact(2)
+                    .map(|b| u16::from_le_bytes([b[0], b[1]]))
+                    .collect(),
+            )
+        } else {
+            let mut bytes = vec![0u8; pixels];
+            let got = self.fill(&mut bytes)?;
+            if got < bytes.len() {
+                self.finish(got)?;
+                return Ok(None);
+            }
+            Samples::U8(bytes)
+        };
+        let frame = Frame {
+            index: self.index,
+            samples,
+        };
+        self.index += 1;
+        Ok(Some(frame))
+    }
+
+    fn frame_count_hint(&self) -> Option<usize> {
+        self.info.frames.map(|n| n.saturating_sub(self.index))
+    }
+}
+
+impl Drop for FfmpegSource {
+    fn drop(&mut self) {
+        if !self.done {
+            let _ = self.child.kill();
+            let _ = self.child.wait();
+        }
+    }
+}

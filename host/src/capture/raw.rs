@@ -1,0 +1,100 @@
+//! Headerless raw frames: width × height samples per frame, 8-bit or 16-bit little-endian.
+
+use super::{CaptureError, Frame, FrameFormat, FrameSource, Samples};
+use std::io::{BufReader, Read};
+use std::path::{Path, PathBuf};
+
+/// Layout of a raw file.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct RawLayout {
+    /// Frame width.
+    pub width: usize,
+    /// Frame height.
+    pub height: usize,
+    /// Bits per sample: 8 (one byte) or 9..=16 (two bytes, little-endian).
+    pub bit_depth: u8,
+}
+
+/// A raw frame file read one frame at a time.
+pub struct RawSource {
+    format: FrameFormat,
+    path: PathBuf,
+    reader: BufReader<std::fs::File>,
+    frames: usize,
+    index: usize,
+}
+
+impl RawSource {
+    /// Opens `path` with the given layout; the file size must be a whole number of frames.
+    pub fn open(path: &Path, layout: RawLayout, fps: f64) -> Result<Self, CaptureError> {
+        let io = |source| CaptureError::Io {
+            path: path.to_path_buf(),
+            source,
+        };
+        if !(1..=16).contains(&layout.bit_depth) || layout.width == 0 || layout.height == 0 {
+            return Err(CaptureError::Other(format!(
+                "invalid raw layout {layout:?}"
+            )));
+        }
+        let file = std::fs::File::open(path).map_err(io)?;
+        let size = file.metadata().map_err(io)?.len() as usize;
+        let frame_bytes = layout.width * layout.height * if layout.bit_depth > 8 { 2 } else { 1 };
+        if !size.is_multiple_of(frame_bytes) {
+            return Err(CaptureError::Format {
+                path: path.to_path_buf(),
+                reason: format!(
+                    "size {size} bytes is not a whole number of {}x{} frames ({frame_bytes} bytes): truncated or wrong size",
+                    layout.width, layout.height
+                ),
+            });
+        }
+        Ok(Self {
+            format: FrameFormat::full_range(layout.width, layout.height, layout.bit_depth, fps),
+            path: path.to_path_buf(),
+            reader: BufReader::new(file),
+            frames: size / frame_bytes,
+            index: 0,
+        })
+    }
+}
+
+impl FrameSource for RawSource {
+    fn format(&self) -> &FrameFormat {
+        &self.format
+    }
+
+    fn next_frame(&mut self) -> Result<Option<Frame>, CaptureError> {
+        if self.index >= self.frames {
+            return Ok(None);
+        }
+        let pixels = self.format.pixels();
+        let io = |source| CaptureError::Io {
+            path: self.path.clone(),
+            source,
+        };
+        let samples = if self.format.bit_depth > 8 {
+            let mut bytes = vec![0u8; 2 * pixels];
+            self.reader.read_exact(&mut bytes).map_err(io)?;
+            Samples::U16(
+                bytes
+                    .chunks_exact(2)
+                    .map(|b| u16::from_le_bytes([b[0], b[1]]))
+                    .collect(),
+            )
+        } else {
+            let mut bytes = vec![0u8; pixels];
+            self.reader.read_exact(&mut bytes).map_err(io)?;
+            Samples::U8(bytes)
+        };
+        let frame = Frame {
+            index: self.index,
+            samples,
+        };
+        self.index += 1;
+        Ok(Some(frame))
+    }
+
+    fn frame_count_hint(&self) -> Option<usize> {
+        Some(self.frames - self.index)
+    }
+}
