@@ -7,5 +7,6 @@
 
 pub mod capture;
 pub mod flicker;
+pub mod photometric;
 pub mod rig;
 pub mod types;
