@@ -6,7 +6,10 @@
 //! [`device`] talks to luminaires over USB serial and runs a virtual one on a pseudo-terminal.
 
 pub mod capture;
+pub mod datasets;
 pub mod flicker;
+pub mod integrate;
+pub mod metrics;
 pub mod photometric;
 pub mod rig;
 pub mod types;

@@ -194,7 +194,7 @@ fn subset_inverses(lights: &Lights, min_lit: usize) -> Option<Vec<Option<Matrix3
 /// Inverse of a symmetric 3×3 matrix unless it is (nearly) singular.
 fn well_conditioned_inverse(m: &Matrix3<f64>) -> Option<Matrix3<f64>> {
     let scale = m.trace();
-    if !(scale > 0.0) || m.determinant().abs() < 1e-9 * scale.powi(3) {
+    if scale.is_nan() || scale <= 0.0 || m.determinant().abs() < 1e-9 * scale.powi(3) {
         return None;
     }
     m.try_inverse()
@@ -248,7 +248,7 @@ fn solve_pixel(
         }?;
         let g = inverse * b;
         let rho = g.norm();
-        if !(rho > 0.0) || !rho.is_finite() {
+        if !rho.is_finite() || rho <= 0.0 {
             return None;
         }
         let n = g / rho;
