@@ -11,5 +11,6 @@ pub mod flicker;
 pub mod integrate;
 pub mod metrics;
 pub mod photometric;
+pub mod reconstruct;
 pub mod rig;
 pub mod types;

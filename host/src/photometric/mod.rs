@@ -12,7 +12,7 @@ pub mod solve;
 
 pub use lights::Lights;
 pub use mask::{MaskConfig, object_mask};
-pub use solve::{PhotometricResult, estimate_normals};
+pub use solve::{PhotometricResult, estimate_normals, model_misfit};
 
 use thiserror::Error;
 

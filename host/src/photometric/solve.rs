@@ -167,6 +167,54 @@ pub fn estimate_normals(
     })
 }
 
+/// Relative least-squares misfit Σ‖A − L·G‖² / Σ‖A‖² of the Lambertian model over `pixels`
+/// (lit LEDs only). With more lit LEDs than three it depends on the light vectors, which lets the
+/// near-field stage find the object's absolute depth.
+pub fn model_misfit(
+    images: &LedImages,
+    lights: &Lights,
+    pixels: &[(usize, usize)],
+    config: &PhotometricConfig,
+) -> f64 {
+    let k = images.images.len();
+    let (misfit, energy) = pixels
+        .par_chunks(1024)
+        .map(|chunk| {
+            let mut values = vec![0.0f64; k];
+            let mut l = vec![Vector3::zeros(); k];
+            if let Lights::Distant(v) = lights {
+                l.copy_from_slice(v);
+            }
+            let (mut misfit, mut energy) = (0.0, 0.0);
+            for &(r, c) in chunk {
+                for (v, im) in values.iter_mut().zip(&images.images) {
+                    *v = f64::from(im[(r, c)]);
+                }
+                if !lights.is_distant() {
+                    lights.at(r, c, &mut l);
+                }
+                if let Some((n, rho, _)) = solve_pixel(&values, &l, 0.0, config, None) {
+                    let g = n * rho;
+                    let threshold = f64::from(config.shadow_fraction)
+                        * values.iter().copied().fold(0.0, f64::max);
+                    for (v, li) in values.iter().zip(&l) {
+                        if *v > threshold {
+                            misfit += (v - g.dot(li)).powi(2);
+                            energy += v * v;
+                        }
+                    }
+                }
+            }
+            (misfit, energy)
+        })
+        .reduce(|| (0.0, 0.0), |a, b| (a.0 + b.0, a.1 + b.1));
+    if energy > 0.0 {
+        misfit / energy
+    } else {
+        f64::INFINITY
+    }
+}
+
 /// For distant lights with few LEDs: (Σ_{i∈S} L_i L_iᵀ)⁻¹ for every subset S (bit i = LED i).
 fn subset_inverses(lights: &Lights, min_lit: usize) -> Option<Vec<Option<Matrix3<f64>>>> {
     let Lights::Distant(v) = lights else {
