@@ -7,6 +7,7 @@
 
 pub mod capture;
 pub mod datasets;
+pub mod export;
 pub mod flicker;
 pub mod integrate;
 pub mod metrics;
