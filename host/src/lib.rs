@@ -7,6 +7,7 @@
 
 pub mod capture;
 pub mod datasets;
+pub mod demod;
 pub mod export;
 pub mod flicker;
 pub mod integrate;
@@ -14,4 +15,5 @@ pub mod metrics;
 pub mod photometric;
 pub mod reconstruct;
 pub mod rig;
+pub mod simulate;
 pub mod types;

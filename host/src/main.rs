@@ -17,12 +17,15 @@ struct Cli {
 enum Command {
     /// Print the MEB-FDMA chip table, its spectrum and its IEEE 1789 flicker class.
     Carriers(cli::carriers::CarriersArgs),
+    /// Render a synthetic MEB-FDMA capture of a scene with ground truth (or the Ch. 7 data set).
+    Simulate(Box<cli::simulate::SimulateArgs>),
 }
 
 fn main() -> ExitCode {
     let cli = Cli::parse();
     let result = match cli.command {
         Command::Carriers(args) => cli::carriers::run(&args),
+        Command::Simulate(args) => cli::simulate::run(&args),
     };
     match result {
         Ok(()) => ExitCode::SUCCESS,

@@ -139,3 +139,5 @@ pub trait FrameSource {
         None
     }
 }
+
+pub mod memory;

@@ -1,0 +1,104 @@
+//! Decoder settings: which LEDs, which frames, which estimator, how code values map to light.
+
+use serde::{Deserialize, Serialize};
+
+/// How many LEDs the capture carries.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+pub enum LedCount {
+    /// Exactly this many (1..=8); a capture that shows another count is an error.
+    Fixed(usize),
+    /// Detect the number of modulated LEDs from the video.
+    Auto,
+}
+
+/// The per-pixel amplitude estimator.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize)]
+#[serde(rename_all = "lowercase")]
+pub enum Estimator {
+    /// Fit each LED's received waveform once from the whole frame, then per-pixel least
+    /// squares against it (matched filter): unbiased, handles exposure and rate mismatch.
+    #[default]
+    Waveform,
+    /// The thesis' decoder (Eqs. 3.25–3.30): subspace projection and maximum, per block of n
+    /// frames, averaged over blocks.
+    Thesis,
+}
+
+/// Conversion of code values to linear light before decoding.
+#[derive(Debug, Clone, Copy, PartialEq, Default, Serialize, Deserialize)]
+pub enum Linearize {
+    /// Code values are already linear in light.
+    #[default]
+    None,
+    /// Undo the sRGB transfer curve.
+    Srgb,
+    /// Undo a power-law gamma: linear = fraction^gamma.
+    Gamma(f32),
+}
+
+/// A rectangular region of interest in pixels.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+pub struct Roi {
+    /// Left column.
+    pub x: usize,
+    /// Top row.
+    pub y: usize,
+    /// Width in pixels.
+    pub width: usize,
+    /// Height in pixels.
+    pub height: usize,
+}
+
+/// Everything `decode` needs besides the frames.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct DecodeConfig {
+    /// Number of LEDs, or detect it.
+    pub leds: LedCount,
+    /// Number of frames to use (at least n = 2^(N+1)); `None` = every frame of the source.
+    pub frames: Option<usize>,
+    /// Frames to skip at the start.
+    pub start: usize,
+    /// The amplitude estimator.
+    pub estimator: Estimator,
+    /// Code-value linearisation.
+    pub linearize: Linearize,
+    /// Decode only this region.
+    pub roi: Option<Roi>,
+    /// Camera frame rate override in fps (phone containers may store the playback rate).
+    pub fps: Option<f64>,
+    /// Known chips per frame (chip rate / frame rate) instead of estimating it.
+    pub rate_ratio: Option<f64>,
+    /// Largest |chips per frame − 1| searched when estimating the rate ratio.
+    pub max_rate_mismatch: f64,
+    /// Known exposure as a fraction of the frame period instead of estimating it.
+    pub exposure: Option<f64>,
+    /// Row bands with their own LED phases (rolling shutter); 1 for a global shutter.
+    pub row_bands: usize,
+    /// Memory budget for the frames of one decoding window, in bytes.
+    pub window_bytes: usize,
+    /// A pixel whose brightest frame stays below this fraction of full scale is under-exposed.
+    pub underexposed_below: f32,
+    /// Fail when the capture's modulated LED count differs from a fixed `leds`.
+    pub check_led_count: bool,
+}
+
+impl Default for DecodeConfig {
+    fn default() -> Self {
+        Self {
+            leds: LedCount::Fixed(4),
+            frames: None,
+            start: 0,
+            estimator: Estimator::Waveform,
+            linearize: Linearize::None,
+            roi: None,
+            fps: None,
+            rate_ratio: None,
+            max_rate_mismatch: 0.06,
+            exposure: None,
+            row_bands: 1,
+            window_bytes: 128 << 20,
+            underexposed_below: 0.02,
+            check_led_count: true,
+        }
+    }
+}
