@@ -7,6 +7,7 @@
 
 pub mod capture;
 pub mod datasets;
+pub mod demo;
 pub mod demod;
 pub mod export;
 pub mod flicker;
