@@ -96,7 +96,10 @@ pub fn write_report(dir: &Path, inputs: &ReportInputs) -> Result<WrittenReport, 
         previews.push((
             "normal error (0–10°)".into(),
             "normal_error.png".into(),
-            png_bytes(&grey_map(&a.error_map.mapv(|d| d.min(10.0))))?,
+            png_bytes(&grey_map(
+                &a.error_map
+                    .mapv(|d| if d.is_nan() { d } else { d.min(10.0) }),
+            ))?,
         ));
     }
     for view in VIEWS {

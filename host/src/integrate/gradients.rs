@@ -90,3 +90,39 @@ impl SurfaceGradients {
         Ok(())
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use ndarray::Array3;
+
+    #[test]
+    fn nan_normals_inside_the_mask_are_an_error() {
+        let mut normals =
+            Array3::from_shape_fn((3, 3, 3), |(_, _, j)| if j == 2 { 1.0 } else { 0.0 });
+        normals[(1, 2, 0)] = f32::NAN;
+        let field = NormalField {
+            normals,
+            albedo: Array2::ones((3, 3)),
+            mask: Array2::from_elem((3, 3), true),
+        };
+        let err = SurfaceGradients::from_normals(&field, 10.0).unwrap_err();
+        assert!(
+            matches!(
+                err,
+                IntegrateError::NonFinite {
+                    count: 1,
+                    row: 1,
+                    col: 2
+                }
+            ),
+            "{err}"
+        );
+        let empty = NormalField {
+            mask: Array2::from_elem((3, 3), false),
+            ..field
+        };
+        let g = SurfaceGradients::from_normals(&empty, 10.0).unwrap();
+        assert!(matches!(g.validate(), Err(IntegrateError::EmptyMask)));
+    }
+}
