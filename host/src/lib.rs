@@ -6,8 +6,15 @@
 //! [`device`] talks to luminaires over USB serial and runs a virtual one on a pseudo-terminal.
 
 pub mod capture;
+pub mod datasets;
+pub mod demo;
 pub mod demod;
+pub mod export;
 pub mod flicker;
+pub mod integrate;
+pub mod metrics;
+pub mod photometric;
+pub mod reconstruct;
 pub mod rig;
 pub mod simulate;
 pub mod types;

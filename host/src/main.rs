@@ -15,6 +15,12 @@ struct Cli {
 
 #[derive(Subcommand)]
 enum Command {
+    /// Simulate the thesis' sphere and cube, decode, reconstruct and write a report.
+    Demo(cli::demo::DemoArgs),
+    /// Integrate a normal map into depth.
+    Integrate(cli::integrate::IntegrateArgs),
+    /// Photometric stereo on an image set with known lights (or a DiLiGenT folder).
+    Photometric(cli::photometric::PhotometricArgs),
     /// Print the MEB-FDMA chip table, its spectrum and its IEEE 1789 flicker class.
     Carriers(cli::carriers::CarriersArgs),
     /// Demodulate a capture into one image per LED (led1.npy…, previews, noise, decode.json).
@@ -26,6 +32,9 @@ enum Command {
 fn main() -> ExitCode {
     let cli = Cli::parse();
     let result = match cli.command {
+        Command::Demo(args) => cli::demo::run(&args),
+        Command::Integrate(args) => cli::integrate::run(&args),
+        Command::Photometric(args) => cli::photometric::run(&args),
         Command::Carriers(args) => cli::carriers::run(&args),
         Command::Decode(args) => cli::decode::run(&args),
         Command::Simulate(args) => cli::simulate::run(&args),

@@ -1,5 +1,9 @@
 //! One module per `meb` subcommand: argument parsing and printing only.
 
 pub mod carriers;
+pub mod common;
 pub mod decode;
+pub mod demo;
+pub mod integrate;
+pub mod photometric;
 pub mod simulate;

@@ -1,0 +1,177 @@
+//! PS + masked least-squares integration of one 1280×720 frame (the thesis' out-of-plane sphere
+//! Ø48 mm), against a straightforward implementation: per-pixel SVD pseudo-inverse and
+//! unpreconditioned conjugate gradients.
+
+use criterion::{Criterion, criterion_group, criterion_main};
+use meb::integrate::{IntegrateConfig, integrate_normals};
+use meb::photometric::{Lights, PhotometricConfig, estimate_normals};
+use meb::rig::Rig;
+use meb::types::LedImages;
+use nalgebra::{DMatrix, DVector, Vector3};
+use ndarray::Array2;
+use std::hint::black_box;
+
+fn sphere_frame() -> (Rig, LedImages, Array2<bool>) {
+    let rig = Rig::preset("thesis-out-of-plane").unwrap();
+    let (rows, cols) = (rig.camera.height, rig.camera.width);
+    let scale = Lights::near_field_scale(&rig);
+    let mut images = vec![Array2::zeros((rows, cols)); rig.leds.len()];
+    let mut mask = Array2::from_elem((rows, cols), false);
+    for r in 0..rows {
+        for c in 0..cols {
+            let (x, y) = rig.camera.pixel_centre_xy(r as f64, c as f64);
+            let s = 24.0f64.powi(2) - x * x - y * y;
+            if s <= 0.0 {
+                continue;
+            }
+            let p = Vector3::new(x, y, s.sqrt());
+            let n = p / 24.0;
+            mask[(r, c)] = true;
+            for (im, led) in images.iter_mut().zip(&rig.leds) {
+                im[(r, c)] = (0.8 * n.dot(&(led.light_vector_at(&p) * scale)).max(0.0)) as f32;
+            }
+        }
+    }
+    (rig, LedImages { images }, mask)
+}
+
+/// Straightforward: per-pixel SVD pseudo-inverse over the lit LEDs, then plain CG.
+fn naive(rig: &Rig, images: &LedImages, mask: &Array2<bool>) -> Vec<f64> {
+    let scale = Lights::near_field_scale(rig);
+    let l: Vec<Vector3<f64>> = rig
+        .distant_light_vectors()
+        .iter()
+        .map(|v| v * scale)
+        .collect();
+    let (rows, cols) = mask.dim();
+    let mut gx = Array2::zeros((rows, cols));
+    let mut gy = Array2::zeros((rows, cols));
+    let mut valid = Array2::from_elem((rows, cols), false);
+    for r in 0..rows {
+        for c in 0..cols {
+            if !mask[(r, c)] {
+                continue;
+            }
+            let lit: Vec<usize> = (0..l.len())
+                .filter(|&i| images.images[i][(r, c)] > 0.0)
+                .collect();
+            if lit.len() < 3 {
+                continue;
+            }
+            let m = DMatrix::from_fn(lit.len(), 3, |i, j| l[lit[i]][j]);
+            let a = DVector::from_fn(lit.len(), |i, _| f64::from(images.images[lit[i]][(r, c)]));
+            let Ok(pinv) = m.pseudo_inverse(1e-12) else {
+                continue;
+            };
+            let g = pinv * a;
+            if g[2] > 1e-6 {
+                gx[(r, c)] = -g[0] / g[2];
+                gy[(r, c)] = -g[1] / g[2];
+                valid[(r, c)] = true;
+            }
+        }
+    }
+    // Plain CG on the masked Laplacian.
+    let h = rig.camera.pitch_mm();
+    let idx = Array2::from_shape_fn((rows, cols), |p| p);
+    let pixels: Vec<(usize, usize)> = idx.iter().copied().filter(|&p| valid[p]).collect();
+    let mut number = Array2::from_elem((rows, cols), usize::MAX);
+    for (k, &p) in pixels.iter().enumerate() {
+        number[p] = k;
+    }
+    let n = pixels.len();
+    let nbrs: Vec<Vec<usize>> = pixels
+        .iter()
+        .map(|&(r, c)| {
+            [
+                (r.wrapping_sub(1), c),
+                (r + 1, c),
+                (r, c.wrapping_sub(1)),
+                (r, c + 1),
+            ]
+            .iter()
+            .filter(|q| q.0 < rows && q.1 < cols && number[**q] != usize::MAX)
+            .map(|q| number[*q])
+            .collect()
+        })
+        .collect();
+    let mut b = vec![0.0; n];
+    for (k, &(r, c)) in pixels.iter().enumerate() {
+        if c + 1 < cols && number[(r, c + 1)] != usize::MAX {
+            let g = 0.5 * h * (gx[(r, c)] + gx[(r, c + 1)]);
+            b[k] -= g;
+            b[number[(r, c + 1)]] += g;
+        }
+        if r + 1 < rows && number[(r + 1, c)] != usize::MAX {
+            let g = -0.5 * h * (gy[(r, c)] + gy[(r + 1, c)]);
+            b[k] -= g;
+            b[number[(r + 1, c)]] += g;
+        }
+    }
+    let apply = |x: &[f64], y: &mut [f64]| {
+        for k in 0..n {
+            y[k] =
+                (nbrs[k].len() as f64 + 1e-10) * x[k] - nbrs[k].iter().map(|&j| x[j]).sum::<f64>();
+        }
+    };
+    let dot = |a: &[f64], b: &[f64]| a.iter().zip(b).map(|(x, y)| x * y).sum::<f64>();
+    let mut x = vec![0.0; n];
+    let mut r = b.clone();
+    let mut p = r.clone();
+    let mut rr = dot(&r, &r);
+    let stop = 1e-14 * dot(&b, &b);
+    let mut ap = vec![0.0; n];
+    for _ in 0..20_000 {
+        if rr <= stop {
+            break;
+        }
+        apply(&p, &mut ap);
+        let alpha = rr / dot(&p, &ap);
+        for k in 0..n {
+            x[k] += alpha * p[k];
+            r[k] -= alpha * ap[k];
+        }
+        let rr_new = dot(&r, &r);
+        for k in 0..n {
+            p[k] = r[k] + rr_new / rr * p[k];
+        }
+        rr = rr_new;
+    }
+    x
+}
+
+fn bench(c: &mut Criterion) {
+    let (rig, images, mask) = sphere_frame();
+    let scale = Lights::near_field_scale(&rig);
+    let lights = Lights::Distant(
+        rig.distant_light_vectors()
+            .iter()
+            .map(|v| v * scale)
+            .collect(),
+    );
+    let pitch = rig.camera.pitch_mm();
+    let mut group = c.benchmark_group("ps+integration 1280x720 sphere");
+    group.sample_size(10);
+    group.bench_function("meb", |b| {
+        b.iter(|| {
+            let ps = estimate_normals(
+                &images,
+                &lights,
+                Some(&mask),
+                None,
+                &PhotometricConfig::default(),
+            )
+            .unwrap();
+            black_box(
+                integrate_normals(&ps.field, pitch, &IntegrateConfig::default(), None).unwrap(),
+            )
+        })
+    });
+    group.bench_function("straightforward", |b| {
+        b.iter(|| black_box(naive(&rig, &images, &mask)))
+    });
+    group.finish();
+}
+
+criterion_group!(benches, bench);
+criterion_main!(benches);

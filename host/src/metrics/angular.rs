@@ -1,0 +1,125 @@
+//! Angular normal errors and normals of a depth map (central differences).
+
+use super::MetricsError;
+use ndarray::{Array2, Array3};
+
+/// Angular accuracy of a normal field.
+#[derive(Debug, Clone, serde::Serialize)]
+pub struct AngularErrors {
+    /// Mean angle between estimated and true normals, degrees.
+    pub mean_deg: f64,
+    /// Median angle, degrees.
+    pub median_deg: f64,
+    /// Pixels compared.
+    pub compared_pixels: usize,
+    /// Per-pixel angle in degrees (NaN where not compared).
+    #[serde(skip)]
+    pub error_map: Array2<f32>,
+}
+
+/// Compares unit normals (H×W×3) over `mask` where both are finite.
+pub fn compare_normals(
+    estimate: &Array3<f32>,
+    truth: &Array3<f32>,
+    mask: &Array2<bool>,
+) -> Result<AngularErrors, MetricsError> {
+    let (er, ec, _) = estimate.dim();
+    let (tr, tc, _) = truth.dim();
+    if (er, ec) != (tr, tc) || mask.dim() != (tr, tc) {
+        return Err(MetricsError::SizeMismatch {
+            estimate: (er, ec),
+            truth: (tr, tc),
+        });
+    }
+    let mut error_map = Array2::from_elem((tr, tc), f32::NAN);
+    let mut angles = Vec::new();
+    for ((r, c), &m) in mask.indexed_iter() {
+        if !m {
+            continue;
+        }
+        let a = [0, 1, 2].map(|j| f64::from(estimate[(r, c, j)]));
+        let b = [0, 1, 2].map(|j| f64::from(truth[(r, c, j)]));
+        let na = a.iter().map(|v| v * v).sum::<f64>().sqrt();
+        let nb = b.iter().map(|v| v * v).sum::<f64>().sqrt();
+        if !(na > 0.0 && nb > 0.0 && na.is_finite() && nb.is_finite()) {
+            continue;
+        }
+        let cos = (a[0] * b[0] + a[1] * b[1] + a[2] * b[2]) / (na * nb);
+        let deg = cos.clamp(-1.0, 1.0).acos().to_degrees();
+        error_map[(r, c)] = deg as f32;
+        angles.push(deg);
+    }
+    if angles.is_empty() {
+        return Err(MetricsError::NoOverlap);
+    }
+    let mean = angles.iter().sum::<f64>() / angles.len() as f64;
+    angles.sort_by(f64::total_cmp);
+    let mid = angles.len() / 2;
+    let median = if angles.len() % 2 == 0 {
+        0.5 * (angles[mid - 1] + angles[mid])
+    } else {
+        angles[mid]
+    };
+    Ok(AngularErrors {
+        mean_deg: mean,
+        median_deg: median,
+        compared_pixels: angles.len(),
+        error_map,
+    })
+}
+
+/// Unit normals of a depth map (mm, NaN = none) with pitch h: n ∝ (−∂z/∂x, −∂z/∂y, 1) by
+/// central differences (one-sided at edges), y up; NaN where a neighbour is missing on both sides.
+pub fn normals_from_depth(depth: &Array2<f32>, pitch_mm: f64) -> Array3<f32> {
+    let (rows, cols) = depth.dim();
+    let get = |r: isize, c: isize| -> Option<f64> {
+        if r < 0 || c < 0 || r as usize >= rows || c as usize >= cols {
+            return None;
+        }
+        let v = depth[(r as usize, c as usize)];
+        v.is_finite().then_some(f64::from(v))
+    };
+    let diff = |minus: Option<f64>, centre: f64, plus: Option<f64>| match (minus, plus) {
+        (Some(m), Some(p)) => Some((p - m) / 2.0),
+        (None, Some(p)) => Some(p - centre),
+        (Some(m), None) => Some(centre - m),
+        (None, None) => None,
+    };
+    let mut out = Array3::from_elem((rows, cols, 3), f32::NAN);
+    for r in 0..rows as isize {
+        for c in 0..cols as isize {
+            let Some(z) = get(r, c) else { continue };
+            let dx = diff(get(r, c - 1), z, get(r, c + 1));
+            // y up: row − 1 is +y.
+            let dy = diff(get(r + 1, c), z, get(r - 1, c));
+            if let (Some(dx), Some(dy)) = (dx, dy) {
+                let n = [-dx / pitch_mm, -dy / pitch_mm, 1.0];
+                let len = (n[0] * n[0] + n[1] * n[1] + 1.0).sqrt();
+                for j in 0..3 {
+                    out[(r as usize, c as usize, j)] = (n[j] / len) as f32;
+                }
+            }
+        }
+    }
+    out
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn plane_normals_and_angles() {
+        // z = 0.5 x − 0.25 y on a 1 mm grid: n ∝ (−0.5, 0.25, 1).
+        let depth = Array2::from_shape_fn((5, 6), |(r, c)| 0.5 * c as f32 + 0.25 * r as f32);
+        let n = normals_from_depth(&depth, 1.0);
+        let len = (0.25f64 + 0.0625 + 1.0).sqrt();
+        assert!((f64::from(n[(2, 3, 0)]) + 0.5 / len).abs() < 1e-6);
+        assert!((f64::from(n[(0, 0, 1)]) - 0.25 / len).abs() < 1e-6);
+        let mask = Array2::from_elem((5, 6), true);
+        let flat = Array3::from_shape_fn((5, 6, 3), |(_, _, j)| if j == 2 { 1.0 } else { 0.0 });
+        let e = compare_normals(&n, &flat, &mask).unwrap();
+        let expected = (1.0 / len).acos().to_degrees();
+        assert!((e.mean_deg - expected).abs() < 1e-4 && (e.median_deg - expected).abs() < 1e-4);
+    }
+}
