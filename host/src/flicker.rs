@@ -217,7 +217,11 @@ mod tests {
         let report = analyse(&table, 960.0, 200.0);
         assert_eq!(report.len(), 4);
         // LED 4's subspace holds every odd bin q: lines at 30, 90, 150 Hz (SPEC §4).
-        let freqs: Vec<f64> = report[3].components.iter().map(|c| c.frequency_hz).collect();
+        let freqs: Vec<f64> = report[3]
+            .components
+            .iter()
+            .map(|c| c.frequency_hz)
+            .collect();
         assert_eq!(freqs, vec![30.0, 90.0, 150.0]);
         // LED 1 only has bins q ≡ 8 (mod 16): first line at 240 Hz, nothing below 200 Hz.
         assert!(report[0].components.is_empty());

@@ -6,6 +6,7 @@
 //! [`device`] talks to luminaires over USB serial and runs a virtual one on a pseudo-terminal.
 
 pub mod capture;
+pub mod device;
 pub mod flicker;
 pub mod rig;
 pub mod types;

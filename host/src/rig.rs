@@ -294,7 +294,10 @@ impl Rig {
             let name = |f: &str| format!("led[{}].{f}", i + 1);
             let p = led.position();
             if !p.iter().all(|v| v.is_finite()) || p.norm() < 1e-9 {
-                return Err(bad(&name("position_mm"), "must be finite and not at the origin"));
+                return Err(bad(
+                    &name("position_mm"),
+                    "must be finite and not at the origin",
+                ));
             }
             if let Some(a) = led.axis {
                 let a = Vector3::from(a);
@@ -357,7 +360,10 @@ mod tests {
         assert!(err.contains("led[3].intensity"), "{err}");
         let err = Rig::from_toml_str("[camera]\nwidth = 1", "x.toml").unwrap_err();
         assert!(matches!(err, RigError::Parse { .. }));
-        assert!(matches!(Rig::load("no-such-rig"), Err(RigError::UnknownPreset(_))));
+        assert!(matches!(
+            Rig::load("no-such-rig"),
+            Err(RigError::UnknownPreset(_))
+        ));
     }
 
     #[test]

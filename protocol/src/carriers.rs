@@ -80,7 +80,10 @@ impl ChipTable {
 
     /// Builds the table with LED i's carrier delayed by `phases[i]` chips (cyclically):
     /// LED i is on during chip j when s_i[(j - phase_i) mod n] = +1.
-    pub const fn with_phases(led_count: u8, phases: &[u16; MAX_LEDS]) -> Result<Self, CarrierError> {
+    pub const fn with_phases(
+        led_count: u8,
+        phases: &[u16; MAX_LEDS],
+    ) -> Result<Self, CarrierError> {
         if led_count == 0 || led_count as usize > MAX_LEDS {
             return Err(CarrierError::LedCount(led_count));
         }
@@ -178,7 +181,10 @@ mod tests {
         assert_eq!(ChipTable::new(9), Err(CarrierError::LedCount(9)));
         let table = ChipTable::new(3).unwrap();
         let mut short = [0i8; 4];
-        assert_eq!(table.row_into(0, &mut short), Err(CarrierError::LedIndex(0)));
+        assert_eq!(
+            table.row_into(0, &mut short),
+            Err(CarrierError::LedIndex(0))
+        );
         let mut buf = [0i8; 16];
         assert_eq!(table.row_into(3, &mut buf), Err(CarrierError::LedIndex(3)));
     }

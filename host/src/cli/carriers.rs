@@ -61,7 +61,14 @@ pub fn run(args: &CarriersArgs) -> Result<()> {
         "{} LEDs, {} chips per frame (mask bit i = LED i+1 on)",
         report.leds, report.chips
     );
-    println!("{:>5}  {}", "chip", (1..=args.leds).map(|i| format!("L{i}")).collect::<Vec<_>>().join(" "));
+    println!(
+        "{:>5}  {}",
+        "chip",
+        (1..=args.leds)
+            .map(|i| format!("L{i}"))
+            .collect::<Vec<_>>()
+            .join(" ")
+    );
     for (chip, mask) in report.masks.iter().enumerate() {
         let cells: Vec<&str> = (0..args.leds)
             .map(|i| if mask & (1 << i) != 0 { "on" } else { " ." })
@@ -69,7 +76,10 @@ pub fn run(args: &CarriersArgs) -> Result<()> {
         println!("{chip:>5}  {}   mask {mask}", cells.join(" "));
     }
     if let (Some(rate), Some(flicker)) = (report.rate_hz, &report.flicker) {
-        println!("\nAt {rate} Hz chip rate (frame period {:.4} s):", report.chips as f64 / rate);
+        println!(
+            "\nAt {rate} Hz chip rate (frame period {:.4} s):",
+            report.chips as f64 / rate
+        );
         for led in flicker {
             let lines: Vec<String> = led
                 .components
@@ -81,7 +91,11 @@ pub fn run(args: &CarriersArgs) -> Result<()> {
                 led.led,
                 led.fundamental_hz,
                 led.class,
-                if lines.is_empty() { "none".to_string() } else { lines.join(", ") }
+                if lines.is_empty() {
+                    "none".to_string()
+                } else {
+                    lines.join(", ")
+                }
             );
         }
     }
