@@ -1,6 +1,12 @@
 //! The contract between the meb luminaire firmware and the host.
 //!
 //! * [`carriers`]: MEB-FDMA chip tables (SPEC §2).
+//! * [`config`]: the luminaire configuration and its validation.
+//! * [`wire`]: header, request/response command table and payload types.
+//! * [`framing`]: COBS + CRC-32 framing, the streaming [`framing::FrameReader`].
+//! * [`record`]: the persisted configuration record (flash and emulator file).
+//! * [`luminaire`]: the hardware-free state machine and [`luminaire::Endpoint`] that both the
+//!   firmware and `meb device emulate` run.
 //!
 //! `no_std` and allocation-free; the `std` feature adds `std::error::Error` impls for the host,
 //! the `defmt` feature adds `defmt::Format` derives for the firmware's logs.
@@ -8,3 +14,8 @@
 #![deny(missing_docs)]
 
 pub mod carriers;
+pub mod config;
+pub mod framing;
+pub mod luminaire;
+pub mod record;
+pub mod wire;

@@ -1,0 +1,253 @@
+//! Luminaire configuration: LED count, chip rate, per-LED brightness and phase, running flag
+//! (SPEC §3, issue 2 item 2).
+//!
+//! The chip rate is a fixed-point number of millihertz so that fractional rates such as
+//! 959.5 Hz are exact on the wire and in flash. Supported range: [`ChipRate::MIN`] = 1.000 Hz
+//! to [`ChipRate::MAX`] = 4000.000 Hz. Below 1 Hz a frame of even 4 chips lasts seconds, useless
+//! for any camera. The firmware's brightness PWM runs at 96 kHz (96 MHz timer clock / 1000
+//! steps), so ≤ 4 kHz keeps ≥ 24 PWM periods per chip and the brightness even within a chip.
+//!
+//! Validation ([`LuminaireConfig::validate`]) names the offending field; the state machine
+//! never applies an invalid configuration.
+
+use serde::{Deserialize, Serialize};
+
+use crate::carriers::{ChipTable, MAX_LEDS, chips_per_frame};
+
+/// Full brightness in per mille.
+pub const FULL_BRIGHTNESS_PERMILLE: u16 = 1000;
+
+/// Chip rate in millihertz (959.5 Hz = `ChipRate(959_500)`).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, PartialOrd, Ord, Hash, Serialize, Deserialize)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub struct ChipRate(pub u32);
+
+impl ChipRate {
+    /// Lowest supported chip rate, 1.000 Hz.
+    pub const MIN: ChipRate = ChipRate(1_000);
+    /// Highest supported chip rate, 4000.000 Hz (≥ 24 periods of the 96 kHz brightness PWM per chip).
+    pub const MAX: ChipRate = ChipRate(4_000_000);
+
+    /// Rate from hertz, rounded to the nearest millihertz (saturating; NaN gives 0).
+    pub fn from_hz(hz: f64) -> Self {
+        let mhz = hz * 1000.0;
+        // `as` saturates and maps NaN to 0; rounding without libm: add 0.5 and truncate.
+        if mhz <= 0.0 || mhz.is_nan() {
+            ChipRate(0)
+        } else {
+            ChipRate((mhz + 0.5) as u32)
+        }
+    }
+
+    /// Rate in hertz.
+    pub fn hz(self) -> f64 {
+        f64::from(self.0) / 1000.0
+    }
+
+    /// Rate in millihertz.
+    pub const fn millihertz(self) -> u32 {
+        self.0
+    }
+
+    /// Whether the rate lies in [`Self::MIN`]..=[`Self::MAX`].
+    pub const fn is_supported(self) -> bool {
+        self.0 >= Self::MIN.0 && self.0 <= Self::MAX.0
+    }
+}
+
+/// Why a configuration was rejected; each variant names the field.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub enum ConfigError {
+    /// `led_count` is outside 1..=8.
+    LedCount {
+        /// The rejected value.
+        got: u8,
+    },
+    /// `chip_rate` is outside 1.000..=4000.000 Hz.
+    ChipRate {
+        /// The rejected value in millihertz.
+        got_millihertz: u32,
+    },
+    /// `brightness_permille[led]` exceeds 1000.
+    Brightness {
+        /// 0-based LED index.
+        led: u8,
+        /// The rejected value.
+        got: u16,
+    },
+    /// `phase_chips[led]` is not below the frame length 2^(N+1).
+    Phase {
+        /// 0-based LED index.
+        led: u8,
+        /// The rejected value.
+        got: u16,
+    },
+}
+
+impl core::fmt::Display for ConfigError {
+    fn fmt(&self, f: &mut core::fmt::Formatter<'_>) -> core::fmt::Result {
+        match self {
+            Self::LedCount { got } => write!(f, "led_count {got} is outside 1..={MAX_LEDS}"),
+            Self::ChipRate { got_millihertz } => write!(
+                f,
+                "chip_rate {got_millihertz} mHz is outside {}..={} mHz",
+                ChipRate::MIN.0,
+                ChipRate::MAX.0
+            ),
+            Self::Brightness { led, got } => write!(
+                f,
+                "brightness_permille[{led}] = {got} exceeds {FULL_BRIGHTNESS_PERMILLE}"
+            ),
+            Self::Phase { led, got } => {
+                write!(
+                    f,
+                    "phase_chips[{led}] = {got} is not below the frame length"
+                )
+            }
+        }
+    }
+}
+
+#[cfg(feature = "std")]
+impl std::error::Error for ConfigError {}
+
+/// Everything the luminaire plays: persisted in flash, exchanged by GetConfig/SetConfig.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub struct LuminaireConfig {
+    /// Number of modulated LEDs N (1..=8).
+    pub led_count: u8,
+    /// Chip rate.
+    pub chip_rate: ChipRate,
+    /// Per-LED on-brightness in per mille (0..=1000); all 8 entries are validated.
+    pub brightness_permille: [u16; MAX_LEDS],
+    /// Per-LED cyclic carrier delay in chips (< 2^(N+1)); all 8 entries are validated.
+    pub phase_chips: [u16; MAX_LEDS],
+    /// Whether the carriers are playing.
+    pub running: bool,
+}
+
+impl LuminaireConfig {
+    /// Factory default: 4 LEDs at 960 Hz, full brightness, no phase offsets, running.
+    pub const DEFAULT: LuminaireConfig = LuminaireConfig {
+        led_count: 4,
+        chip_rate: ChipRate(960_000),
+        brightness_permille: [FULL_BRIGHTNESS_PERMILLE; MAX_LEDS],
+        phase_chips: [0; MAX_LEDS],
+        running: true,
+    };
+
+    /// Checks every field; the first offending field is reported.
+    pub fn validate(&self) -> Result<(), ConfigError> {
+        if self.led_count == 0 || usize::from(self.led_count) > MAX_LEDS {
+            return Err(ConfigError::LedCount {
+                got: self.led_count,
+            });
+        }
+        if !self.chip_rate.is_supported() {
+            return Err(ConfigError::ChipRate {
+                got_millihertz: self.chip_rate.0,
+            });
+        }
+        for (led, &got) in (0u8..).zip(self.brightness_permille.iter()) {
+            if got > FULL_BRIGHTNESS_PERMILLE {
+                return Err(ConfigError::Brightness { led, got });
+            }
+        }
+        let chips = chips_per_frame(self.led_count);
+        for (led, &got) in (0u8..).zip(self.phase_chips.iter()) {
+            if usize::from(got) >= chips {
+                return Err(ConfigError::Phase { led, got });
+            }
+        }
+        Ok(())
+    }
+
+    /// The chip table this configuration plays (phases applied); `LedCount` error if invalid.
+    pub fn chip_table(&self) -> Result<ChipTable, ConfigError> {
+        ChipTable::with_phases(self.led_count, &self.phase_chips).map_err(|_| {
+            ConfigError::LedCount {
+                got: self.led_count,
+            }
+        })
+    }
+}
+
+impl Default for LuminaireConfig {
+    fn default() -> Self {
+        Self::DEFAULT
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn default_is_valid_and_plays_four_leds() {
+        let config = LuminaireConfig::DEFAULT;
+        assert_eq!(config.validate(), Ok(()));
+        assert_eq!(config.chip_table().map(|t| t.chips()), Ok(32));
+    }
+
+    #[test]
+    fn fractional_rates_are_exact() {
+        assert_eq!(ChipRate::from_hz(959.5), ChipRate(959_500));
+        assert_eq!(ChipRate(959_500).hz(), 959.5);
+        assert_eq!(ChipRate::from_hz(f64::NAN), ChipRate(0));
+        assert_eq!(ChipRate::from_hz(-3.0), ChipRate(0));
+        assert_eq!(ChipRate::from_hz(1e30), ChipRate(u32::MAX));
+    }
+
+    #[test]
+    fn rate_range_edges() {
+        let mut c = LuminaireConfig::DEFAULT;
+        for (mhz, ok) in [
+            (999, false),
+            (1_000, true),
+            (4_000_000, true),
+            (4_000_001, false),
+        ] {
+            c.chip_rate = ChipRate(mhz);
+            assert_eq!(c.validate().is_ok(), ok, "{mhz}");
+        }
+        c.chip_rate = ChipRate(999);
+        assert_eq!(
+            c.validate(),
+            Err(ConfigError::ChipRate {
+                got_millihertz: 999
+            })
+        );
+    }
+
+    #[test]
+    fn errors_name_the_field() {
+        let mut c = LuminaireConfig::DEFAULT;
+        c.led_count = 9;
+        assert_eq!(c.validate(), Err(ConfigError::LedCount { got: 9 }));
+        c.led_count = 0;
+        assert_eq!(c.validate(), Err(ConfigError::LedCount { got: 0 }));
+        let mut c = LuminaireConfig::DEFAULT;
+        c.brightness_permille[7] = 1001;
+        assert_eq!(
+            c.validate(),
+            Err(ConfigError::Brightness { led: 7, got: 1001 })
+        );
+        let mut c = LuminaireConfig::DEFAULT;
+        c.phase_chips[2] = 32;
+        assert_eq!(c.validate(), Err(ConfigError::Phase { led: 2, got: 32 }));
+        c.phase_chips[2] = 31;
+        assert_eq!(c.validate(), Ok(()));
+    }
+
+    #[test]
+    fn phases_reach_the_chip_table() {
+        let mut c = LuminaireConfig::DEFAULT;
+        c.phase_chips[0] = 1;
+        let shifted = c.chip_table().unwrap();
+        let plain = LuminaireConfig::DEFAULT.chip_table().unwrap();
+        assert_ne!(shifted.masks(), plain.masks());
+        assert_eq!(shifted.masks()[1] & 1, plain.masks()[0] & 1);
+    }
+}

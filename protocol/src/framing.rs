@@ -1,0 +1,277 @@
+//! Framing: `COBS(postcard(Header) ‖ postcard(body) ‖ crc32_le(…)) 0x00` (issue 2 item 3).
+//!
+//! Encoding uses postcard's own flavors (`CrcModifier` over `Cobs` over `Slice`); decoding
+//! undoes COBS in place (the `cobs` crate postcard depends on), checks the CRC-32 (ISO-HDLC,
+//! the `crc` crate), then reads the header and the body with postcard. A frame on the wire is
+//! at most [`MAX_FRAME_LEN`] bytes including its 0x00 terminator.
+//!
+//! [`FrameReader`] splits a byte stream at 0x00 delimiters. Resynchronisation rules:
+//! * Bytes between two delimiters form one candidate frame; garbage that is separated from the
+//!   next frame by a 0x00 therefore costs nothing but a rejected candidate.
+//! * Garbage glued to the front of a frame with no 0x00 in between corrupts exactly that frame
+//!   (CRC or COBS error); the frame after the next 0x00 is read intact. Senders may put a 0x00
+//!   *before* a frame too (the reader ignores empty frames), which makes every frame immune to
+//!   preceding line noise; the host does so after a timeout.
+//! * A candidate longer than the capacity is reported once as [`FrameEvent::TooLong`] and the
+//!   rest is discarded up to the next 0x00; the frame after that is read intact.
+
+use postcard::ser_flavors::{Cobs, Slice, crc::CrcModifier};
+use serde::{Deserialize, Serialize};
+
+use crate::wire::{Header, PROTOCOL_VERSION, Request, Response};
+
+/// Largest frame on the wire in bytes, including the 0x00 terminator.
+pub const MAX_FRAME_LEN: usize = 256;
+
+/// Largest COBS-encoded frame body (without terminator) a reader must hold.
+pub const MAX_COBS_LEN: usize = MAX_FRAME_LEN - 1;
+
+/// Length of the CRC-32 trailer inside a decoded frame.
+pub const CRC_LEN: usize = 4;
+
+/// The frame and record CRC: CRC-32/ISO-HDLC.
+pub static CRC32: crc::Crc<u32> = crc::Crc::<u32>::new(&crc::CRC_32_ISO_HDLC);
+
+/// A [`FrameReader`] sized for this protocol's frames.
+pub type WireFrameReader = FrameReader<MAX_COBS_LEN>;
+
+/// Why a message could not be encoded.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub enum EncodeError {
+    /// The output buffer (capped at [`MAX_FRAME_LEN`]) is too small for the frame.
+    BufferFull,
+    /// postcard failed to serialize the message.
+    Serialize,
+}
+
+/// Why a received frame could not be decoded.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub enum FrameError {
+    /// Not valid COBS (or empty).
+    Cobs,
+    /// Shorter than a CRC or CRC mismatch.
+    BadCrc,
+    /// CRC fine but header or body did not decode, or bytes were left over; `seq` is known
+    /// when the header decoded.
+    Malformed {
+        /// Sequence number from the header, if it decoded.
+        seq: Option<u32>,
+    },
+    /// The header carries another protocol version.
+    UnsupportedVersion {
+        /// The sender's version.
+        version: u16,
+        /// The sender's sequence number.
+        seq: u32,
+    },
+}
+
+impl FrameError {
+    /// Sequence number of the offending frame, if known.
+    pub fn seq(&self) -> Option<u32> {
+        match self {
+            Self::Cobs | Self::BadCrc => None,
+            Self::Malformed { seq } => *seq,
+            Self::UnsupportedVersion { seq, .. } => Some(*seq),
+        }
+    }
+
+    /// The [`crate::wire::ProtocolError`] a device answers this error with.
+    pub fn protocol_error(&self) -> crate::wire::ProtocolError {
+        use crate::wire::ProtocolError;
+        match self {
+            Self::Cobs | Self::Malformed { .. } => ProtocolError::Malformed,
+            Self::BadCrc => ProtocolError::BadCrc,
+            Self::UnsupportedVersion { .. } => ProtocolError::UnsupportedVersion {
+                supported: PROTOCOL_VERSION,
+            },
+        }
+    }
+}
+
+impl core::fmt::Display for EncodeError {
+    fn fmt(&self, f: &mut core::fmt::Formatter<'_>) -> core::fmt::Result {
+        match self {
+            Self::BufferFull => write!(f, "frame does not fit the buffer ({MAX_FRAME_LEN} B max)"),
+            Self::Serialize => f.write_str("message could not be serialized"),
+        }
+    }
+}
+
+impl core::fmt::Display for FrameError {
+    fn fmt(&self, f: &mut core::fmt::Formatter<'_>) -> core::fmt::Result {
+        match self {
+            Self::Cobs => f.write_str("invalid COBS frame"),
+            Self::BadCrc => f.write_str("CRC mismatch"),
+            Self::Malformed { seq: Some(seq) } => write!(f, "malformed frame (seq {seq})"),
+            Self::Malformed { seq: None } => f.write_str("malformed frame"),
+            Self::UnsupportedVersion { version, seq } => {
+                write!(f, "protocol version {version} unsupported (seq {seq})")
+            }
+        }
+    }
+}
+
+#[cfg(feature = "std")]
+impl std::error::Error for EncodeError {}
+#[cfg(feature = "std")]
+impl std::error::Error for FrameError {}
+
+/// Encodes `(header, body)` as one complete frame (terminator included) into `buf`.
+fn encode<'a, T: Serialize>(
+    header: Header,
+    body: &T,
+    buf: &'a mut [u8],
+) -> Result<&'a [u8], EncodeError> {
+    let limit = buf.len().min(MAX_FRAME_LEN);
+    let slice = Slice::new(&mut buf[..limit]);
+    let cobs = Cobs::try_new(slice).map_err(|_| EncodeError::BufferFull)?;
+    let flavor = CrcModifier::new(cobs, CRC32.digest());
+    match postcard::serialize_with_flavor::<_, _, &mut [u8]>(&(header, body), flavor) {
+        Ok(frame) => Ok(frame),
+        Err(postcard::Error::SerializeBufferFull) => Err(EncodeError::BufferFull),
+        Err(_) => Err(EncodeError::Serialize),
+    }
+}
+
+/// Encodes a request frame with sequence number `seq`; returns the bytes to send.
+pub fn encode_request<'a>(
+    seq: u32,
+    request: &Request,
+    buf: &'a mut [u8],
+) -> Result<&'a [u8], EncodeError> {
+    encode(Header::new(seq), request, buf)
+}
+
+/// Encodes a response frame echoing sequence number `seq`; returns the bytes to send.
+pub fn encode_response<'a>(
+    seq: u32,
+    response: &Response,
+    buf: &'a mut [u8],
+) -> Result<&'a [u8], EncodeError> {
+    encode(Header::new(seq), response, buf)
+}
+
+/// Undoes COBS in place and checks the CRC; returns the payload (header ‖ body).
+fn unframe(raw: &mut [u8]) -> Result<&[u8], FrameError> {
+    let len = cobs::decode_in_place(raw).map_err(|_| FrameError::Cobs)?;
+    let decoded = &raw[..len];
+    if decoded.len() < CRC_LEN {
+        return Err(FrameError::BadCrc);
+    }
+    let (payload, trailer) = decoded.split_at(decoded.len() - CRC_LEN);
+    let expected = u32::from_le_bytes([trailer[0], trailer[1], trailer[2], trailer[3]]);
+    if CRC32.checksum(payload) != expected {
+        return Err(FrameError::BadCrc);
+    }
+    Ok(payload)
+}
+
+/// Decodes one frame's header and body; the body must use every remaining byte.
+fn decode<'de, T: Deserialize<'de>>(raw: &'de mut [u8]) -> Result<(Header, T), FrameError> {
+    let payload = unframe(raw)?;
+    let (header, rest) = postcard::take_from_bytes::<Header>(payload)
+        .map_err(|_| FrameError::Malformed { seq: None })?;
+    if header.version != PROTOCOL_VERSION {
+        return Err(FrameError::UnsupportedVersion {
+            version: header.version,
+            seq: header.seq,
+        });
+    }
+    let malformed = FrameError::Malformed {
+        seq: Some(header.seq),
+    };
+    match postcard::take_from_bytes::<T>(rest) {
+        Ok((body, [])) => Ok((header, body)),
+        _ => Err(malformed),
+    }
+}
+
+/// Decodes a request from one raw COBS frame (terminator optional), in place.
+pub fn decode_request(raw: &mut [u8]) -> Result<(Header, Request), FrameError> {
+    decode(raw)
+}
+
+/// Decodes a response from one raw COBS frame (terminator optional), in place.
+pub fn decode_response(raw: &mut [u8]) -> Result<(Header, Response), FrameError> {
+    decode(raw)
+}
+
+/// What [`FrameReader`] found in the stream.
+#[derive(Debug, PartialEq, Eq)]
+pub enum FrameEvent<'a> {
+    /// A complete candidate frame (COBS bytes, terminator stripped), ready for decoding.
+    Frame(&'a mut [u8]),
+    /// A candidate exceeded the capacity; it is discarded up to the next 0x00.
+    TooLong,
+}
+
+/// Streaming splitter of a byte stream into frames at 0x00 delimiters, holding up to `N`
+/// bytes per frame (see the module docs for the resynchronisation rules).
+#[derive(Debug, Clone)]
+pub struct FrameReader<const N: usize> {
+    buf: [u8; N],
+    len: usize,
+    discarding: bool,
+}
+
+impl<const N: usize> Default for FrameReader<N> {
+    fn default() -> Self {
+        Self::new()
+    }
+}
+
+impl<const N: usize> FrameReader<N> {
+    /// An empty reader.
+    pub const fn new() -> Self {
+        Self {
+            buf: [0; N],
+            len: 0,
+            discarding: false,
+        }
+    }
+
+    /// Forgets any partial frame (e.g. after a link reset).
+    pub fn reset(&mut self) {
+        self.len = 0;
+        self.discarding = false;
+    }
+
+    /// Number of bytes of the partial frame held.
+    pub fn pending(&self) -> usize {
+        self.len
+    }
+
+    /// Takes one byte; returns an event when it completes a frame or overflows one.
+    pub fn push(&mut self, byte: u8) -> Option<FrameEvent<'_>> {
+        if byte == 0 {
+            let len = core::mem::take(&mut self.len);
+            if core::mem::take(&mut self.discarding) || len == 0 {
+                return None;
+            }
+            return Some(FrameEvent::Frame(&mut self.buf[..len]));
+        }
+        if self.discarding {
+            return None;
+        }
+        if self.len == N {
+            self.len = 0;
+            self.discarding = true;
+            return Some(FrameEvent::TooLong);
+        }
+        self.buf[self.len] = byte;
+        self.len += 1;
+        None
+    }
+
+    /// Takes a chunk of any length, calling `on_event` for every event in stream order.
+    pub fn feed(&mut self, chunk: &[u8], mut on_event: impl FnMut(FrameEvent<'_>)) {
+        for &byte in chunk {
+            if let Some(event) = self.push(byte) {
+                on_event(event);
+            }
+        }
+    }
+}

@@ -1,0 +1,416 @@
+//! The hardware-free luminaire state machine (issue 2 item 4) and the byte-level
+//! [`Endpoint`] around it.
+//!
+//! [`Luminaire::handle`] maps a request to a response plus [`Effects`] the hardware layer must
+//! carry out (load a chip table, persist, start/stop, blink). It owns the configuration, the
+//! save state and the link counters, and never applies an invalid configuration. The firmware
+//! and the host's virtual luminaire (`meb device emulate`) both run exactly this code through
+//! [`Endpoint`], so the emulator answers byte for byte like the hardware.
+//!
+//! A request carrying the same sequence number and body as the previous one is a retry: the
+//! cached response is returned and no effects are repeated.
+
+use heapless::{String, Vec};
+
+use crate::carriers::{ChipTable, MAX_LEDS};
+use crate::config::{ChipRate, ConfigError, LuminaireConfig};
+use crate::framing::{
+    FrameError, FrameEvent, MAX_FRAME_LEN, WireFrameReader, decode_request, encode_response,
+};
+use crate::wire::{
+    CommandError, ConfigSource, DeviceInfo, MAX_IDENTIFY_SECONDS, PROTOCOL_VERSION, ProtocolError,
+    Request, Response, SEQ_UNKNOWN, SaveOutcome, SaveState, Status,
+};
+
+/// What the hardware must play: everything of a config except the running flag.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub struct OutputPlan {
+    /// Number of LEDs N.
+    pub led_count: u8,
+    /// Chip rate.
+    pub chip_rate: ChipRate,
+    /// Per-LED on-brightness in per mille.
+    pub brightness_permille: [u16; MAX_LEDS],
+    /// Per-LED carrier delay in chips.
+    pub phase_chips: [u16; MAX_LEDS],
+}
+
+impl OutputPlan {
+    /// The plan of a (validated) configuration.
+    pub fn of(config: &LuminaireConfig) -> Self {
+        Self {
+            led_count: config.led_count,
+            chip_rate: config.chip_rate,
+            brightness_permille: config.brightness_permille,
+            phase_chips: config.phase_chips,
+        }
+    }
+
+    /// The chip table to load (phases applied).
+    pub fn chip_table(&self) -> Result<ChipTable, ConfigError> {
+        ChipTable::with_phases(self.led_count, &self.phase_chips).map_err(|_| {
+            ConfigError::LedCount {
+                got: self.led_count,
+            }
+        })
+    }
+}
+
+/// One thing the hardware layer must do after a request.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub enum Effect {
+    /// Load the new chip table, rate and brightness.
+    ApplyOutput(OutputPlan),
+    /// Write this configuration to storage, then call [`Luminaire::notify_saved`].
+    Persist(LuminaireConfig),
+    /// Start playing the carriers.
+    Start,
+    /// Stop playing (LEDs off).
+    Stop,
+    /// Blink all LEDs for `seconds` (0 = end a blink), then call
+    /// [`Luminaire::notify_identify_finished`].
+    Identify {
+        /// Blink duration.
+        seconds: u8,
+    },
+}
+
+/// The effects of one request, in the order they must be carried out.
+pub type Effects = Vec<Effect, 4>;
+
+/// Static facts about the board the state machine runs on.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct BoardInfo {
+    /// Firmware version string.
+    pub firmware_version: String<16>,
+    /// Board name.
+    pub board: String<32>,
+}
+
+/// Outcome of reading the stored configuration at boot.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub enum RestoredConfig {
+    /// A valid record was read.
+    Ok(LuminaireConfig),
+    /// No record (erased flash, no file).
+    Missing,
+    /// A record was present but corrupt or invalid.
+    Corrupt,
+}
+
+impl<E> From<Result<LuminaireConfig, E>> for RestoredConfig {
+    /// Any decode error counts as corrupt; use [`RestoredConfig::Missing`] for absent storage.
+    fn from(result: Result<LuminaireConfig, E>) -> Self {
+        match result {
+            Ok(config) if config.validate().is_ok() => Self::Ok(config),
+            _ => Self::Corrupt,
+        }
+    }
+}
+
+/// Receive-side link counters.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub struct LinkCounters {
+    /// Frames that decoded into a request.
+    pub frames_ok: u32,
+    /// Frames with a CRC mismatch.
+    pub bad_crc: u32,
+    /// Frames that were not valid COBS or did not decode.
+    pub malformed: u32,
+    /// Frames that overflowed the reader.
+    pub too_long: u32,
+    /// Frames of another protocol version.
+    pub unsupported_version: u32,
+}
+
+/// The luminaire's protocol state: configuration, save and identify state, counters.
+#[derive(Debug, Clone)]
+pub struct Luminaire {
+    board: BoardInfo,
+    config: LuminaireConfig,
+    stored: Option<LuminaireConfig>,
+    source: ConfigSource,
+    save: SaveState,
+    saving: Option<LuminaireConfig>,
+    identify_active: bool,
+    counters: LinkCounters,
+    last: Option<(u32, Request, Response)>,
+}
+
+impl Luminaire {
+    /// A luminaire starting from the stored configuration, or the defaults if there is none.
+    pub fn new(board: BoardInfo, restored: RestoredConfig) -> Self {
+        let (config, stored, source) = match restored {
+            RestoredConfig::Ok(config) if config.validate().is_ok() => {
+                (config, Some(config), ConfigSource::Restored)
+            }
+            RestoredConfig::Ok(_) | RestoredConfig::Corrupt => (
+                LuminaireConfig::DEFAULT,
+                None,
+                ConfigSource::CorruptRecordDefaults,
+            ),
+            RestoredConfig::Missing => (LuminaireConfig::DEFAULT, None, ConfigSource::Defaults),
+        };
+        Self {
+            board,
+            config,
+            stored,
+            source,
+            save: SaveState::Idle,
+            saving: None,
+            identify_active: false,
+            counters: LinkCounters::default(),
+            last: None,
+        }
+    }
+
+    /// Effects that bring freshly booted hardware into the active configuration.
+    pub fn startup_effects(&self) -> Effects {
+        let mut effects = Effects::new();
+        push(
+            &mut effects,
+            Effect::ApplyOutput(OutputPlan::of(&self.config)),
+        );
+        push(&mut effects, self.run_effect());
+        effects
+    }
+
+    /// The active configuration.
+    pub fn config(&self) -> &LuminaireConfig {
+        &self.config
+    }
+
+    /// The receive counters.
+    pub fn counters(&self) -> &LinkCounters {
+        &self.counters
+    }
+
+    /// The `GetInfo` answer.
+    pub fn info(&self) -> DeviceInfo {
+        DeviceInfo {
+            firmware_version: self.board.firmware_version.clone(),
+            protocol_version: PROTOCOL_VERSION,
+            board: self.board.board.clone(),
+            max_leds: MAX_LEDS as u8,
+            min_chip_rate: ChipRate::MIN,
+            max_chip_rate: ChipRate::MAX,
+            carrier_fingerprint: self
+                .config
+                .chip_table()
+                .map(|table| table.fingerprint())
+                .unwrap_or(0),
+        }
+    }
+
+    /// The `GetStatus` answer.
+    pub fn status(&self) -> Status {
+        Status {
+            running: self.config.running,
+            config_source: self.source,
+            unsaved_changes: self.stored != Some(self.config),
+            save: self.save,
+            identify_active: self.identify_active,
+            rx_frames_ok: self.counters.frames_ok,
+            rx_bad_crc: self.counters.bad_crc,
+            rx_malformed: self.counters.malformed,
+            rx_too_long: self.counters.too_long,
+            rx_unsupported_version: self.counters.unsupported_version,
+        }
+    }
+
+    /// Handles one decoded request with sequence number `seq`.
+    pub fn handle(&mut self, seq: u32, request: &Request) -> (Response, Effects) {
+        self.counters.frames_ok = self.counters.frames_ok.wrapping_add(1);
+        if let Some((last_seq, last_request, last_response)) = &self.last
+            && *last_seq == seq
+            && last_request == request
+        {
+            return (last_response.clone(), Effects::new());
+        }
+        let (response, effects) = self.execute(request);
+        self.last = Some((seq, request.clone(), response.clone()));
+        (response, effects)
+    }
+
+    fn execute(&mut self, request: &Request) -> (Response, Effects) {
+        let mut effects = Effects::new();
+        let response = match request {
+            Request::Ping(nonce) => Response::Ping(*nonce),
+            Request::GetInfo(()) => Response::GetInfo(self.info()),
+            Request::GetConfig(()) => Response::GetConfig(self.config),
+            Request::SetConfig(new) => Response::SetConfig(match new.validate() {
+                Ok(()) => {
+                    self.config = *new;
+                    push(&mut effects, Effect::ApplyOutput(OutputPlan::of(new)));
+                    push(&mut effects, self.run_effect());
+                    Ok(())
+                }
+                Err(e) => Err(e),
+            }),
+            Request::SaveConfig(()) => Response::SaveConfig(if self.save == SaveState::Pending {
+                Err(CommandError::Busy)
+            } else if self.stored == Some(self.config) {
+                self.save = SaveState::Idle;
+                Ok(SaveOutcome::AlreadySaved)
+            } else {
+                self.save = SaveState::Pending;
+                self.saving = Some(self.config);
+                push(&mut effects, Effect::Persist(self.config));
+                Ok(SaveOutcome::Deferred)
+            }),
+            Request::Start(()) => {
+                self.config.running = true;
+                push(&mut effects, Effect::Start);
+                Response::Start(Ok(()))
+            }
+            Request::Stop(()) => {
+                self.config.running = false;
+                push(&mut effects, Effect::Stop);
+                Response::Stop(Ok(()))
+            }
+            Request::GetStatus(()) => Response::GetStatus(self.status()),
+            Request::Identify(seconds) => Response::Identify(if *seconds > MAX_IDENTIFY_SECONDS {
+                Err(CommandError::InvalidArgument)
+            } else {
+                self.identify_active = *seconds > 0;
+                push(&mut effects, Effect::Identify { seconds: *seconds });
+                Ok(())
+            }),
+        };
+        (response, effects)
+    }
+
+    fn run_effect(&self) -> Effect {
+        if self.config.running {
+            Effect::Start
+        } else {
+            Effect::Stop
+        }
+    }
+
+    /// Reports the outcome of the last [`Effect::Persist`].
+    pub fn notify_saved(&mut self, result: Result<(), CommandError>) {
+        let saving = self.saving.take();
+        match result {
+            Ok(()) => {
+                self.save = SaveState::Idle;
+                if saving.is_some() {
+                    self.stored = saving;
+                }
+            }
+            Err(_) => self.save = SaveState::Failed,
+        }
+    }
+
+    /// Reports that an identify blink ended.
+    pub fn notify_identify_finished(&mut self) {
+        self.identify_active = false;
+    }
+
+    /// Counts a frame that failed to decode and returns the reply to send.
+    pub fn frame_error(&mut self, error: &FrameError) -> (u32, Response) {
+        let c = &mut self.counters;
+        let counter = match error {
+            FrameError::Cobs | FrameError::Malformed { .. } => &mut c.malformed,
+            FrameError::BadCrc => &mut c.bad_crc,
+            FrameError::UnsupportedVersion { .. } => &mut c.unsupported_version,
+        };
+        *counter = counter.wrapping_add(1);
+        (
+            error.seq().unwrap_or(SEQ_UNKNOWN),
+            Response::ProtocolError(error.protocol_error()),
+        )
+    }
+
+    /// Counts an overflowing frame and returns the reply to send.
+    pub fn frame_too_long(&mut self) -> (u32, Response) {
+        self.counters.too_long = self.counters.too_long.wrapping_add(1);
+        (
+            SEQ_UNKNOWN,
+            Response::ProtocolError(ProtocolError::FrameTooLong),
+        )
+    }
+}
+
+fn push(effects: &mut Effects, effect: Effect) {
+    // Capacity 4 exceeds the 2 effects any request produces.
+    let _ = effects.push(effect);
+}
+
+/// A [`Luminaire`] behind a [`WireFrameReader`]: bytes in, reply frames and effects out.
+#[derive(Debug, Clone)]
+pub struct Endpoint {
+    /// The state machine.
+    pub luminaire: Luminaire,
+    reader: WireFrameReader,
+    reply: [u8; MAX_FRAME_LEN],
+}
+
+impl Endpoint {
+    /// An endpoint around `luminaire` with an empty reader.
+    pub fn new(luminaire: Luminaire) -> Self {
+        Self {
+            luminaire,
+            reader: WireFrameReader::new(),
+            reply: [0; MAX_FRAME_LEN],
+        }
+    }
+
+    /// Feeds received bytes; for every complete or overflowing frame calls `sink` with the
+    /// encoded reply frame and the effects to carry out.
+    pub fn on_bytes(&mut self, chunk: &[u8], mut sink: impl FnMut(&[u8], Effects)) {
+        let Self {
+            luminaire,
+            reader,
+            reply,
+        } = self;
+        reader.feed(chunk, |event| {
+            let (bytes, effects) = match event {
+                FrameEvent::Frame(raw) => respond(luminaire, raw, reply),
+                FrameEvent::TooLong => {
+                    let (seq, response) = luminaire.frame_too_long();
+                    (encode_reply(seq, &response, reply), Effects::new())
+                }
+            };
+            if let Some(bytes) = bytes {
+                sink(bytes, effects);
+            }
+        });
+    }
+
+    /// Handles one raw COBS frame (terminator optional): decode → handle → encode.
+    /// Returns the reply (`None` only if it could not be encoded) and the effects.
+    pub fn handle_frame<'a>(
+        &mut self,
+        raw: &mut [u8],
+        reply_buf: &'a mut [u8],
+    ) -> (Option<&'a [u8]>, Effects) {
+        respond(&mut self.luminaire, raw, reply_buf)
+    }
+}
+
+fn respond<'a>(
+    luminaire: &mut Luminaire,
+    raw: &mut [u8],
+    reply_buf: &'a mut [u8],
+) -> (Option<&'a [u8]>, Effects) {
+    let (seq, response, effects) = match decode_request(raw) {
+        Ok((header, request)) => {
+            let (response, effects) = luminaire.handle(header.seq, &request);
+            (header.seq, response, effects)
+        }
+        Err(error) => {
+            let (seq, response) = luminaire.frame_error(&error);
+            (seq, response, Effects::new())
+        }
+    };
+    (encode_reply(seq, &response, reply_buf), effects)
+}
+
+fn encode_reply<'a>(seq: u32, response: &Response, buf: &'a mut [u8]) -> Option<&'a [u8]> {
+    encode_response(seq, response, buf).ok()
+}

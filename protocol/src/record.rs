@@ -1,0 +1,112 @@
+//! Persisted configuration record, used by the firmware's flash page and the host emulator's
+//! storage file alike (issue 2 items 2 and 4).
+//!
+//! Layout (little-endian): `b"MEBC"` magic, `u16` record version, `u16` payload length,
+//! postcard([`LuminaireConfig`]), CRC-32/ISO-HDLC of everything before it. Bytes after the
+//! record (erased flash) are ignored. Decoding yields either a valid configuration or an error,
+//! never a half-valid configuration.
+
+use crate::config::{ConfigError, LuminaireConfig};
+use crate::framing::CRC32;
+
+/// Record magic.
+pub const RECORD_MAGIC: [u8; 4] = *b"MEBC";
+/// Current record layout version.
+pub const RECORD_VERSION: u16 = 1;
+/// Bytes before the payload: magic, version, length.
+pub const RECORD_HEADER_LEN: usize = 8;
+/// Largest record in bytes (header, payload, CRC).
+pub const MAX_RECORD_LEN: usize = 128;
+
+/// Why a record could not be written or read.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub enum RecordError {
+    /// The output buffer is too small.
+    BufferFull,
+    /// Shorter than its header or declared length.
+    Truncated,
+    /// The magic is wrong (e.g. erased flash).
+    BadMagic,
+    /// A record version this firmware does not know.
+    UnknownVersion(u16),
+    /// The CRC does not match.
+    BadCrc,
+    /// The payload does not decode as a configuration.
+    Malformed,
+    /// The decoded configuration fails validation.
+    Invalid(ConfigError),
+}
+
+impl core::fmt::Display for RecordError {
+    fn fmt(&self, f: &mut core::fmt::Formatter<'_>) -> core::fmt::Result {
+        match self {
+            Self::BufferFull => f.write_str("record buffer too small"),
+            Self::Truncated => f.write_str("record truncated"),
+            Self::BadMagic => f.write_str("no config record (bad magic)"),
+            Self::UnknownVersion(v) => write!(f, "unknown record version {v}"),
+            Self::BadCrc => f.write_str("record CRC mismatch"),
+            Self::Malformed => f.write_str("record payload malformed"),
+            Self::Invalid(e) => write!(f, "stored config invalid: {e}"),
+        }
+    }
+}
+
+#[cfg(feature = "std")]
+impl std::error::Error for RecordError {}
+
+/// Writes the record for `config` into `buf`; returns the record bytes.
+pub fn encode_record<'a>(
+    config: &LuminaireConfig,
+    buf: &'a mut [u8],
+) -> Result<&'a [u8], RecordError> {
+    if buf.len() < RECORD_HEADER_LEN {
+        return Err(RecordError::BufferFull);
+    }
+    let (head, tail) = buf.split_at_mut(RECORD_HEADER_LEN);
+    let payload_len = postcard::to_slice(config, tail)
+        .map_err(|_| RecordError::BufferFull)?
+        .len();
+    let length = u16::try_from(payload_len).map_err(|_| RecordError::BufferFull)?;
+    head[..4].copy_from_slice(&RECORD_MAGIC);
+    head[4..6].copy_from_slice(&RECORD_VERSION.to_le_bytes());
+    head[6..8].copy_from_slice(&length.to_le_bytes());
+    let body_end = RECORD_HEADER_LEN + payload_len;
+    let end = body_end + 4;
+    if buf.len() < end {
+        return Err(RecordError::BufferFull);
+    }
+    let crc = CRC32.checksum(&buf[..body_end]);
+    buf[body_end..end].copy_from_slice(&crc.to_le_bytes());
+    Ok(&buf[..end])
+}
+
+/// Reads a record (trailing bytes ignored); the configuration is returned only if valid.
+pub fn decode_record(bytes: &[u8]) -> Result<LuminaireConfig, RecordError> {
+    if bytes.len() < RECORD_HEADER_LEN {
+        return Err(RecordError::Truncated);
+    }
+    if bytes[..4] != RECORD_MAGIC {
+        return Err(RecordError::BadMagic);
+    }
+    let version = u16::from_le_bytes([bytes[4], bytes[5]]);
+    if version != RECORD_VERSION {
+        return Err(RecordError::UnknownVersion(version));
+    }
+    let length = usize::from(u16::from_le_bytes([bytes[6], bytes[7]]));
+    let body_end = RECORD_HEADER_LEN + length;
+    let end = body_end + 4;
+    let (Some(body), Some(trailer)) = (bytes.get(..body_end), bytes.get(body_end..end)) else {
+        return Err(RecordError::Truncated);
+    };
+    let expected = u32::from_le_bytes([trailer[0], trailer[1], trailer[2], trailer[3]]);
+    if CRC32.checksum(body) != expected {
+        return Err(RecordError::BadCrc);
+    }
+    let config = match postcard::take_from_bytes::<LuminaireConfig>(&body[RECORD_HEADER_LEN..]) {
+        Ok((config, [])) => config,
+        _ => return Err(RecordError::Malformed),
+    };
+    config.validate().map_err(RecordError::Invalid)?;
+    Ok(config)
+}
