@@ -17,12 +17,15 @@ struct Cli {
 enum Command {
     /// Print the MEB-FDMA chip table, its spectrum and its IEEE 1789 flicker class.
     Carriers(cli::carriers::CarriersArgs),
+    /// Talk to meb luminaires over USB serial, or emulate one on a pseudo-terminal.
+    Device(cli::device::DeviceArgs),
 }
 
 fn main() -> ExitCode {
     let cli = Cli::parse();
     let result = match cli.command {
         Command::Carriers(args) => cli::carriers::run(&args),
+        Command::Device(args) => cli::device::run(&args),
     };
     match result {
         Ok(()) => ExitCode::SUCCESS,

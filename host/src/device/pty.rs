@@ -13,6 +13,7 @@ use std::os::fd::{AsFd, OwnedFd};
 use std::path::{Path, PathBuf};
 use std::time::Duration;
 
+use nix::fcntl::{FcntlArg, OFlag, fcntl};
 use nix::poll::{PollFd, PollFlags, PollTimeout, poll};
 use nix::sys::termios::{SetArg, cfmakeraw, tcgetattr, tcsetattr};
 
@@ -51,6 +52,10 @@ impl PseudoTerminal {
         cfmakeraw(&mut termios);
         tcsetattr(pair.slave.as_fd(), SetArg::TCSANOW, &termios).map_err(PtyError::RawMode)?;
         let slave_path = nix::unistd::ttyname(pair.slave.as_fd()).map_err(PtyError::SlavePath)?;
+        // Non-blocking master: a client that never reads must not stall the emulator.
+        let flags = fcntl(pair.master.as_fd(), FcntlArg::F_GETFL).map_err(PtyError::Open)?;
+        let flags = OFlag::from_bits_truncate(flags) | OFlag::O_NONBLOCK;
+        fcntl(pair.master.as_fd(), FcntlArg::F_SETFL(flags)).map_err(PtyError::Open)?;
         Ok(Self {
             master: File::from(pair.master),
             _slave: pair.slave,
@@ -77,7 +82,7 @@ impl PseudoTerminal {
         }
     }
 
-    /// The master side: read what clients wrote, write what they will read.
+    /// The (non-blocking) master side: read what clients wrote, write what they will read.
     pub fn master(&mut self) -> &mut File {
         &mut self.master
     }
