@@ -9,4 +9,5 @@ pub mod capture;
 pub mod device;
 pub mod flicker;
 pub mod rig;
+pub mod simulate;
 pub mod types;

@@ -1,0 +1,260 @@
+//! Near-field Lambertian shading with attached and cast shadows, and the background light.
+//!
+//! Per pixel with visible surface point X, normal n and albedo ρ, LED i contributes
+//! (SPEC §5 with the exact per-point light vector of `rig::Led::light_vector_at`)
+//!
+//! ```text
+//! A_i = g · ρ · max(0, L_i(X)·n) · V_i(X)
+//! ```
+//!
+//! g is a global gain (code fraction per unit irradiance), the clamp is the attached shadow and
+//! V_i ∈ {0, 1} the cast shadow, found by marching from X towards the LED over the depth map
+//! (a height-field shadow test). These A_i are the `led_true` images: the value a pixel reads
+//! with only LED i constantly on, no background, no noise.
+//!
+//! Background (unmodulated room light, thesis Eq. 4.3 `SNR = 10·log10(P_signal/P_noise)`, both
+//! measured as optical power at the object location): we model it as a uniform overhead dome,
+//! which lights a surface of normal n with irradiance E_bg·(1 + n_z)/2 (no shadows). Reading
+//! the thesis' photodetector as facing up (+z) at the object centre and time-averaging the
+//! modulated LEDs (50 % duty), P_signal = Σ_i g·max(0, L_i(0)·ẑ)/2 and P_noise = E_bg, so
+//! `E_bg = P_signal · 10^(−SNR/10)`.
+
+use super::geometry::SurfaceMap;
+use crate::rig::Rig;
+use nalgebra::Vector3;
+use ndarray::Array2;
+use rayon::prelude::*;
+
+/// Peak of the brightest LED image on the default scene (Ø48 mm sphere, albedo 1).
+pub const DEFAULT_PEAK: f64 = 0.4;
+
+/// Radius of the reference sphere used to set the default gain, mm.
+const REFERENCE_RADIUS_MM: f64 = 24.0;
+
+/// Global gain g such that the brightest LED peaks at `peak` of full scale on a Ø48 mm
+/// sphere of albedo 1 at the origin (the brightest point faces that LED).
+pub fn default_gain(rig: &Rig, peak: f64) -> f64 {
+    let brightest = rig
+        .leds
+        .iter()
+        .map(|led| {
+            let p = led.position();
+            let x = p.normalize() * REFERENCE_RADIUS_MM;
+            led.light_vector_at(&x).norm()
+        })
+        .fold(0.0, f64::max);
+    if brightest > 0.0 {
+        peak / brightest
+    } else {
+        1.0
+    }
+}
+
+/// Time-averaged LED irradiance (in code fractions) on an upward detector at the origin:
+/// P_signal of thesis Eq. 4.3.
+pub fn signal_power(rig: &Rig, gain: f64) -> f64 {
+    rig.leds
+        .iter()
+        .map(|led| 0.5 * gain * led.light_vector_at(&Vector3::zeros()).z.max(0.0))
+        .sum()
+}
+
+/// Background irradiance E_bg for a given SNR in dB (thesis Eq. 4.3).
+pub fn background_power(rig: &Rig, gain: f64, snr_db: f64) -> f64 {
+    signal_power(rig, gain) * 10f64.powf(-snr_db / 10.0)
+}
+
+/// Per-LED on-level images A_i (module docs), fractions of full scale.
+pub fn led_images(map: &SurfaceMap, rig: &Rig, gain: f64) -> Vec<Array2<f32>> {
+    let camera = &rig.camera;
+    let pitch = camera.pitch_mm();
+    let z_top = map
+        .z_mm
+        .iter()
+        .copied()
+        .filter(|z| z.is_finite())
+        .fold(f64::NEG_INFINITY, f64::max);
+    rig.leds
+        .iter()
+        .map(|led| {
+            let values: Vec<f32> = (0..map.z_mm.len())
+                .into_par_iter()
+                .map(|i| {
+                    if !map.z_mm[i].is_finite() || map.albedo[i] <= 0.0 {
+                        return 0.0;
+                    }
+                    let x = map.point(camera, i);
+                    let l = led.light_vector_at(&x);
+                    let shade = l.dot(&map.normals[i]);
+                    if shade <= 0.0 {
+                        return 0.0; // attached shadow
+                    }
+                    if in_cast_shadow(map, rig, &x, &led.position(), pitch, z_top) {
+                        return 0.0;
+                    }
+                    (gain * map.albedo[i] * shade) as f32
+                })
+                .collect();
+            Array2::from_shape_vec((map.height, map.width), values)
+                .unwrap_or_else(|_| Array2::zeros((map.height, map.width)))
+        })
+        .collect()
+}
+
+/// Background image ρ·E_bg·(1 + n_z)/2 (module docs).
+pub fn background_image(map: &SurfaceMap, irradiance: f64) -> Array2<f32> {
+    let values: Vec<f32> = (0..map.z_mm.len())
+        .map(|i| {
+            if map.z_mm[i].is_finite() {
+                (irradiance * map.albedo[i] * (1.0 + map.normals[i].z) / 2.0) as f32
+            } else {
+                0.0
+            }
+        })
+        .collect();
+    Array2::from_shape_vec((map.height, map.width), values)
+        .unwrap_or_else(|_| Array2::zeros((map.height, map.width)))
+}
+
+/// Height-field shadow test: does the depth map rise above the segment X → P?
+fn in_cast_shadow(
+    map: &SurfaceMap,
+    rig: &Rig,
+    x: &Vector3<f64>,
+    led: &Vector3<f64>,
+    pitch: f64,
+    z_top: f64,
+) -> bool {
+    let to_led = led - x;
+    let horizontal = (to_led.x * to_led.x + to_led.y * to_led.y).sqrt();
+    if horizontal < 1e-9 {
+        return false; // straight up: a height field cannot occlude
+    }
+    // Half-pixel steps in the image plane.
+    let step = 0.5 * pitch / horizontal;
+    let tolerance = 0.05 * pitch;
+    let mut s = step;
+    while s < 1.0 {
+        let p = x + to_led * s;
+        if p.z > z_top {
+            return false;
+        }
+        let (row, col) = rig.camera.xy_to_pixel(p.x, p.y);
+        match sample_depth(map, row, col) {
+            None => return false, // left the image
+            Some(z) if z > p.z + tolerance => return true,
+            _ => {}
+        }
+        s += step;
+    }
+    false
+}
+
+/// Depth at continuous pixel coordinates: bilinear where all four neighbours are surface,
+/// nearest otherwise; `None` outside the image.
+fn sample_depth(map: &SurfaceMap, row: f64, col: f64) -> Option<f64> {
+    let (h, w) = (map.height as f64, map.width as f64);
+    if !(row > -0.5 && col > -0.5 && row < h - 0.5 && col < w - 0.5) {
+        return None;
+    }
+    let r0 = row.floor().clamp(0.0, h - 1.0);
+    let c0 = col.floor().clamp(0.0, w - 1.0);
+    let r1 = (r0 + 1.0).min(h - 1.0);
+    let c1 = (c0 + 1.0).min(w - 1.0);
+    let at = |r: f64, c: f64| map.z_mm[r as usize * map.width + c as usize];
+    let (z00, z01, z10, z11) = (at(r0, c0), at(r0, c1), at(r1, c0), at(r1, c1));
+    if z00.is_finite() && z01.is_finite() && z10.is_finite() && z11.is_finite() {
+        let fr = (row - r0).clamp(0.0, 1.0);
+        let fc = (col - c0).clamp(0.0, 1.0);
+        let top = z00 + (z01 - z00) * fc;
+        let bottom = z10 + (z11 - z10) * fc;
+        Some(top + (bottom - top) * fr)
+    } else {
+        let r = row.round().clamp(0.0, h - 1.0);
+        let c = col.round().clamp(0.0, w - 1.0);
+        Some(at(r, c))
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::rig::{Camera, Led};
+    use crate::simulate::scene::{GroundPlane, Scene, SceneObject, Shape};
+
+    fn rig_with(leds: Vec<[f64; 3]>, w: usize, h: usize, pitch: f64) -> Rig {
+        Rig {
+            camera: Camera {
+                width: w,
+                height: h,
+                fps: 960.0,
+                distance_mm: 420.0,
+                fov_deg: None,
+                pixel_pitch_mm: Some(pitch),
+            },
+            leds: leds
+                .into_iter()
+                .map(|position_mm| Led {
+                    position_mm,
+                    axis: None,
+                    intensity: 1.0,
+                    lambert_order: 1.0,
+                })
+                .collect(),
+        }
+    }
+
+    /// A plane tilted about y by a known angle: every pixel equals g·ρ·n·L(X).
+    #[test]
+    fn tilted_plane_shading_is_n_dot_l() {
+        let rig = rig_with(
+            vec![[-200.0, 50.0, 300.0], [150.0, -80.0, 400.0]],
+            40,
+            30,
+            0.5,
+        );
+        let tilt = 0.35f64;
+        let mut plane = SceneObject::new(Shape::Cuboid {
+            half_extents_mm: [100.0, 100.0, 1.0],
+        });
+        plane.rotation = nalgebra::UnitQuaternion::from_axis_angle(&Vector3::y_axis(), tilt);
+        plane.albedo = 0.7;
+        let map = SurfaceMap::render(&Scene::single(plane), &rig.camera, 0.0);
+        let images = led_images(&map, &rig, 2.0);
+        let n = Vector3::new(tilt.sin(), 0.0, tilt.cos());
+        for (i, led) in rig.leds.iter().enumerate() {
+            for row in 0..30 {
+                for col in 0..40 {
+                    let (x, y) = rig.camera.pixel_centre_xy(row as f64, col as f64);
+                    // Plane through (0, 0, 1/cos) with normal n: z = (1 − n_x·x)/n_z.
+                    let z = (1.0 - n.x * x) / n.z;
+                    let expected = 2.0 * 0.7 * led.light_vector_at(&Vector3::new(x, y, z)).dot(&n);
+                    let got = f64::from(images[i][[row, col]]);
+                    assert!((got - expected).abs() < 1e-6 * expected.abs().max(1e-3));
+                }
+            }
+        }
+    }
+
+    /// A sphere on a ground plane under a low LED on the left: the shadow falls on the plane
+    /// to the right of the sphere, the left of the plane stays lit.
+    #[test]
+    fn sphere_casts_a_shadow_away_from_the_led() {
+        let rig = rig_with(vec![[-270.0, 0.0, 100.0]], 120, 60, 1.0);
+        let mut scene = Scene::single(SceneObject::new(Shape::Sphere { radius_mm: 15.0 }));
+        scene.ground = Some(GroundPlane {
+            z_mm: -15.0,
+            albedo: 1.0,
+        });
+        let map = SurfaceMap::render(&scene, &rig.camera, 0.0);
+        let img = &led_images(&map, &rig, 1e4)[0];
+        let px = |x: f64| {
+            let (r, c) = rig.camera.xy_to_pixel(x, 0.0);
+            img[[r.round() as usize, c.round() as usize]]
+        };
+        assert!(px(-30.0) > 0.0, "left of the sphere is lit");
+        assert_eq!(px(30.0), 0.0, "right of the sphere is in its shadow");
+        assert!(px(-10.0) > 0.0, "the side facing the LED is lit");
+        assert_eq!(px(12.0), 0.0, "the far side is in attached shadow");
+    }
+}
