@@ -9,8 +9,8 @@
 //! every LED at [`IDENTIFY_BLINK_HZ`] with 50 % duty at full brightness.
 //!
 //! [`TimelineWaveform`] reads the timeline in camera time (camera t = 0 at a chosen timeline
-//! instant), which is what the simulator needs to render exactly what a configured luminaire
-//! emits.
+//! instant) and implements the simulator's [`LedWaveform`], so `meb simulate` can render exactly
+//! what a configured luminaire emits.
 
 use std::io::{self, Write};
 use std::path::{Path, PathBuf};
@@ -19,6 +19,8 @@ use protocol::carriers::{ChipTable, MAX_LEDS};
 use protocol::config::ChipRate;
 use protocol::luminaire::OutputPlan;
 use serde::{Deserialize, Serialize};
+
+use crate::simulate::LedWaveform;
 
 /// `format` tag of a timeline file.
 pub const TIMELINE_FORMAT: &str = "meb-luminaire-timeline";
@@ -332,6 +334,16 @@ impl TimelineWaveform {
     }
 }
 
+impl LedWaveform for TimelineWaveform {
+    fn led_count(&self) -> usize {
+        TimelineWaveform::led_count(self)
+    }
+
+    fn on_fraction(&self, led: usize, t0: f64, t1: f64) -> f64 {
+        TimelineWaveform::on_fraction(self, led, t0, t1)
+    }
+}
+
 impl PlayedSegment {
     fn is_on(&self, led: usize, chip: f64) -> bool {
         let masks = self.table.masks();
@@ -452,6 +464,32 @@ mod tests {
         for j in 0..32 {
             let got = sign(&w, 0, t0 + j as f64 * dt, t0 + (j + 1) as f64 * dt);
             assert!((got - 0.5 * (s(j) + s(j + 1))).abs() < 1e-6);
+        }
+    }
+
+    /// A steady timeline plays exactly what the simulator's own carrier model plays.
+    #[test]
+    fn matches_the_simulators_carrier_waveform() {
+        use crate::simulate::CarrierWaveform;
+        let mut p = plan(4, 960_000);
+        p.phase_chips[..4].copy_from_slice(&[0, 5, 0, 17]);
+        let mut timeline = Timeline::new(0.0);
+        timeline
+            .segments
+            .push(TimelineSegment::new(3.0, OutputMode::Playing, &p, 0.0));
+        let recorded: &dyn LedWaveform = &TimelineWaveform::from_last_change(&timeline).unwrap();
+        let table = ChipTable::with_phases(4, &p.phase_chips).unwrap();
+        let model = CarrierWaveform::new(table, &[960.0; 4], &[0.0; 4]).unwrap();
+        assert_eq!(recorded.led_count(), 4);
+        for k in 0..200 {
+            let t0 = k as f64 * 0.000_731;
+            for led in 0..4 {
+                let (a, b) = (
+                    recorded.on_fraction(led, t0, t0 + 0.0008),
+                    model.on_fraction(led, t0, t0 + 0.0008),
+                );
+                assert!((a - b).abs() < 1e-6, "t0 {t0} led {led}: {a} vs {b}");
+            }
         }
     }
 
