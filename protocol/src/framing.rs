@@ -275,3 +275,246 @@ impl<const N: usize> FrameReader<N> {
         }
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::config::{ChipRate, ConfigError, LuminaireConfig};
+    use crate::wire::{CommandError, ConfigSource, DeviceInfo, ProtocolError, SaveState, Status};
+
+    fn frame(seq: u32, request: &Request) -> ([u8; MAX_FRAME_LEN], usize) {
+        let mut buf = [0u8; MAX_FRAME_LEN];
+        let len = encode_request(seq, request, &mut buf).unwrap().len();
+        (buf, len)
+    }
+
+    fn frames_of(
+        reader: &mut WireFrameReader,
+        chunk: &[u8],
+        out: &mut std::vec::Vec<Result<(u32, Request), &'static str>>,
+    ) {
+        reader.feed(chunk, |event| match event {
+            FrameEvent::Frame(raw) => out.push(
+                decode_request(raw)
+                    .map(|(h, r)| (h.seq, r))
+                    .map_err(|_| "bad"),
+            ),
+            FrameEvent::TooLong => out.push(Err("too long")),
+        });
+    }
+
+    fn worst_config() -> LuminaireConfig {
+        LuminaireConfig {
+            led_count: u8::MAX,
+            chip_rate: ChipRate(u32::MAX),
+            brightness_permille: [u16::MAX; 8],
+            phase_chips: [u16::MAX; 8],
+            running: true,
+        }
+    }
+
+    #[test]
+    fn largest_messages_fit_a_frame() {
+        let mut buf = [0u8; MAX_FRAME_LEN];
+        let s16 = heapless::String::<16>::try_from("0123456789abcdef").unwrap();
+        let s32 = heapless::String::<32>::try_from("0123456789abcdef0123456789abcdef").unwrap();
+        let info = DeviceInfo {
+            firmware_version: s16,
+            protocol_version: u16::MAX,
+            board: s32,
+            max_leds: u8::MAX,
+            min_chip_rate: ChipRate(u32::MAX),
+            max_chip_rate: ChipRate(u32::MAX),
+            carrier_fingerprint: u32::MAX,
+        };
+        let status = Status {
+            running: true,
+            config_source: ConfigSource::CorruptRecordDefaults,
+            unsaved_changes: true,
+            save: SaveState::Failed,
+            identify_active: true,
+            rx_frames_ok: u32::MAX,
+            rx_bad_crc: u32::MAX,
+            rx_malformed: u32::MAX,
+            rx_too_long: u32::MAX,
+            rx_unsupported_version: u32::MAX,
+        };
+        let responses = [
+            Response::GetInfo(info),
+            Response::GetConfig(worst_config()),
+            Response::GetStatus(status),
+            Response::SetConfig(Err(ConfigError::ChipRate {
+                got_millihertz: u32::MAX,
+            })),
+            Response::SaveConfig(Err(CommandError::StorageFailed)),
+        ];
+        for response in &responses {
+            let len = encode_response(u32::MAX, response, &mut buf).unwrap().len();
+            assert!(len <= MAX_FRAME_LEN / 2, "{response:?}: {len} B");
+        }
+        let len = encode_request(u32::MAX, &Request::SetConfig(worst_config()), &mut buf)
+            .unwrap()
+            .len();
+        assert!(len <= MAX_FRAME_LEN / 2, "{len}");
+    }
+
+    #[test]
+    fn small_buffer_is_an_error() {
+        let mut buf = [0u8; 8];
+        assert_eq!(
+            encode_request(1, &Request::SetConfig(worst_config()), &mut buf),
+            Err(EncodeError::BufferFull)
+        );
+        assert_eq!(
+            encode_request(1, &Request::Ping(1), &mut []),
+            Err(EncodeError::BufferFull)
+        );
+    }
+
+    #[test]
+    fn decode_errors_are_classified() {
+        let (buf, len) = frame(7, &Request::Ping(9));
+        // Flip a payload byte: COBS stays valid (non-zero), CRC fails.
+        let mut raw = buf[..len].to_vec();
+        raw[4] ^= 0x01;
+        assert_eq!(decode_request(&mut raw), Err(FrameError::BadCrc));
+        // Not COBS: a code byte pointing past the end.
+        assert_eq!(decode_request(&mut [9, 1, 1]), Err(FrameError::Cobs));
+        assert_eq!(decode_request(&mut []), Err(FrameError::Cobs));
+        // Too short for a CRC.
+        assert_eq!(decode_request(&mut [3, 1, 1]), Err(FrameError::BadCrc));
+    }
+
+    /// Builds a frame from an arbitrary payload with a valid CRC.
+    fn raw_frame(payload: &[u8]) -> std::vec::Vec<u8> {
+        let mut data = payload.to_vec();
+        data.extend_from_slice(&CRC32.checksum(payload).to_le_bytes());
+        let mut out = std::vec![0u8; data.len() * 2 + 2];
+        let n = cobs::encode(&data, &mut out);
+        out.truncate(n);
+        out
+    }
+
+    #[test]
+    fn version_and_body_errors_carry_the_seq() {
+        // Version 2, seq 5, Ping(1).
+        let mut raw = raw_frame(&[2, 5, 0, 1]);
+        assert_eq!(
+            decode_request(&mut raw),
+            Err(FrameError::UnsupportedVersion { version: 2, seq: 5 })
+        );
+        // Version 1, seq 5, unknown command 99.
+        let mut raw = raw_frame(&[1, 5, 99]);
+        assert_eq!(
+            decode_request(&mut raw),
+            Err(FrameError::Malformed { seq: Some(5) })
+        );
+        // Trailing byte after a complete Ping.
+        let mut raw = raw_frame(&[1, 5, 0, 1, 0]);
+        assert_eq!(
+            decode_request(&mut raw),
+            Err(FrameError::Malformed { seq: Some(5) })
+        );
+        // Header truncated.
+        let mut raw = raw_frame(&[1]);
+        assert_eq!(
+            decode_request(&mut raw),
+            Err(FrameError::Malformed { seq: None })
+        );
+        assert_eq!(
+            FrameError::UnsupportedVersion { version: 2, seq: 5 }.protocol_error(),
+            ProtocolError::UnsupportedVersion {
+                supported: PROTOCOL_VERSION
+            }
+        );
+    }
+
+    #[test]
+    fn every_split_point_yields_the_frame() {
+        let request = Request::SetConfig(LuminaireConfig::DEFAULT);
+        let (buf, len) = frame(42, &request);
+        let bytes = &buf[..len];
+        for split in 0..=len {
+            let mut reader = WireFrameReader::new();
+            let mut out = std::vec::Vec::new();
+            frames_of(&mut reader, &bytes[..split], &mut out);
+            frames_of(&mut reader, &bytes[split..], &mut out);
+            assert_eq!(out, [Ok((42, request.clone()))], "split at {split}");
+            assert_eq!(reader.pending(), 0);
+        }
+    }
+
+    #[test]
+    fn one_byte_chunks_and_back_to_back_frames() {
+        let requests = [
+            Request::Ping(1),
+            Request::GetStatus(()),
+            Request::Identify(3),
+        ];
+        let mut stream = std::vec::Vec::new();
+        for (seq, request) in (10..).zip(&requests) {
+            let (buf, len) = frame(seq, request);
+            stream.extend_from_slice(&buf[..len]);
+        }
+        let expected: std::vec::Vec<_> = (10..).zip(requests.iter().cloned()).map(Ok).collect();
+        let mut reader = WireFrameReader::new();
+        let mut out = std::vec::Vec::new();
+        for byte in &stream {
+            frames_of(&mut reader, core::slice::from_ref(byte), &mut out);
+        }
+        assert_eq!(out, expected);
+        let mut out = std::vec::Vec::new();
+        frames_of(&mut reader, &stream, &mut out);
+        assert_eq!(out, expected);
+    }
+
+    #[test]
+    fn garbage_costs_only_what_it_touches() {
+        let (buf, len) = frame(3, &Request::Ping(77));
+        let good = &buf[..len];
+        let mut reader = WireFrameReader::new();
+        let mut out = std::vec::Vec::new();
+        // Garbage, delimiter, frame: garbage rejected, frame intact.
+        let mut stream = std::vec![0x55, 0xAA, 0x13, 0x00];
+        stream.extend_from_slice(good);
+        // Garbage glued to a frame: that frame lost, the next one intact.
+        stream.extend_from_slice(&[0x42, 0x42]);
+        stream.extend_from_slice(good);
+        // Leading delimiters and empty frames are ignored; the next frame is intact.
+        stream.extend_from_slice(&[0, 0, 0]);
+        stream.extend_from_slice(good);
+        frames_of(&mut reader, &stream, &mut out);
+        let ping = Ok((3, Request::Ping(77)));
+        assert_eq!(out, [Err("bad"), ping.clone(), Err("bad"), ping]);
+    }
+
+    #[test]
+    fn oversize_is_reported_once_and_the_next_frame_survives() {
+        let (buf, len) = frame(4, &Request::Ping(5));
+        let mut stream = std::vec![0x11; 3 * MAX_FRAME_LEN];
+        stream.push(0);
+        stream.extend_from_slice(&buf[..len]);
+        for chunk in [1, 7, 64, stream.len()] {
+            let mut reader = WireFrameReader::new();
+            let mut out = std::vec::Vec::new();
+            for piece in stream.chunks(chunk) {
+                frames_of(&mut reader, piece, &mut out);
+            }
+            assert_eq!(
+                out,
+                [Err("too long"), Ok((4, Request::Ping(5)))],
+                "chunk {chunk}"
+            );
+        }
+        // A frame of exactly the capacity is accepted.
+        let mut reader = FrameReader::<4>::new();
+        let mut got = std::vec::Vec::new();
+        reader.feed(&[1, 2, 3, 4, 0, 1, 2, 3, 4, 5, 0], |e| {
+            got.push(match e {
+                FrameEvent::Frame(f) => f.len(),
+                FrameEvent::TooLong => 0,
+            })
+        });
+        assert_eq!(got, [4, 0]);
+    }
+}

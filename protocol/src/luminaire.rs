@@ -414,3 +414,216 @@ fn respond<'a>(
 fn encode_reply<'a>(seq: u32, response: &Response, buf: &'a mut [u8]) -> Option<&'a [u8]> {
     encode_response(seq, response, buf).ok()
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::framing::{decode_response, encode_request};
+
+    fn board() -> BoardInfo {
+        BoardInfo {
+            firmware_version: String::try_from("0.1.0").unwrap(),
+            board: String::try_from("test").unwrap(),
+        }
+    }
+
+    fn other_config() -> LuminaireConfig {
+        LuminaireConfig {
+            led_count: 3,
+            chip_rate: ChipRate(959_500),
+            phase_chips: [1, 2, 3, 0, 0, 0, 0, 0],
+            ..LuminaireConfig::DEFAULT
+        }
+    }
+
+    #[test]
+    fn boot_sources() {
+        let missing = Luminaire::new(board(), RestoredConfig::Missing);
+        assert_eq!(missing.status().config_source, ConfigSource::Defaults);
+        assert_eq!(*missing.config(), LuminaireConfig::DEFAULT);
+        assert!(missing.status().unsaved_changes);
+        let corrupt = Luminaire::new(board(), RestoredConfig::Corrupt);
+        assert_eq!(
+            corrupt.status().config_source,
+            ConfigSource::CorruptRecordDefaults
+        );
+        let restored = Luminaire::new(board(), RestoredConfig::Ok(other_config()));
+        assert_eq!(restored.status().config_source, ConfigSource::Restored);
+        assert_eq!(*restored.config(), other_config());
+        assert!(!restored.status().unsaved_changes);
+        let mut bad = other_config();
+        bad.led_count = 0;
+        let invalid = Luminaire::new(board(), RestoredConfig::Ok(bad));
+        assert_eq!(
+            invalid.status().config_source,
+            ConfigSource::CorruptRecordDefaults
+        );
+        assert_eq!(
+            restored.startup_effects().as_slice(),
+            [
+                Effect::ApplyOutput(OutputPlan::of(&other_config())),
+                Effect::Start
+            ]
+        );
+    }
+
+    #[test]
+    fn set_config_applies_only_valid_configs() {
+        let mut lum = Luminaire::new(board(), RestoredConfig::Missing);
+        let mut bad = other_config();
+        bad.brightness_permille[5] = 2000;
+        let (response, effects) = lum.handle(1, &Request::SetConfig(bad));
+        assert_eq!(
+            response,
+            Response::SetConfig(Err(ConfigError::Brightness { led: 5, got: 2000 }))
+        );
+        assert!(effects.is_empty());
+        assert_eq!(*lum.config(), LuminaireConfig::DEFAULT);
+        let (response, effects) = lum.handle(2, &Request::SetConfig(other_config()));
+        assert_eq!(response, Response::SetConfig(Ok(())));
+        assert_eq!(
+            effects.as_slice(),
+            [
+                Effect::ApplyOutput(OutputPlan::of(&other_config())),
+                Effect::Start
+            ]
+        );
+        assert_eq!(
+            lum.handle(3, &Request::GetConfig(())).0,
+            Response::GetConfig(other_config())
+        );
+        let Response::GetInfo(info) = lum.handle(4, &Request::GetInfo(())).0 else {
+            panic!("not an info response");
+        };
+        assert_eq!(
+            info.carrier_fingerprint,
+            other_config().chip_table().unwrap().fingerprint()
+        );
+        assert_eq!(
+            (info.min_chip_rate, info.max_chip_rate),
+            (ChipRate::MIN, ChipRate::MAX)
+        );
+    }
+
+    #[test]
+    fn retry_returns_cached_response_without_effects() {
+        let mut lum = Luminaire::new(board(), RestoredConfig::Missing);
+        let request = Request::SetConfig(other_config());
+        let first = lum.handle(9, &request);
+        assert!(!first.1.is_empty());
+        let retry = lum.handle(9, &request);
+        assert_eq!(retry.0, first.0);
+        assert!(retry.1.is_empty());
+        // Same seq, different body: a new request.
+        let (_, effects) = lum.handle(9, &Request::Stop(()));
+        assert_eq!(effects.as_slice(), [Effect::Stop]);
+        assert!(!lum.config().running);
+    }
+
+    #[test]
+    fn save_flow() {
+        let mut lum = Luminaire::new(board(), RestoredConfig::Missing);
+        let (response, effects) = lum.handle(1, &Request::SaveConfig(()));
+        assert_eq!(response, Response::SaveConfig(Ok(SaveOutcome::Deferred)));
+        assert_eq!(
+            effects.as_slice(),
+            [Effect::Persist(LuminaireConfig::DEFAULT)]
+        );
+        assert_eq!(lum.status().save, SaveState::Pending);
+        assert_eq!(
+            lum.handle(2, &Request::SaveConfig(())).0,
+            Response::SaveConfig(Err(CommandError::Busy))
+        );
+        // A change while saving stays unsaved after the save completes.
+        lum.handle(3, &Request::Stop(()));
+        lum.notify_saved(Ok(()));
+        let status = lum.status();
+        assert_eq!(status.save, SaveState::Idle);
+        assert!(status.unsaved_changes);
+        lum.handle(4, &Request::Start(()));
+        assert!(!lum.status().unsaved_changes);
+        assert_eq!(
+            lum.handle(5, &Request::SaveConfig(())).0,
+            Response::SaveConfig(Ok(SaveOutcome::AlreadySaved))
+        );
+        lum.handle(6, &Request::SetConfig(other_config()));
+        lum.handle(7, &Request::SaveConfig(()));
+        lum.notify_saved(Err(CommandError::StorageFailed));
+        assert_eq!(lum.status().save, SaveState::Failed);
+        assert!(lum.status().unsaved_changes);
+    }
+
+    #[test]
+    fn identify_and_ping() {
+        let mut lum = Luminaire::new(board(), RestoredConfig::Missing);
+        assert_eq!(lum.handle(1, &Request::Ping(77)).0, Response::Ping(77));
+        let (response, effects) = lum.handle(2, &Request::Identify(5));
+        assert_eq!(response, Response::Identify(Ok(())));
+        assert_eq!(effects.as_slice(), [Effect::Identify { seconds: 5 }]);
+        assert!(lum.status().identify_active);
+        lum.notify_identify_finished();
+        assert!(!lum.status().identify_active);
+        assert_eq!(
+            lum.handle(3, &Request::Identify(MAX_IDENTIFY_SECONDS + 1))
+                .0,
+            Response::Identify(Err(CommandError::InvalidArgument))
+        );
+    }
+
+    #[test]
+    fn endpoint_replies_and_counts() {
+        let mut endpoint = Endpoint::new(Luminaire::new(board(), RestoredConfig::Missing));
+        let mut buf = [0u8; MAX_FRAME_LEN];
+        let mut stream = std::vec::Vec::new();
+        stream.extend_from_slice(encode_request(5, &Request::Ping(1), &mut buf).unwrap());
+        stream.extend_from_slice(&[0x33, 0x01, 0x02, 0x00]);
+        stream.extend_from_slice(&[0x44; 2 * MAX_FRAME_LEN]);
+        stream.push(0);
+        stream.extend_from_slice(encode_request(6, &Request::Stop(()), &mut buf).unwrap());
+        let mut replies = std::vec::Vec::new();
+        for chunk in stream.chunks(5) {
+            endpoint.on_bytes(chunk, |bytes, effects| {
+                let mut raw = bytes.to_vec();
+                let (header, response) = decode_response(&mut raw).unwrap();
+                replies.push((header.seq, response, effects));
+            });
+        }
+        let seqs: std::vec::Vec<_> = replies.iter().map(|r| r.0).collect();
+        assert_eq!(seqs, [5, SEQ_UNKNOWN, SEQ_UNKNOWN, 6]);
+        assert_eq!(replies[0].1, Response::Ping(1));
+        assert_eq!(
+            replies[1].1,
+            Response::ProtocolError(ProtocolError::Malformed)
+        );
+        assert_eq!(
+            replies[2].1,
+            Response::ProtocolError(ProtocolError::FrameTooLong)
+        );
+        assert_eq!(replies[3].1, Response::Stop(Ok(())));
+        assert_eq!(replies[3].2.as_slice(), [Effect::Stop]);
+        let status = endpoint.luminaire.status();
+        assert_eq!(
+            (
+                status.rx_frames_ok,
+                status.rx_malformed,
+                status.rx_too_long,
+                status.rx_bad_crc
+            ),
+            (2, 1, 1, 0)
+        );
+        // handle_frame: a bad CRC is answered as such.
+        let mut raw = encode_request(8, &Request::Ping(2), &mut buf)
+            .unwrap()
+            .to_vec();
+        raw[4] ^= 0x01;
+        let mut reply = [0u8; MAX_FRAME_LEN];
+        let (bytes, effects) = endpoint.handle_frame(&mut raw, &mut reply);
+        let mut bytes = bytes.unwrap().to_vec();
+        assert!(effects.is_empty());
+        assert_eq!(
+            decode_response(&mut bytes).unwrap().1,
+            Response::ProtocolError(ProtocolError::BadCrc)
+        );
+        assert_eq!(endpoint.luminaire.counters().bad_crc, 1);
+    }
+}

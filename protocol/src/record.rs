@@ -110,3 +110,66 @@ pub fn decode_record(bytes: &[u8]) -> Result<LuminaireConfig, RecordError> {
     config.validate().map_err(RecordError::Invalid)?;
     Ok(config)
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::config::ChipRate;
+
+    fn sample() -> LuminaireConfig {
+        LuminaireConfig {
+            led_count: 6,
+            chip_rate: ChipRate(959_500),
+            brightness_permille: [1000, 900, 800, 700, 600, 500, 0, 0],
+            phase_chips: [0, 1, 2, 3, 127, 5, 0, 0],
+            running: false,
+        }
+    }
+
+    #[test]
+    fn round_trip_ignores_trailing_erased_flash() {
+        let mut buf = [0xFFu8; MAX_RECORD_LEN];
+        let len = encode_record(&sample(), &mut buf).unwrap().len();
+        assert!(len < MAX_RECORD_LEN);
+        assert_eq!(decode_record(&buf), Ok(sample()));
+        assert_eq!(decode_record(&buf[..len]), Ok(sample()));
+        assert_eq!(decode_record(&buf[..len - 1]), Err(RecordError::Truncated));
+    }
+
+    #[test]
+    fn every_corrupted_byte_is_rejected() {
+        let mut buf = [0u8; MAX_RECORD_LEN];
+        let record = encode_record(&sample(), &mut buf).unwrap().to_vec();
+        for index in 0..record.len() {
+            for flip in [0x01u8, 0x80, 0xFF] {
+                let mut bad = record.clone();
+                bad[index] ^= flip;
+                assert!(decode_record(&bad).is_err(), "byte {index} ^ {flip:#x}");
+            }
+        }
+        assert_eq!(decode_record(&[0xFF; 64]), Err(RecordError::BadMagic));
+        assert_eq!(decode_record(&[]), Err(RecordError::Truncated));
+        let mut bad = record.clone();
+        bad[4] = 2;
+        assert_eq!(decode_record(&bad), Err(RecordError::UnknownVersion(2)));
+    }
+
+    #[test]
+    fn invalid_config_with_valid_crc_is_rejected() {
+        let mut config = sample();
+        config.phase_chips[0] = 128;
+        let mut buf = [0u8; MAX_RECORD_LEN];
+        encode_record(&config, &mut buf).unwrap();
+        assert_eq!(
+            decode_record(&buf),
+            Err(RecordError::Invalid(ConfigError::Phase {
+                led: 0,
+                got: 128
+            }))
+        );
+        assert_eq!(
+            encode_record(&config, &mut [0u8; 12]),
+            Err(RecordError::BufferFull)
+        );
+    }
+}
