@@ -108,6 +108,14 @@ pub enum TimelineError {
     /// The timeline has no segment to play.
     #[error("the timeline is empty")]
     Empty,
+    /// The chosen start lies before the luminaire's first output.
+    #[error("start {offset} s lies before the timeline's first output at {first} s")]
+    BeforeFirstSegment {
+        /// The requested start, seconds.
+        offset: f64,
+        /// The first segment's start, seconds.
+        first: f64,
+    },
 }
 
 /// Every output state a luminaire went through, in time order.
@@ -276,9 +284,18 @@ impl TimelineWaveform {
             });
         }
         let at = segments.partition_point(|s| s.t <= offset);
-        let led_count = match at.checked_sub(1).and_then(|i| segments.get(i)) {
-            Some(s) => usize::from(s.table.led_count()),
-            None => return Err(TimelineError::Empty),
+        let led_count = match (
+            at.checked_sub(1).and_then(|i| segments.get(i)),
+            segments.first(),
+        ) {
+            (Some(s), _) => usize::from(s.table.led_count()),
+            (None, Some(first)) => {
+                return Err(TimelineError::BeforeFirstSegment {
+                    offset,
+                    first: first.t,
+                });
+            }
+            (None, None) => return Err(TimelineError::Empty),
         };
         Ok(Self {
             segments,
@@ -293,6 +310,16 @@ impl TimelineWaveform {
             timeline,
             timeline.last_change().ok_or(TimelineError::Empty)?,
         )
+    }
+
+    /// Reads a timeline file; camera time 0 is timeline time `offset` seconds, or the last
+    /// change when `None` (what `meb simulate --timeline` uses).
+    pub fn load(path: &Path, offset: Option<f64>) -> Result<Self, TimelineError> {
+        let timeline = Timeline::read(path)?;
+        match offset {
+            Some(offset) => Self::new(&timeline, offset),
+            None => Self::from_last_change(&timeline),
+        }
     }
 
     /// Number of LEDs the luminaire drives at camera time 0.
@@ -545,6 +572,11 @@ mod tests {
         ));
         timeline.write(&path).unwrap();
         assert!(Timeline::read(&path).unwrap().approx_eq(&timeline));
+        assert_eq!(TimelineWaveform::load(&path, None).unwrap().led_count(), 4);
+        assert!(matches!(
+            TimelineWaveform::load(&path, Some(0.1)),
+            Err(TimelineError::BeforeFirstSegment { .. })
+        ));
         std::fs::write(&path, "{\"format\":\"x\"}").unwrap();
         assert!(matches!(
             Timeline::read(&path),
