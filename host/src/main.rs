@@ -19,6 +19,8 @@ enum Command {
     Carriers(cli::carriers::CarriersArgs),
     /// Talk to meb luminaires over USB serial, or emulate one on a pseudo-terminal.
     Device(cli::device::DeviceArgs),
+    /// Render a synthetic MEB-FDMA capture of a scene with ground truth (or the Ch. 7 data set).
+    Simulate(Box<cli::simulate::SimulateArgs>),
 }
 
 fn main() -> ExitCode {
@@ -26,6 +28,7 @@ fn main() -> ExitCode {
     let result = match cli.command {
         Command::Carriers(args) => cli::carriers::run(&args),
         Command::Device(args) => cli::device::run(&args),
+        Command::Simulate(args) => cli::simulate::run(&args),
     };
     match result {
         Ok(()) => ExitCode::SUCCESS,

@@ -116,6 +116,61 @@ fn set_get_save_survives_emulator_restart() {
     emulator.stop();
 }
 
+const SMALL_RIG: &str = r#"
+[camera]
+width = 64
+height = 48
+fps = 960.0
+distance_mm = 420.0
+pixel_pitch_mm = 1.0
+
+[[led]]
+position_mm = [-270.0, 420.0, 100.0]
+[[led]]
+position_mm = [-140.0, 420.0, 350.0]
+[[led]]
+position_mm = [140.0, 420.0, 350.0]
+[[led]]
+position_mm = [270.0, 420.0, 100.0]
+"#;
+
+#[test]
+fn simulate_renders_what_the_emulated_luminaire_emits() {
+    let dir = tempfile::tempdir().unwrap();
+    let emulator = Emulator::start(dir.path());
+    stdout(&emulator.meb(&[
+        "set",
+        "--leds",
+        "4",
+        "--rate",
+        "960",
+        "--phase",
+        "0,9,17,26",
+    ]));
+    emulator.stop();
+    let rig = dir.path().join("rig.toml");
+    std::fs::write(&rig, SMALL_RIG).unwrap();
+    let out = dir.path().join("capture");
+    let simulate = |leds_out: &Path, timeline: &str| {
+        Command::new(MEB)
+            .args(["simulate", "--frames", "8", "--rig"])
+            .arg(&rig)
+            .arg("--timeline")
+            .arg(dir.path().join(timeline))
+            .arg("--out")
+            .arg(leds_out)
+            .output()
+            .unwrap()
+    };
+    stdout(&simulate(&out, "timeline.json"));
+    assert!(out.join("frame_00007.png").exists());
+    // A timeline that is not one is a clear error, not a capture.
+    std::fs::write(dir.path().join("bad.json"), "{}").unwrap();
+    let bad = simulate(&dir.path().join("bad"), "bad.json");
+    assert!(!bad.status.success());
+    assert!(String::from_utf8_lossy(&bad.stderr).contains("not a meb luminaire timeline"));
+}
+
 #[test]
 fn missing_port_fails_with_one_clear_line() {
     let output = Command::new(MEB)

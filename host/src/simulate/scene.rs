@@ -68,6 +68,33 @@ impl SceneObject {
         }
     }
 
+    /// A sphere of diameter `diameter_mm` (thesis: Ø48 mm).
+    pub fn sphere(diameter_mm: f64) -> Self {
+        Self::new(Shape::Sphere {
+            radius_mm: diameter_mm / 2.0,
+        })
+    }
+
+    /// A cube of edge `edge_mm` (thesis: 75 mm), face-on, or corner-on (a body diagonal
+    /// pointing at the camera).
+    pub fn cube(edge_mm: f64, corner_on: bool) -> Self {
+        let mut o = Self::new(Shape::Cuboid {
+            half_extents_mm: [edge_mm / 2.0; 3],
+        });
+        if corner_on {
+            o.rotation = UnitQuaternion::rotation_between(&Vector3::repeat(1.0), &Vector3::z())
+                .unwrap_or_else(UnitQuaternion::identity);
+        }
+        o
+    }
+
+    /// An ellipsoid with full axis lengths `axes_mm` (thesis Ch. 5: 100×60×60 mm).
+    pub fn ellipsoid(axes_mm: [f64; 3]) -> Self {
+        Self::new(Shape::Ellipsoid {
+            semi_axes_mm: axes_mm.map(|a| a / 2.0),
+        })
+    }
+
     /// Orientation at time `t_s` seconds.
     pub fn rotation_at(&self, t_s: f64) -> UnitQuaternion<f64> {
         match &self.spin {

@@ -1,0 +1,430 @@
+//! `meb simulate`: render a synthetic MEB-FDMA capture with ground truth, or the Ch. 7 data set.
+
+use anyhow::{Context, Result, bail};
+use clap::{Args, Subcommand, ValueEnum};
+use indicatif::{ProgressBar, ProgressStyle};
+use meb::rig::Rig;
+use meb::simulate::dataset::{DatasetConfig, write_dataset};
+use meb::simulate::output::{OutputOptions, VideoFormat, write_capture};
+use meb::simulate::{
+    GroundPlane, NoiseModel, Scene, SceneObject, Shape, SimConfig, SimulatedCapture, Spin,
+    ToneCurve, TriMesh,
+};
+use nalgebra::{Unit, UnitQuaternion, Vector3};
+use std::path::PathBuf;
+use std::sync::Arc;
+use std::time::Instant;
+
+/// Arguments of `meb simulate`.
+#[derive(Args)]
+#[command(
+    args_conflicts_with_subcommands = true,
+    after_help = "Thesis scenes:\n  \
+  Ch. 4 sphere:      meb simulate --rig thesis-out-of-plane --scene sphere --size-mm 48 --frames 128 --out sphere\n  \
+  Ch. 4 cube face:   meb simulate --rig thesis-out-of-plane --scene cube --size-mm 75 --frames 128 --out cube\n  \
+  Ch. 4 cube corner: meb simulate --rig thesis-out-of-plane --scene cube --corner --size-mm 75 --frames 128 --out corner\n  \
+  Ch. 5 ellipsoid:   meb simulate --rig thesis-dynamic --scene ellipsoid --axes-mm 100,60,60 --rpm 7.5 --frames 400 --out ellipsoid\n  \
+  Ch. 7 data set:    meb simulate dataset --count 100 --out dataset"
+)]
+pub struct SimulateArgs {
+    #[command(subcommand)]
+    command: Option<SimulateCommand>,
+    #[command(flatten)]
+    capture: CaptureArgs,
+}
+
+#[derive(Subcommand)]
+enum SimulateCommand {
+    /// Write the thesis' Ch. 7 data set: per blobby object, N noise-free LED images, mask,
+    /// light vectors and ground-truth depth (top-down in-plane rig, 480×270).
+    Dataset(DatasetArgs),
+}
+
+/// The scene kinds.
+#[derive(Clone, Copy, Debug, ValueEnum)]
+enum SceneKind {
+    /// A sphere of diameter --size-mm (default 48).
+    Sphere,
+    /// A cube of edge --size-mm (default 75); face-on, or corner-on with --corner.
+    Cube,
+    /// An ellipsoid with axis lengths --axes-mm (default 100,60,60).
+    Ellipsoid,
+    /// A seeded random smooth shape of largest extent --size-mm (default 60).
+    Blobby,
+    /// An STL or OBJ mesh (--mesh FILE), scaled to --size-mm if given (else file units = mm).
+    Mesh,
+    /// Several objects at different depths: sphere Ø48 at z = 0, cube 40 at z = −70.
+    Multi,
+}
+
+/// Frame containers.
+#[derive(Clone, Copy, Debug, ValueEnum)]
+enum FormatArg {
+    /// frame_00000.png … (8-bit, or 16-bit for deeper captures).
+    Png,
+    /// capture.y4m (mono / mono16).
+    Y4m,
+    /// capture.mp4, lossless H.264 through the ffmpeg program.
+    Mp4,
+}
+
+#[derive(Args)]
+struct CaptureArgs {
+    /// Rig: a TOML file or a preset (thesis-in-plane, thesis-out-of-plane, thesis-dynamic,
+    /// thesis-hybrid).
+    #[arg(long, default_value = "thesis-out-of-plane")]
+    rig: String,
+    /// What is in front of the camera.
+    #[arg(long, value_enum, default_value_t = SceneKind::Sphere)]
+    scene: SceneKind,
+    /// Size in mm: sphere diameter, cube edge, blobby or mesh largest extent.
+    #[arg(long)]
+    size_mm: Option<f64>,
+    /// Ellipsoid axis lengths x,y,z in mm.
+    #[arg(long, value_delimiter = ',', num_args = 3, default_values_t = [100.0, 60.0, 60.0])]
+    axes_mm: Vec<f64>,
+    /// Cube corner-on (a body diagonal towards the camera).
+    #[arg(long)]
+    corner: bool,
+    /// Mesh file (.stl or .obj) for --scene mesh.
+    #[arg(long)]
+    mesh: Option<PathBuf>,
+    /// Shade meshes with interpolated vertex normals instead of flat faces.
+    #[arg(long)]
+    smooth_normals: bool,
+    /// Object centre x,y,z in mm.
+    #[arg(long, value_delimiter = ',', num_args = 3, allow_hyphen_values = true)]
+    position_mm: Option<Vec<f64>>,
+    /// Object rotation: angles about x, then y, then z, in degrees.
+    #[arg(long, value_delimiter = ',', num_args = 3, allow_hyphen_values = true)]
+    rotate_deg: Option<Vec<f64>>,
+    /// Object albedo in [0, 1].
+    #[arg(long, default_value_t = 1.0)]
+    albedo: f64,
+    /// Add a ground plane at this z (mm, e.g. -24 under a Ø48 sphere).
+    #[arg(long, allow_hyphen_values = true)]
+    ground_mm: Option<f64>,
+    /// Albedo of the ground plane.
+    #[arg(long, default_value_t = 0.5)]
+    ground_albedo: f64,
+    /// Spin the object(s) at this many revolutions per minute (thesis Ch. 5: 7.5).
+    #[arg(long, default_value_t = 0.0, allow_hyphen_values = true)]
+    rpm: f64,
+    /// Spin axis x,y,z (through the object centre).
+    #[arg(long, value_delimiter = ',', num_args = 3, default_values_t = [0.0, 1.0, 0.0], allow_hyphen_values = true)]
+    spin_axis: Vec<f64>,
+    /// Number of frames.
+    #[arg(long, default_value_t = 128)]
+    frames: usize,
+    /// Output directory (written atomically).
+    #[arg(long)]
+    out: Option<PathBuf>,
+    /// Replace an existing non-empty output directory.
+    #[arg(long)]
+    force: bool,
+    /// Frame container.
+    #[arg(long, value_enum, default_value_t = FormatArg::Png)]
+    format: FormatArg,
+    /// Exposure as a fraction of the frame period, in (0, 1].
+    #[arg(long, default_value_t = 1.0)]
+    exposure: f64,
+    /// Rolling-shutter line time in microseconds (0 = global shutter).
+    #[arg(long, default_value_t = 0.0)]
+    line_time_us: f64,
+    /// Bits per sample: 8, 10, 12 or 16.
+    #[arg(long, default_value_t = 8)]
+    bit_depth: u8,
+    /// Gaussian read noise σ as a fraction of full scale.
+    #[arg(long, default_value_t = 0.005)]
+    noise: f64,
+    /// Full-well capacity in electrons: adds Poisson shot noise.
+    #[arg(long)]
+    full_well: Option<f64>,
+    /// Unmodulated background light as SNR in dB (thesis Eq. 4.3); default: dark room.
+    #[arg(long, allow_hyphen_values = true)]
+    snr_db: Option<f64>,
+    /// Encode with a power-law tone curve code ∝ light^(1/G).
+    #[arg(long, conflicts_with = "srgb")]
+    gamma: Option<f64>,
+    /// Encode with the sRGB tone curve.
+    #[arg(long)]
+    srgb: bool,
+    /// Global gain (full-scale fraction per unit Φ·cos^m θ/d²); default: brightest LED peaks
+    /// at --peak on a Ø48 mm white sphere.
+    #[arg(long)]
+    gain: Option<f64>,
+    /// Peak of the brightest LED on the reference sphere when --gain is not given.
+    #[arg(long, default_value_t = 0.4)]
+    peak: f64,
+    /// Per-LED time shifts in chips, comma-separated (default: random from --seed).
+    #[arg(long, value_delimiter = ',', allow_hyphen_values = true)]
+    phases: Option<Vec<f64>>,
+    /// Chip rate in Hz: one value for all LEDs or one per LED (default: the camera's fps).
+    #[arg(long, value_delimiter = ',')]
+    chip_rate: Option<Vec<f64>>,
+    /// Seed of the phases, the noise and blobby shapes.
+    #[arg(long, default_value_t = 0)]
+    seed: u64,
+    /// Light the scene with a luminaire timeline recorded by `meb device emulate --timeline`
+    /// (replaces --phases/--chip-rate: the capture shows exactly what that luminaire emits).
+    #[arg(long, conflicts_with_all = ["phases", "chip_rate"])]
+    timeline: Option<std::path::PathBuf>,
+    /// Timeline time (s) at camera time 0 (default: the timeline's last output change).
+    #[arg(long, requires = "timeline")]
+    timeline_start: Option<f64>,
+    /// Frame whose start time the ground-truth files describe.
+    #[arg(long, default_value_t = 0)]
+    truth_frame: usize,
+}
+
+#[derive(Args)]
+struct DatasetArgs {
+    /// Number of objects.
+    #[arg(long, default_value_t = 100)]
+    count: usize,
+    /// Output directory (written atomically).
+    #[arg(long)]
+    out: PathBuf,
+    /// Rig (default: thesis-in-plane); its camera is resized to --width × --height.
+    #[arg(long, default_value = "thesis-in-plane")]
+    rig: String,
+    /// Image width.
+    #[arg(long, default_value_t = 480)]
+    width: usize,
+    /// Image height.
+    #[arg(long, default_value_t = 270)]
+    height: usize,
+    /// Largest extent of each object in mm.
+    #[arg(long, default_value_t = 120.0)]
+    size_mm: f64,
+    /// Seed of the shapes and poses.
+    #[arg(long, default_value_t = 0)]
+    seed: u64,
+    /// Replace an existing non-empty output directory.
+    #[arg(long)]
+    force: bool,
+}
+
+/// Runs `meb simulate`.
+pub fn run(args: &SimulateArgs) -> Result<()> {
+    match &args.command {
+        Some(SimulateCommand::Dataset(d)) => run_dataset(d),
+        None => run_capture(&args.capture),
+    }
+}
+
+fn progress_bar(total: usize, what: &str) -> ProgressBar {
+    let bar = ProgressBar::new(total as u64);
+    if let Ok(style) = ProgressStyle::with_template(&format!(
+        "{what} {{bar:40}} {{pos}}/{{len}} [{{elapsed}} < {{eta}}]"
+    )) {
+        bar.set_style(style);
+    }
+    bar
+}
+
+fn run_capture(args: &CaptureArgs) -> Result<()> {
+    let out = args
+        .out
+        .as_ref()
+        .context("--out DIR is required (where to write the capture)")?;
+    let rig = Rig::load(&args.rig)?;
+    let (scene, description) = build_scene(args)?;
+    let tone = match (args.gamma, args.srgb) {
+        (Some(g), _) => ToneCurve::Gamma(g),
+        (None, true) => ToneCurve::Srgb,
+        (None, false) => ToneCurve::Linear,
+    };
+    let config = SimConfig {
+        frames: args.frames,
+        exposure: args.exposure,
+        line_time_s: args.line_time_us * 1e-6,
+        start_time_s: 0.0,
+        bit_depth: args.bit_depth,
+        noise: NoiseModel {
+            sigma: args.noise,
+            full_well_electrons: args.full_well,
+        },
+        tone,
+        snr_db: args.snr_db,
+        gain: args.gain,
+        peak: args.peak,
+        phases_chips: args.phases.clone(),
+        chip_rates_hz: args.chip_rate.clone(),
+        seed: args.seed,
+    };
+    if args.truth_frame >= args.frames.max(1) {
+        bail!(
+            "--truth-frame {} is past the last frame ({})",
+            args.truth_frame,
+            args.frames
+        );
+    }
+    let started = Instant::now();
+    let mut capture = SimulatedCapture::new(rig, scene, config)?;
+    if let Some(path) = &args.timeline {
+        let waveform = meb::device::TimelineWaveform::load(path, args.timeline_start)?;
+        capture = capture.with_waveform(std::sync::Arc::new(waveform))?;
+    }
+    let options = OutputOptions {
+        video: match args.format {
+            FormatArg::Png => VideoFormat::Png,
+            FormatArg::Y4m => VideoFormat::Y4m,
+            FormatArg::Mp4 => VideoFormat::Mp4,
+        },
+        truth_frame: args.truth_frame,
+        force: args.force,
+        scene: description,
+    };
+    let bar = progress_bar(args.frames, "rendering");
+    let path = write_capture(&mut capture, out, &options, &mut |done, _| {
+        bar.set_position(done as u64)
+    })?;
+    bar.finish_and_clear();
+    let info = capture.info();
+    eprintln!(
+        "wrote {} frames ({}x{}, {}-bit) and ground truth to {} in {:.1} s; phases {:?} chips, gain {:.4e}",
+        info.frames,
+        capture.rig().camera.width,
+        capture.rig().camera.height,
+        info.bit_depth,
+        path.display(),
+        started.elapsed().as_secs_f64(),
+        info.phases_chips
+            .iter()
+            .map(|p| (p * 1000.0).round() / 1000.0)
+            .collect::<Vec<_>>(),
+        info.gain
+    );
+    Ok(())
+}
+
+fn vec3(values: &[f64], name: &str) -> Result<Vector3<f64>> {
+    match values {
+        [x, y, z] if values.iter().all(|v| v.is_finite()) => Ok(Vector3::new(*x, *y, *z)),
+        _ => bail!("{name} needs three finite numbers x,y,z"),
+    }
+}
+
+fn positive(value: f64, name: &str) -> Result<f64> {
+    if value.is_finite() && value > 0.0 {
+        Ok(value)
+    } else {
+        bail!("{name} must be a positive number, got {value}")
+    }
+}
+
+/// Builds the scene and a JSON description of it for truth.json.
+fn build_scene(args: &CaptureArgs) -> Result<(Scene, serde_json::Value)> {
+    let size = args.size_mm.map(|s| positive(s, "--size-mm")).transpose()?;
+    let mut objects = match args.scene {
+        SceneKind::Sphere => vec![SceneObject::sphere(size.unwrap_or(48.0))],
+        SceneKind::Cube => vec![SceneObject::cube(size.unwrap_or(75.0), args.corner)],
+        SceneKind::Ellipsoid => {
+            let axes = vec3(&args.axes_mm, "--axes-mm")?;
+            for a in axes.iter() {
+                positive(*a, "--axes-mm")?;
+            }
+            vec![SceneObject::ellipsoid([axes.x, axes.y, axes.z])]
+        }
+        SceneKind::Blobby => {
+            let mesh = TriMesh::blobby(args.seed, size.unwrap_or(60.0));
+            vec![SceneObject::new(Shape::Mesh(Arc::new(mesh)))]
+        }
+        SceneKind::Mesh => {
+            let path = args
+                .mesh
+                .as_ref()
+                .context("--scene mesh needs --mesh FILE.stl|FILE.obj")?;
+            let mut mesh = TriMesh::load(path)?.centred(size);
+            if args.smooth_normals {
+                mesh = mesh.with_smooth_normals();
+            }
+            vec![SceneObject::new(Shape::Mesh(Arc::new(mesh)))]
+        }
+        SceneKind::Multi => {
+            let mut sphere = SceneObject::sphere(48.0);
+            sphere.position_mm = Vector3::new(-40.0, 0.0, 0.0);
+            let mut cube = SceneObject::cube(40.0, false);
+            cube.position_mm = Vector3::new(45.0, 0.0, -70.0);
+            vec![sphere, cube]
+        }
+    };
+    let rotation = match &args.rotate_deg {
+        Some(r) => {
+            let r = vec3(r, "--rotate-deg")?;
+            Some(UnitQuaternion::from_euler_angles(
+                r.x.to_radians(),
+                r.y.to_radians(),
+                r.z.to_radians(),
+            ))
+        }
+        None => None,
+    };
+    let position = args
+        .position_mm
+        .as_ref()
+        .map(|p| vec3(p, "--position-mm"))
+        .transpose()?;
+    let spin = if args.rpm != 0.0 {
+        let axis = vec3(&args.spin_axis, "--spin-axis")?;
+        let axis = Unit::try_new(axis, 1e-12).context("--spin-axis must not be zero")?;
+        Some(Spin {
+            axis,
+            rpm: args.rpm,
+        })
+    } else {
+        None
+    };
+    for object in &mut objects {
+        if let Some(r) = rotation {
+            object.rotation = r * object.rotation;
+        }
+        if let Some(p) = position {
+            object.position_mm += p;
+        }
+        object.albedo = args.albedo;
+        object.spin = spin.clone();
+    }
+    let ground = args.ground_mm.map(|z| GroundPlane {
+        z_mm: z,
+        albedo: args.ground_albedo,
+    });
+    let description = serde_json::json!({
+        "kind": format!("{:?}", args.scene).to_lowercase(),
+        "size_mm": size,
+        "axes_mm": matches!(args.scene, SceneKind::Ellipsoid).then(|| args.axes_mm.clone()),
+        "corner": args.corner,
+        "mesh": args.mesh.as_ref().map(|p| p.display().to_string()),
+        "position_mm": args.position_mm,
+        "rotate_deg": args.rotate_deg,
+        "albedo": args.albedo,
+        "ground_mm": args.ground_mm,
+        "rpm": args.rpm,
+        "spin_axis": args.spin_axis,
+    });
+    Ok((Scene { objects, ground }, description))
+}
+
+fn run_dataset(args: &DatasetArgs) -> Result<()> {
+    let mut rig = Rig::load(&args.rig)?;
+    if args.width == 0 || args.height == 0 {
+        bail!("--width and --height must be positive");
+    }
+    rig.camera.width = args.width;
+    rig.camera.height = args.height;
+    let config = DatasetConfig {
+        count: args.count,
+        rig,
+        size_mm: args.size_mm,
+        seed: args.seed,
+        force: args.force,
+    };
+    let bar = progress_bar(args.count, "objects");
+    let path = write_dataset(&config, &args.out, &mut |done, _| {
+        bar.set_position(done as u64)
+    })?;
+    bar.finish_and_clear();
+    eprintln!("wrote {} objects to {}", args.count, path.display());
+    Ok(())
+}
