@@ -17,6 +17,7 @@ use crate::config::{ChipRate, ConfigError, LuminaireConfig};
 use crate::framing::{
     FrameError, FrameEvent, MAX_FRAME_LEN, WireFrameReader, decode_request, encode_response,
 };
+use crate::record::RecordError;
 use crate::wire::{
     CommandError, ConfigSource, DeviceInfo, MAX_IDENTIFY_SECONDS, PROTOCOL_VERSION, ProtocolError,
     Request, Response, SEQ_UNKNOWN, SaveOutcome, SaveState, Status,
@@ -89,6 +90,27 @@ pub struct BoardInfo {
     pub board: String<32>,
 }
 
+impl BoardInfo {
+    /// Board facts from plain strings, each cut at a character boundary to fit its capacity.
+    pub fn new(firmware_version: &str, board: &str) -> Self {
+        Self {
+            firmware_version: truncated(firmware_version),
+            board: truncated(board),
+        }
+    }
+}
+
+/// The longest prefix of `text` that fits `N` bytes, cut at a character boundary.
+fn truncated<const N: usize>(text: &str) -> String<N> {
+    let mut out = String::new();
+    for c in text.chars() {
+        if out.push(c).is_err() {
+            break;
+        }
+    }
+    out
+}
+
 /// Outcome of reading the stored configuration at boot.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 #[cfg_attr(feature = "defmt", derive(defmt::Format))]
@@ -101,11 +123,13 @@ pub enum RestoredConfig {
     Corrupt,
 }
 
-impl<E> From<Result<LuminaireConfig, E>> for RestoredConfig {
-    /// Any decode error counts as corrupt; use [`RestoredConfig::Missing`] for absent storage.
-    fn from(result: Result<LuminaireConfig, E>) -> Self {
+impl From<Result<LuminaireConfig, RecordError>> for RestoredConfig {
+    /// Maps [`decode_record`](crate::record::decode_record)'s result: no magic (erased flash)
+    /// is `Missing`, any other error (including an empty or truncated record) is `Corrupt`.
+    fn from(result: Result<LuminaireConfig, RecordError>) -> Self {
         match result {
             Ok(config) if config.validate().is_ok() => Self::Ok(config),
+            Err(RecordError::BadMagic) => Self::Missing,
             _ => Self::Corrupt,
         }
     }
@@ -434,6 +458,37 @@ mod tests {
             phase_chips: [1, 2, 3, 0, 0, 0, 0, 0],
             ..LuminaireConfig::DEFAULT
         }
+    }
+
+    #[test]
+    fn board_info_truncates_at_char_boundaries() {
+        let info = BoardInfo::new("0.1.0-very-long-version", "ü".repeat(20).as_str());
+        assert_eq!(info.firmware_version.as_str(), "0.1.0-very-long-");
+        assert_eq!(info.board.as_str(), "ü".repeat(16));
+    }
+
+    #[test]
+    fn restored_from_record_results() {
+        use crate::record::{MAX_RECORD_LEN, decode_record, encode_record};
+        assert_eq!(
+            RestoredConfig::from(decode_record(&[0xFF; 64])),
+            RestoredConfig::Missing
+        );
+        assert_eq!(
+            RestoredConfig::from(decode_record(&[])),
+            RestoredConfig::Corrupt
+        );
+        let mut buf = [0u8; MAX_RECORD_LEN];
+        let len = encode_record(&other_config(), &mut buf).unwrap().len();
+        assert_eq!(
+            RestoredConfig::from(decode_record(&buf)),
+            RestoredConfig::Ok(other_config())
+        );
+        buf[len - 1] ^= 1;
+        assert_eq!(
+            RestoredConfig::from(decode_record(&buf)),
+            RestoredConfig::Corrupt
+        );
     }
 
     #[test]

@@ -83,11 +83,11 @@ pub fn encode_record<'a>(
 
 /// Reads a record (trailing bytes ignored); the configuration is returned only if valid.
 pub fn decode_record(bytes: &[u8]) -> Result<LuminaireConfig, RecordError> {
+    if bytes.len() >= RECORD_MAGIC.len() && bytes[..RECORD_MAGIC.len()] != RECORD_MAGIC {
+        return Err(RecordError::BadMagic);
+    }
     if bytes.len() < RECORD_HEADER_LEN {
         return Err(RecordError::Truncated);
-    }
-    if bytes[..4] != RECORD_MAGIC {
-        return Err(RecordError::BadMagic);
     }
     let version = u16::from_le_bytes([bytes[4], bytes[5]]);
     if version != RECORD_VERSION {

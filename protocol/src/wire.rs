@@ -29,7 +29,9 @@ pub const SEQ_UNKNOWN: u32 = 0;
 pub struct Header {
     /// Protocol version of the sender ([`PROTOCOL_VERSION`]).
     pub version: u16,
-    /// Request sequence number; a response echoes the request's.
+    /// Request sequence number; a response echoes the request's. A host numbers requests from
+    /// 1 (skipping [`SEQ_UNKNOWN`]) and resends a timed-out request with the *same* number, so
+    /// the device answers from its cache instead of applying it twice.
     pub seq: u32,
 }
 

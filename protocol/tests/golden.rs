@@ -7,12 +7,15 @@
 //!   and the `0` terminator.
 //! * `ProtocolError(FrameTooLong)` response: payload `01 01 00 00 | crc`, COBS `[3, 1, 1] [1]
 //!   [5, crc…] 0`: variant 0 of `Response` and variant 0 of `ProtocolError` are both zeros.
+//! * `SetConfig(DEFAULT)`: after `01 01 03` comes `04` (LED count), `80 CC 3A` (960 000 mHz as
+//!   a varint: 0x00|0x80, 0x4C|0x80, 0x3A), eight times `E8 07` (1000), eight zero phases
+//!   (each becoming a COBS code `01`), `01` (running).
 
 use protocol::config::{ChipRate, ConfigError, LuminaireConfig};
 use protocol::framing::{decode_request, decode_response, encode_request, encode_response};
 use protocol::wire::{
-    CommandError, ConfigSource, DeviceInfo, PROTOCOL_VERSION, ProtocolError, Request, Response,
-    SaveOutcome, SaveState, Status,
+    Command, CommandError, ConfigSource, DeviceInfo, PROTOCOL_VERSION, ProtocolError, Request,
+    Response, SaveOutcome, SaveState, Status,
 };
 
 fn info() -> DeviceInfo {
@@ -42,7 +45,7 @@ fn status() -> Status {
     }
 }
 
-fn check_request(request: Request, golden: &[u8]) {
+fn check_request(request: Request, golden: &[u8]) -> Command {
     let mut buf = [0u8; 256];
     let bytes = encode_request(1, &request, &mut buf).unwrap();
     assert_eq!(bytes, golden, "{request:?}");
@@ -50,6 +53,7 @@ fn check_request(request: Request, golden: &[u8]) {
     let (header, decoded) = decode_request(&mut raw).unwrap();
     assert_eq!((header.version, header.seq), (PROTOCOL_VERSION, 1));
     assert_eq!(decoded, request);
+    request.command()
 }
 
 fn check_response(response: Response, golden: &[u8]) {
@@ -64,24 +68,27 @@ fn check_response(response: Response, golden: &[u8]) {
 
 #[test]
 fn every_request_variant_has_golden_bytes() {
-    check_request(
-        Request::Ping(0x1234_5678),
-        &[3, 1, 1, 10, 248, 172, 209, 145, 1, 168, 189, 16, 227, 0],
-    );
-    check_request(Request::GetInfo(()), &[8, 1, 1, 1, 242, 178, 159, 144, 0]);
-    check_request(Request::GetConfig(()), &[8, 1, 1, 2, 72, 227, 150, 9, 0]);
-    check_request(
-        Request::SetConfig(LuminaireConfig::DEFAULT),
-        &[
-            24, 1, 1, 3, 4, 128, 204, 58, 232, 7, 232, 7, 232, 7, 232, 7, 232, 7, 232, 7, 232, 7,
-            232, 7, 1, 1, 1, 1, 1, 1, 1, 6, 1, 154, 251, 57, 119, 0,
-        ],
-    );
-    check_request(Request::SaveConfig(()), &[8, 1, 1, 4, 125, 70, 245, 224, 0]);
-    check_request(Request::Start(()), &[8, 1, 1, 5, 235, 118, 242, 151, 0]);
-    check_request(Request::Stop(()), &[8, 1, 1, 6, 81, 39, 251, 14, 0]);
-    check_request(Request::GetStatus(()), &[8, 1, 1, 7, 199, 23, 252, 121, 0]);
-    check_request(Request::Identify(5), &[9, 1, 1, 8, 5, 201, 172, 137, 32, 0]);
+    let covered = [
+        check_request(
+            Request::Ping(0x1234_5678),
+            &[3, 1, 1, 10, 248, 172, 209, 145, 1, 168, 189, 16, 227, 0],
+        ),
+        check_request(Request::GetInfo(()), &[8, 1, 1, 1, 242, 178, 159, 144, 0]),
+        check_request(Request::GetConfig(()), &[8, 1, 1, 2, 72, 227, 150, 9, 0]),
+        check_request(
+            Request::SetConfig(LuminaireConfig::DEFAULT),
+            &[
+                24, 1, 1, 3, 4, 128, 204, 58, 232, 7, 232, 7, 232, 7, 232, 7, 232, 7, 232, 7, 232,
+                7, 232, 7, 1, 1, 1, 1, 1, 1, 1, 6, 1, 154, 251, 57, 119, 0,
+            ],
+        ),
+        check_request(Request::SaveConfig(()), &[8, 1, 1, 4, 125, 70, 245, 224, 0]),
+        check_request(Request::Start(()), &[8, 1, 1, 5, 235, 118, 242, 151, 0]),
+        check_request(Request::Stop(()), &[8, 1, 1, 6, 81, 39, 251, 14, 0]),
+        check_request(Request::GetStatus(()), &[8, 1, 1, 7, 199, 23, 252, 121, 0]),
+        check_request(Request::Identify(5), &[9, 1, 1, 8, 5, 201, 172, 137, 32, 0]),
+    ];
+    assert_eq!(covered, Command::ALL);
 }
 
 #[test]
