@@ -81,7 +81,7 @@ struct CaptureArgs {
     #[arg(long)]
     size_mm: Option<f64>,
     /// Ellipsoid axis lengths x,y,z in mm.
-    #[arg(long, value_delimiter = ',', num_args = 3, default_values_t = [100.0, 60.0, 60.0])]
+    #[arg(long, value_delimiter = ',', default_values_t = [100.0, 60.0, 60.0])]
     axes_mm: Vec<f64>,
     /// Cube corner-on (a body diagonal towards the camera).
     #[arg(long)]
@@ -93,10 +93,10 @@ struct CaptureArgs {
     #[arg(long)]
     smooth_normals: bool,
     /// Object centre x,y,z in mm.
-    #[arg(long, value_delimiter = ',', num_args = 3, allow_hyphen_values = true)]
+    #[arg(long, value_delimiter = ',', allow_hyphen_values = true)]
     position_mm: Option<Vec<f64>>,
     /// Object rotation: angles about x, then y, then z, in degrees.
-    #[arg(long, value_delimiter = ',', num_args = 3, allow_hyphen_values = true)]
+    #[arg(long, value_delimiter = ',', allow_hyphen_values = true)]
     rotate_deg: Option<Vec<f64>>,
     /// Object albedo in [0, 1].
     #[arg(long, default_value_t = 1.0)]
@@ -111,7 +111,7 @@ struct CaptureArgs {
     #[arg(long, default_value_t = 0.0, allow_hyphen_values = true)]
     rpm: f64,
     /// Spin axis x,y,z (through the object centre).
-    #[arg(long, value_delimiter = ',', num_args = 3, default_values_t = [0.0, 1.0, 0.0], allow_hyphen_values = true)]
+    #[arg(long, value_delimiter = ',', default_values_t = [0.0, 1.0, 0.0], allow_hyphen_values = true)]
     spin_axis: Vec<f64>,
     /// Number of frames.
     #[arg(long, default_value_t = 128)]

@@ -67,13 +67,7 @@ pub fn background_power(rig: &Rig, gain: f64, snr_db: f64) -> f64 {
 /// Per-LED on-level images A_i (module docs), fractions of full scale.
 pub fn led_images(map: &SurfaceMap, rig: &Rig, gain: f64) -> Vec<Array2<f32>> {
     let camera = &rig.camera;
-    let pitch = camera.pitch_mm();
-    let z_top = map
-        .z_mm
-        .iter()
-        .copied()
-        .filter(|z| z.is_finite())
-        .fold(f64::NEG_INFINITY, f64::max);
+    let field = HeightField::new(map, camera.pitch_mm());
     rig.leds
         .iter()
         .map(|led| {
@@ -89,8 +83,9 @@ pub fn led_images(map: &SurfaceMap, rig: &Rig, gain: f64) -> Vec<Array2<f32>> {
                     if shade <= 0.0 {
                         return 0.0; // attached shadow
                     }
-                    if in_cast_shadow(map, rig, &x, &led.position(), pitch, z_top) {
-                        return 0.0;
+                    let (row, col) = (i / map.width, i % map.width);
+                    if field.occluded(row as f64, col as f64, &x, &led.position()) {
+                        return 0.0; // cast shadow
                     }
                     (gain * map.albedo[i] * shade) as f32
                 })
@@ -116,38 +111,119 @@ pub fn background_image(map: &SurfaceMap, irradiance: f64) -> Array2<f32> {
         .unwrap_or_else(|_| Array2::zeros((map.height, map.width)))
 }
 
-/// Height-field shadow test: does the depth map rise above the segment X → P?
-fn in_cast_shadow(
-    map: &SurfaceMap,
-    rig: &Rig,
-    x: &Vector3<f64>,
-    led: &Vector3<f64>,
+/// Side of the square pixel blocks of the max-height grid used to skip empty space.
+const BLOCK: usize = 8;
+
+/// The depth map prepared for shadow rays: a grid of per-block maximum heights (dilated by one
+/// pixel, so it bounds every sample taken inside the block) lets a ray jump over whole blocks
+/// it passes above.
+struct HeightField<'a> {
+    map: &'a SurfaceMap,
     pitch: f64,
     z_top: f64,
-) -> bool {
-    let to_led = led - x;
-    let horizontal = (to_led.x * to_led.x + to_led.y * to_led.y).sqrt();
-    if horizontal < 1e-9 {
-        return false; // straight up: a height field cannot occlude
-    }
-    // Half-pixel steps in the image plane.
-    let step = 0.5 * pitch / horizontal;
-    let tolerance = 0.05 * pitch;
-    let mut s = step;
-    while s < 1.0 {
-        let p = x + to_led * s;
-        if p.z > z_top {
-            return false;
+    blocks_wide: usize,
+    block_max: Vec<f64>,
+}
+
+impl<'a> HeightField<'a> {
+    fn new(map: &'a SurfaceMap, pitch: f64) -> Self {
+        let blocks_wide = map.width.div_ceil(BLOCK);
+        let blocks_high = map.height.div_ceil(BLOCK);
+        let mut block_max = vec![f64::NEG_INFINITY; blocks_wide * blocks_high];
+        for (i, &z) in map.z_mm.iter().enumerate() {
+            if !z.is_finite() {
+                continue;
+            }
+            let (row, col) = (i / map.width, i % map.width);
+            // Every block whose dilated footprint contains this pixel.
+            let rows = row.saturating_sub(1) / BLOCK..=((row + 1) / BLOCK).min(blocks_high - 1);
+            for br in rows {
+                let cols = col.saturating_sub(1) / BLOCK..=((col + 1) / BLOCK).min(blocks_wide - 1);
+                for bc in cols {
+                    let m = &mut block_max[br * blocks_wide + bc];
+                    *m = m.max(z);
+                }
+            }
         }
-        let (row, col) = rig.camera.xy_to_pixel(p.x, p.y);
-        match sample_depth(map, row, col) {
-            None => return false, // left the image
-            Some(z) if z > p.z + tolerance => return true,
-            _ => {}
+        let z_top = map
+            .z_mm
+            .iter()
+            .copied()
+            .filter(|z| z.is_finite())
+            .fold(f64::NEG_INFINITY, f64::max);
+        Self {
+            map,
+            pitch,
+            z_top,
+            blocks_wide,
+            block_max,
         }
-        s += step;
     }
-    false
+
+    /// Height-field shadow test: does the depth map rise above the segment from surface
+    /// point `x` (at pixel `row0`, `col0`) to the LED at `led`?
+    fn occluded(&self, row0: f64, col0: f64, x: &Vector3<f64>, led: &Vector3<f64>) -> bool {
+        let to_led = led - x;
+        let horizontal = (to_led.x * to_led.x + to_led.y * to_led.y).sqrt();
+        if horizontal < 1e-9 {
+            return false; // straight up: a height field cannot occlude
+        }
+        // Pixel coordinates along the ray: row = row0 + s·dr, col = col0 + s·dc (y up = row down).
+        let dr = -to_led.y / self.pitch;
+        let dc = to_led.x / self.pitch;
+        let rising = to_led.z > 0.0;
+        // Half-pixel steps in the image plane.
+        let step = 0.5 * self.pitch / horizontal;
+        let tolerance = 0.05 * self.pitch;
+        let (h, w) = (self.map.height as f64, self.map.width as f64);
+        let mut s = step;
+        while s < 1.0 {
+            let z = x.z + s * to_led.z;
+            if rising && z > self.z_top {
+                return false;
+            }
+            let (row, col) = (row0 + s * dr, col0 + s * dc);
+            if !(row > -0.5 && col > -0.5 && row < h - 0.5 && col < w - 0.5) {
+                return false; // left the image
+            }
+            let br = (row.max(0.0) as usize) / BLOCK;
+            let bc = (col.max(0.0) as usize) / BLOCK;
+            if rising && z > self.block_max[br * self.blocks_wide + bc] + tolerance {
+                // Jump to where the ray leaves this block (the ray only rises).
+                // Block b spans continuous coordinates [b·B, (b+1)·B); block 0 starts at the
+                // image edge −0.5, so the exit always lies ahead of the current point.
+                let exit = |p0: f64, d: f64, b: usize| {
+                    if d > 0.0 {
+                        ((b + 1) * BLOCK) as f64 - p0
+                    } else if b == 0 {
+                        -0.5 - p0
+                    } else {
+                        (b * BLOCK) as f64 - p0
+                    }
+                };
+                let sr = if dr != 0.0 {
+                    exit(row0, dr, br) / dr
+                } else {
+                    f64::INFINITY
+                };
+                let sc = if dc != 0.0 {
+                    exit(col0, dc, bc) / dc
+                } else {
+                    f64::INFINITY
+                };
+                let next = sr.min(sc) + 1e-6 / dr.abs().max(dc.abs());
+                s = next.max(s + 1e-3 * step);
+                continue;
+            }
+            if let Some(surface) = sample_depth(self.map, row, col)
+                && surface > z + tolerance
+            {
+                return true;
+            }
+            s += step;
+        }
+        false
+    }
 }
 
 /// Depth at continuous pixel coordinates: bilinear where all four neighbours are surface,
@@ -256,5 +332,64 @@ mod tests {
         assert_eq!(px(30.0), 0.0, "right of the sphere is in its shadow");
         assert!(px(-10.0) > 0.0, "the side facing the LED is lit");
         assert_eq!(px(12.0), 0.0, "the far side is in attached shadow");
+    }
+
+    /// The block-skipping march agrees with a plain half-pixel march.
+    #[test]
+    fn block_skipping_matches_a_plain_march() {
+        let rig = rig_with(
+            vec![
+                [-270.0, 420.0, 100.0],
+                [140.0, 420.0, 350.0],
+                [200.0, -150.0, 60.0],
+            ],
+            90,
+            70,
+            1.3,
+        );
+        let mut scene = Scene::single(SceneObject::new(Shape::Cuboid {
+            half_extents_mm: [15.0; 3],
+        }));
+        scene.objects[0].rotation = nalgebra::UnitQuaternion::from_euler_angles(0.5, 0.4, 0.3);
+        let mut ball = SceneObject::new(Shape::Sphere { radius_mm: 12.0 });
+        ball.position_mm = Vector3::new(30.0, -20.0, -10.0);
+        scene.objects.push(ball);
+        scene.ground = Some(GroundPlane {
+            z_mm: -25.0,
+            albedo: 1.0,
+        });
+        let map = SurfaceMap::render(&scene, &rig.camera, 0.0);
+        let field = HeightField::new(&map, 1.3);
+        let (mut shadowed, mut differ) = (0, 0);
+        for led in &rig.leds {
+            let p = led.position();
+            for i in 0..map.z_mm.len() {
+                let x = map.point(&rig.camera, i);
+                let (row, col) = ((i / 90) as f64, (i % 90) as f64);
+                let fast = field.occluded(row, col, &x, &p);
+                // Plain march with the same step and tolerance.
+                let to_led = p - x;
+                let step = 0.5 * 1.3 / (to_led.x.powi(2) + to_led.y.powi(2)).sqrt();
+                let mut slow = false;
+                let mut s = step;
+                while s < 1.0 {
+                    let q = x + to_led * s;
+                    let (r, c) = rig.camera.xy_to_pixel(q.x, q.y);
+                    match sample_depth(&map, r, c) {
+                        None => break,
+                        Some(z) if z > q.z + 0.05 * 1.3 => {
+                            slow = true;
+                            break;
+                        }
+                        _ => {}
+                    }
+                    s += step;
+                }
+                shadowed += usize::from(slow);
+                differ += usize::from(slow != fast);
+            }
+        }
+        assert!(shadowed > 1000, "{shadowed}");
+        assert!(differ * 200 < shadowed, "{differ} of {shadowed} differ");
     }
 }
