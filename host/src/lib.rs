@@ -10,6 +10,7 @@ pub mod datasets;
 pub mod demo;
 pub mod demod;
 pub mod export;
+pub mod device;
 pub mod flicker;
 pub mod integrate;
 pub mod metrics;

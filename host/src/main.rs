@@ -25,6 +25,8 @@ enum Command {
     Carriers(cli::carriers::CarriersArgs),
     /// Demodulate a capture into one image per LED (led1.npy…, previews, noise, decode.json).
     Decode(Box<cli::decode::DecodeArgs>),
+    /// Talk to meb luminaires over USB serial, or emulate one on a pseudo-terminal.
+    Device(cli::device::DeviceArgs),
     /// Render a synthetic MEB-FDMA capture of a scene with ground truth (or the Ch. 7 data set).
     Simulate(Box<cli::simulate::SimulateArgs>),
 }
@@ -37,6 +39,7 @@ fn main() -> ExitCode {
         Command::Photometric(args) => cli::photometric::run(&args),
         Command::Carriers(args) => cli::carriers::run(&args),
         Command::Decode(args) => cli::decode::run(&args),
+        Command::Device(args) => cli::device::run(&args),
         Command::Simulate(args) => cli::simulate::run(&args),
     };
     match result {

@@ -6,4 +6,5 @@ pub mod decode;
 pub mod demo;
 pub mod integrate;
 pub mod photometric;
+pub mod device;
 pub mod simulate;

@@ -165,6 +165,13 @@ struct CaptureArgs {
     /// Seed of the phases, the noise and blobby shapes.
     #[arg(long, default_value_t = 0)]
     seed: u64,
+    /// Light the scene with a luminaire timeline recorded by `meb device emulate --timeline`
+    /// (replaces --phases/--chip-rate: the capture shows exactly what that luminaire emits).
+    #[arg(long, conflicts_with_all = ["phases", "chip_rate"])]
+    timeline: Option<std::path::PathBuf>,
+    /// Timeline time (s) at camera time 0 (default: the timeline's last output change).
+    #[arg(long, requires = "timeline")]
+    timeline_start: Option<f64>,
     /// Frame whose start time the ground-truth files describe.
     #[arg(long, default_value_t = 0)]
     truth_frame: usize,
@@ -255,6 +262,10 @@ fn run_capture(args: &CaptureArgs) -> Result<()> {
     }
     let started = Instant::now();
     let mut capture = SimulatedCapture::new(rig, scene, config)?;
+    if let Some(path) = &args.timeline {
+        let waveform = meb::device::TimelineWaveform::load(path, args.timeline_start)?;
+        capture = capture.with_waveform(std::sync::Arc::new(waveform))?;
+    }
     let options = OutputOptions {
         video: match args.format {
             FormatArg::Png => VideoFormat::Png,
