@@ -1,5 +1,5 @@
 //! The firmware's size budget (issue 3): ≤ 64 KiB of flash and ≤ 16 KiB of static RAM beyond
-//! the chip table, measured from the release ELF's section headers.
+//! the chip table, measured from the shipped (`firmware` profile) ELF's section headers.
 //!
 //! Flash holds `.vector_table`, `.text`, `.rodata` and the load image of `.data`; static RAM is
 //! `.data`, `.bss` and `.uninit` (cortex-m-rt's section names). The chip-table allowance is two
@@ -61,8 +61,11 @@ pub fn workspace_root() -> PathBuf {
         .map_or_else(|| PathBuf::from("."), Path::to_path_buf)
 }
 
-/// Builds the release firmware in the workspace target dir; returns the ELF path or cargo's
-/// output on failure.
+/// Cargo profile of the shipped firmware (`cargo firmware`): release + fat LTO + `opt-level = "z"`.
+pub const FIRMWARE_PROFILE: &str = "firmware";
+
+/// Builds the shipped firmware (the `firmware` profile, as `cargo firmware` does) in the workspace
+/// target dir; returns the ELF path or cargo's output on failure.
 pub fn build_firmware() -> Result<PathBuf, String> {
     let root = workspace_root();
     let cargo = std::env::var_os("CARGO").unwrap_or_else(|| "cargo".into());
@@ -72,7 +75,8 @@ pub fn build_firmware() -> Result<PathBuf, String> {
             "build",
             "-p",
             "firmware",
-            "--release",
+            "--profile",
+            FIRMWARE_PROFILE,
             "--target",
             FIRMWARE_TARGET,
         ])
@@ -80,7 +84,7 @@ pub fn build_firmware() -> Result<PathBuf, String> {
         .map_err(|e| format!("cannot run cargo: {e}"))?;
     if !output.status.success() {
         return Err(format!(
-            "`cargo build -p firmware --release --target {FIRMWARE_TARGET}` failed ({}):\n{}",
+            "`cargo build -p firmware --profile {FIRMWARE_PROFILE} --target {FIRMWARE_TARGET}` failed ({}):\n{}",
             output.status,
             String::from_utf8_lossy(&output.stderr)
         ));
@@ -89,7 +93,7 @@ pub fn build_firmware() -> Result<PathBuf, String> {
         std::env::var_os("CARGO_TARGET_DIR").map_or_else(|| root.join("target"), PathBuf::from);
     Ok(target_dir
         .join(FIRMWARE_TARGET)
-        .join("release")
+        .join(FIRMWARE_PROFILE)
         .join("firmware"))
 }
 

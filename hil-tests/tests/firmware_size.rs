@@ -1,11 +1,11 @@
-//! The release firmware builds for the board and fits its size budget.
+//! The shipped firmware (`cargo firmware`) builds for the board and fits its size budget.
 
 use hil_tests::elf_budget::{
     CHIP_TABLE_ALLOWANCE, FLASH_BUDGET, Footprint, RAM_BUDGET, build_firmware,
 };
 
 #[test]
-fn firmware_release_build_fits_flash_and_ram_budget() {
+fn shipped_firmware_build_fits_flash_and_ram_budget() {
     let elf = match build_firmware() {
         Ok(path) => path,
         Err(log) => panic!("the firmware does not build:\n{log}"),
