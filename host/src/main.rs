@@ -29,6 +29,8 @@ enum Command {
     Device(cli::device::DeviceArgs),
     /// Render a synthetic MEB-FDMA capture of a scene with ground truth (or the Ch. 7 data set).
     Simulate(Box<cli::simulate::SimulateArgs>),
+    /// Reconstruct normals, depth and a mesh from a capture or a `meb decode` folder.
+    Reconstruct(Box<cli::reconstruct::ReconstructArgs>),
 }
 
 fn main() -> ExitCode {
@@ -41,6 +43,7 @@ fn main() -> ExitCode {
         Command::Decode(args) => cli::decode::run(&args),
         Command::Device(args) => cli::device::run(&args),
         Command::Simulate(args) => cli::simulate::run(&args),
+        Command::Reconstruct(args) => cli::reconstruct::run(&args),
     };
     match result {
         Ok(()) => ExitCode::SUCCESS,

@@ -6,8 +6,8 @@ use indicatif::{ProgressBar, ProgressStyle};
 use meb::capture::raw::RawLayout;
 use meb::capture::{OpenOptions, open};
 use meb::demod::output::write_decode_dir;
-use meb::demod::{DecodeConfig, Estimator, LedCount, Linearize, Roi, decode};
-use std::path::PathBuf;
+use meb::demod::{DecodeConfig, Decoded, Estimator, LedCount, Linearize, Roi, decode};
+use std::path::{Path, PathBuf};
 
 /// Arguments of `meb decode`.
 #[derive(Args)]
@@ -15,12 +15,20 @@ pub struct DecodeArgs {
     /// Input: a directory of PNG/TIFF frames, a multi-page TIFF, a .y4m file, a raw file
     /// (with --raw) or a video file (through FFmpeg).
     input: PathBuf,
-    /// Number of LEDs (1..=8) or `auto`.
-    #[arg(long, default_value = "4")]
-    leds: String,
     /// Output directory (led1.npy…, ledI.png, noise.npy, decode.json).
     #[arg(long)]
     out: PathBuf,
+    /// Decoder settings.
+    #[command(flatten)]
+    options: DecodeOptions,
+}
+
+/// The decoder settings shared by `meb decode` and `meb reconstruct`.
+#[derive(Args)]
+pub struct DecodeOptions {
+    /// Number of LEDs (1..=8) or `auto` [default: 4, or the rig's LED count in `reconstruct`].
+    #[arg(long)]
+    leds: Option<String>,
     /// Number of frames to use (≥ 2^(N+1)); default all.
     #[arg(long)]
     frames: Option<usize>,
@@ -66,11 +74,12 @@ fn parse_roi(text: &str) -> Result<Roi> {
     })
 }
 
-/// Builds the decoder settings from the arguments.
-fn config(args: &DecodeArgs) -> Result<DecodeConfig> {
-    let leds = match args.leds.as_str() {
-        "auto" => LedCount::Auto,
-        n => LedCount::Fixed(n.parse().context("--leds must be a number or `auto`")?),
+/// Builds the decoder settings; `default_leds` applies when --leds is absent.
+fn config(args: &DecodeOptions, default_leds: usize) -> Result<DecodeConfig> {
+    let leds = match args.leds.as_deref() {
+        None => LedCount::Fixed(default_leds),
+        Some("auto") => LedCount::Auto,
+        Some(n) => LedCount::Fixed(n.parse().context("--leds must be a number or `auto`")?),
     };
     let estimator = match args.estimator.as_str() {
         "waveform" => Estimator::Waveform,
@@ -113,15 +122,20 @@ fn parse_raw(text: &str) -> Result<RawLayout> {
     })
 }
 
-/// Runs `meb decode`.
-pub fn run(args: &DecodeArgs) -> Result<()> {
-    let config = config(args)?;
-    let options = OpenOptions {
-        fps: args.fps,
-        raw: args.raw.as_deref().map(parse_raw).transpose()?,
+/// Opens and decodes `input` with `options`, showing a progress bar; `default_leds` applies
+/// when --leds is absent.
+pub fn decode_capture(
+    input: &Path,
+    options: &DecodeOptions,
+    default_leds: usize,
+) -> Result<Decoded> {
+    let config = config(options, default_leds)?;
+    let open_options = OpenOptions {
+        fps: options.fps,
+        raw: options.raw.as_deref().map(parse_raw).transpose()?,
     };
-    let mut source = open(&args.input, &options)
-        .with_context(|| format!("cannot open {}", args.input.display()))?;
+    let mut source =
+        open(input, &open_options).with_context(|| format!("cannot open {}", input.display()))?;
     let bar = ProgressBar::new(0);
     bar.set_style(
         ProgressStyle::with_template("decoding {bar:40} {pos}/{len} frames {elapsed}")
@@ -131,8 +145,14 @@ pub fn run(args: &DecodeArgs) -> Result<()> {
         bar.set_length(total as u64);
         bar.set_position(done as u64);
     })
-    .with_context(|| format!("cannot decode {}", args.input.display()))?;
+    .with_context(|| format!("cannot decode {}", input.display()))?;
     bar.finish_and_clear();
+    Ok(decoded)
+}
+
+/// Runs `meb decode`.
+pub fn run(args: &DecodeArgs) -> Result<()> {
+    let decoded = decode_capture(&args.input, &args.options, 4)?;
     write_decode_dir(&args.out, &decoded)?;
     let report = &decoded.report;
     println!(

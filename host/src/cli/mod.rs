@@ -7,4 +7,5 @@ pub mod demo;
 pub mod device;
 pub mod integrate;
 pub mod photometric;
+pub mod reconstruct;
 pub mod simulate;

@@ -3,7 +3,8 @@
 //! (bool masks) and `decode.json` (the [`super::DecodeReport`]).
 //!
 //! Every file is written under a temporary name and renamed into place, `decode.json` last, so
-//! a directory with a `decode.json` is always complete.
+//! a directory with a `decode.json` is always complete. [`read_decode_dir`] reads it back and
+//! checks that every file is present and of the size `decode.json` records.
 
 use super::Decoded;
 use ndarray::Array2;
@@ -30,6 +31,101 @@ pub enum OutputError {
         /// What went wrong.
         reason: String,
     },
+}
+
+/// Errors reading a decode directory.
+#[derive(Debug, Error)]
+#[non_exhaustive]
+pub enum ReadError {
+    /// A file the directory must hold is absent.
+    #[error("{path} is missing (not a complete `meb decode` output folder)")]
+    Missing {
+        /// The file.
+        path: PathBuf,
+    },
+    /// A file could not be read or parsed.
+    #[error("cannot read {path}: {reason}")]
+    Read {
+        /// The file.
+        path: PathBuf,
+        /// What went wrong.
+        reason: String,
+    },
+    /// An array's size differs from the one in `decode.json`.
+    #[error("{path} is {found:?} (rows, cols) but decode.json says {expected:?}")]
+    SizeMismatch {
+        /// The file.
+        path: PathBuf,
+        /// (height, width) from `decode.json`.
+        expected: (usize, usize),
+        /// (rows, cols) of the array.
+        found: (usize, usize),
+    },
+}
+
+/// Reads a directory written by [`write_decode_dir`]; `saturated.npy` and `underexposed.npy`
+/// are optional (all false when absent).
+pub fn read_decode_dir(dir: &Path) -> Result<Decoded, ReadError> {
+    let json_path = dir.join("decode.json");
+    let text = std::fs::read_to_string(&json_path).map_err(|e| match e.kind() {
+        std::io::ErrorKind::NotFound => ReadError::Missing {
+            path: json_path.clone(),
+        },
+        _ => ReadError::Read {
+            path: json_path.clone(),
+            reason: e.to_string(),
+        },
+    })?;
+    let report: super::DecodeReport = serde_json::from_str(&text).map_err(|e| ReadError::Read {
+        path: json_path.clone(),
+        reason: e.to_string(),
+    })?;
+    let shape = (report.height, report.width);
+    let images = (1..=report.leds)
+        .map(|i| read_npy::<f32>(&dir.join(format!("led{i}.npy")), shape))
+        .collect::<Result<Vec<_>, _>>()?;
+    let noise = read_npy::<f32>(&dir.join("noise.npy"), shape)?;
+    let optional_mask = |name: &str| {
+        let path = dir.join(name);
+        if path.exists() {
+            read_npy::<bool>(&path, shape)
+        } else {
+            Ok(Array2::from_elem(shape, false))
+        }
+    };
+    let saturated = optional_mask("saturated.npy")?;
+    let underexposed = optional_mask("underexposed.npy")?;
+    Ok(Decoded {
+        leds: crate::types::LedImages { images },
+        noise,
+        saturated,
+        underexposed,
+        report,
+    })
+}
+
+/// Reads one 2-D array and checks its shape.
+fn read_npy<T: ndarray_npy::ReadableElement>(
+    path: &Path,
+    shape: (usize, usize),
+) -> Result<Array2<T>, ReadError> {
+    if !path.exists() {
+        return Err(ReadError::Missing {
+            path: path.to_path_buf(),
+        });
+    }
+    let array: Array2<T> = ndarray_npy::read_npy(path).map_err(|e| ReadError::Read {
+        path: path.to_path_buf(),
+        reason: e.to_string(),
+    })?;
+    if array.dim() != shape {
+        return Err(ReadError::SizeMismatch {
+            path: path.to_path_buf(),
+            expected: shape,
+            found: array.dim(),
+        });
+    }
+    Ok(array)
 }
 
 /// Writes `decoded` into `dir` (created if missing).

@@ -1,0 +1,278 @@
+//! `meb reconstruct`: a capture (decoded on the fly) or a `meb decode` folder + a rig →
+//! normals, albedo, depth, mesh and report (SPEC §5–§6), optionally compared with ground truth.
+
+use super::decode::{DecodeOptions, decode_capture};
+use super::integrate::IntegratorArg;
+use anyhow::{Context, Result, bail, ensure};
+use clap::Args;
+use meb::demod::Decoded;
+use meb::demod::output::read_decode_dir;
+use meb::metrics::{
+    AngularErrors, DepthErrors, compare_depth, compare_normals, load_mesh_triangles,
+    normals_from_depth, render_mesh_depth,
+};
+use meb::reconstruct::{LightModel, ReconstructConfig, reconstruct};
+use meb::rig::Rig;
+use ndarray::{Array2, Array3};
+use std::path::{Path, PathBuf};
+
+/// Arguments of `meb reconstruct`.
+#[derive(Args)]
+pub struct ReconstructArgs {
+    /// A capture (frame folder, TIFF, .y4m, raw or video: decoded first) or a `meb decode`
+    /// output folder (recognised by its decode.json).
+    input: PathBuf,
+    /// Rig: a TOML file or a preset (thesis-in-plane, thesis-out-of-plane, thesis-dynamic,
+    /// thesis-hybrid).
+    #[arg(long)]
+    rig: String,
+    /// Output folder (normals.npy, albedo.npy, depth.npy, mask.png, previews, surface.ply,
+    /// report.json, report.html).
+    #[arg(long)]
+    out: PathBuf,
+    /// Normal integrator.
+    #[arg(long, value_enum, default_value = "least-squares")]
+    integrator: IntegratorArg,
+    /// Object mask image (non-zero = object), same size as the images; found automatically
+    /// when absent.
+    #[arg(long)]
+    mask: Option<PathBuf>,
+    /// Ground truth: a depth map (H×W .npy, mm, NaN = background) or a mesh (.stl/.obj, mm,
+    /// rendered in the rig's camera).
+    #[arg(long)]
+    ground_truth: Option<PathBuf>,
+    /// Use distant light vectors L_i(0) (the thesis' model) instead of near-field refinement.
+    #[arg(long)]
+    no_near_field: bool,
+    /// Decoder settings (only used when INPUT is a capture).
+    #[command(flatten)]
+    decode: DecodeOptions,
+}
+
+/// Ground-truth depth and normals on the camera grid.
+struct Truth {
+    depth: Array2<f32>,
+    normals: Array3<f32>,
+}
+
+/// Runs `meb reconstruct`.
+pub fn run(args: &ReconstructArgs) -> Result<()> {
+    let rig = Rig::load(&args.rig).with_context(|| format!("cannot load rig {}", args.rig))?;
+    ensure!(
+        rig.leds.len() >= 3,
+        "photometric stereo needs at least 3 LEDs, rig {} has {}",
+        args.rig,
+        rig.leds.len()
+    );
+    let from_folder = args.input.join("decode.json").is_file();
+    let decoded: Decoded = if from_folder {
+        read_decode_dir(&args.input)?
+    } else {
+        decode_capture(&args.input, &args.decode, rig.leds.len())?
+    };
+    let leds = decoded.leds.images.len();
+    ensure!(
+        leds == rig.leds.len(),
+        "rig {} has {} LEDs but {} has {leds} LED images",
+        args.rig,
+        rig.leds.len(),
+        args.input.display()
+    );
+    let shape = decoded
+        .leds
+        .shape()
+        .context("the decoded input holds no LED image")?;
+    let camera = (rig.camera.height, rig.camera.width);
+    ensure!(
+        camera == shape,
+        "rig camera is {}x{} but the images are {}x{} (cropped with --roi? use a rig of the crop's size)",
+        camera.1,
+        camera.0,
+        shape.1,
+        shape.0
+    );
+    let mask = match &args.mask {
+        Some(path) => {
+            let mask = super::common::load_mask(path)?;
+            ensure!(
+                mask.dim() == shape,
+                "mask {} is {}x{} but the images are {}x{}",
+                path.display(),
+                mask.dim().1,
+                mask.dim().0,
+                shape.1,
+                shape.0
+            );
+            Some(mask)
+        }
+        None => None,
+    };
+    let truth = args
+        .ground_truth
+        .as_deref()
+        .map(|path| load_truth(path, &rig, shape))
+        .transpose()?;
+
+    let mut config = ReconstructConfig::default();
+    config.integrate.integrator = args.integrator.into();
+    if args.no_near_field {
+        config.light_model = LightModel::Distant;
+    }
+    let reconstruction = reconstruct(
+        &decoded.leds,
+        &rig,
+        mask.as_ref(),
+        Some(&decoded.noise),
+        &config,
+    )?;
+    let field = &reconstruction.photometric.field;
+    let depth = &reconstruction.integration.depth;
+
+    let (depth_errors, angular_errors) = match &truth {
+        Some(t) => compare(t, field, &depth.depth_mm)?,
+        None => (None, None),
+    };
+
+    let mut summary = serde_json::Map::new();
+    summary.insert("input".into(), args.input.display().to_string().into());
+    summary.insert("rig".into(), args.rig.clone().into());
+    summary.insert("leds".into(), leds.into());
+    summary.insert("decoded frames".into(), decoded.report.frames_used.into());
+    summary.insert(
+        "integrator".into(),
+        serde_json::to_value(config.integrate.integrator)?,
+    );
+    summary.insert(
+        "light model".into(),
+        serde_json::to_value(config.light_model)?,
+    );
+    summary.insert(
+        "object pixels".into(),
+        field.mask.iter().filter(|&&m| m).count().into(),
+    );
+    summary.insert(
+        "kept by artefact filter".into(),
+        reconstruction.integration.kept_fraction.into(),
+    );
+    if let Some(path) = &args.ground_truth {
+        summary.insert("ground truth".into(), path.display().to_string().into());
+    }
+    let source = if from_folder {
+        format!("decode folder {}", args.input.display())
+    } else {
+        format!("capture {}, decoded with meb demod", args.input.display())
+    };
+    let written = super::common::write_outputs(
+        &args.out,
+        "meb reconstruct",
+        source,
+        field,
+        depth,
+        depth_errors.as_ref(),
+        angular_errors.as_ref(),
+        &reconstruction.timings,
+        summary,
+        vec![],
+    )?;
+
+    let total_ms: f64 = reconstruction.timings.iter().map(|t| t.ms).sum();
+    println!(
+        "reconstructed {} pixels from {leds} LED images ({}x{}) in {:.1} s, {:.1} % kept",
+        field.mask.iter().filter(|&&m| m).count(),
+        shape.1,
+        shape.0,
+        total_ms / 1e3,
+        100.0 * reconstruction.integration.kept_fraction
+    );
+    if let Some(e) = &depth_errors {
+        println!(
+            "depth RMSE {:.3} mm, NRMSE {:.2} %, surface reconstructed {:.1} %",
+            e.rmse_mm,
+            100.0 * e.nrmse,
+            100.0 * e.reconstructed_fraction
+        );
+    }
+    if let Some(a) = &angular_errors {
+        println!(
+            "normal error mean {:.2}°, median {:.2}° over {} pixels",
+            a.mean_deg, a.median_deg, a.compared_pixels
+        );
+    }
+    println!("report: {}", written.html.display());
+    Ok(())
+}
+
+/// Loads ground truth from a depth `.npy` or renders a mesh in the rig's camera.
+fn load_truth(path: &Path, rig: &Rig, shape: (usize, usize)) -> Result<Truth> {
+    let ext = path
+        .extension()
+        .and_then(|e| e.to_str())
+        .map(str::to_ascii_lowercase)
+        .unwrap_or_default();
+    let truth = match ext.as_str() {
+        "npy" => {
+            let depth: Array2<f32> = ndarray_npy::read_npy::<_, Array2<f32>>(path)
+                .or_else(|_| {
+                    ndarray_npy::read_npy::<_, Array2<f64>>(path).map(|a| a.mapv(|v| v as f32))
+                })
+                .with_context(|| {
+                    format!(
+                        "reading ground truth {} (expected an H×W float depth map in mm)",
+                        path.display()
+                    )
+                })?;
+            let normals = normals_from_depth(&depth, rig.camera.pitch_mm());
+            Truth { depth, normals }
+        }
+        "stl" | "obj" => {
+            let triangles = load_mesh_triangles(path)
+                .with_context(|| format!("reading ground-truth mesh {}", path.display()))?;
+            let rendered = render_mesh_depth(&triangles, &rig.camera);
+            Truth {
+                depth: rendered.depth_mm,
+                normals: rendered.normals,
+            }
+        }
+        _ => bail!(
+            "ground truth {} must be a depth .npy or an .stl/.obj mesh",
+            path.display()
+        ),
+    };
+    ensure!(
+        truth.depth.dim() == shape,
+        "ground truth {} is {}x{} but the images are {}x{}",
+        path.display(),
+        truth.depth.dim().1,
+        truth.depth.dim().0,
+        shape.1,
+        shape.0
+    );
+    ensure!(
+        truth.depth.iter().any(|z| z.is_finite()),
+        "ground truth {} has no finite depth",
+        path.display()
+    );
+    Ok(truth)
+}
+
+/// Depth and normal errors against the truth, over the truth's surface.
+fn compare(
+    truth: &Truth,
+    field: &meb::types::NormalField,
+    depth: &Array2<f32>,
+) -> Result<(Option<DepthErrors>, Option<AngularErrors>)> {
+    let depth_errors =
+        compare_depth(depth, &truth.depth, None).context("comparing depth with ground truth")?;
+    let both = Array2::from_shape_fn(truth.depth.dim(), |(r, c)| {
+        field.mask[(r, c)] && (0..3).all(|j| truth.normals[(r, c, j)].is_finite())
+    });
+    let angular = if both.iter().any(|&m| m) {
+        Some(
+            compare_normals(&field.normals, &truth.normals, &both)
+                .context("comparing normals with ground truth")?,
+        )
+    } else {
+        None
+    };
+    Ok((Some(depth_errors), angular))
+}
