@@ -447,8 +447,8 @@ fn finish(
     }
     let noise_values = noise.as_slice().unwrap_or(&[]);
     let mut sorted: Vec<f32> = valid.iter().map(|&p| noise_values[p]).collect();
-    sorted.sort_by(f32::total_cmp);
-    let median_noise = f64::from(sorted[sorted.len() / 2]);
+    let middle = sorted.len() / 2;
+    let median_noise = f64::from(*sorted.select_nth_unstable_by(middle, f32::total_cmp).1);
     let noise_power: f64 = valid
         .iter()
         .map(|&p| f64::from(noise_values[p]).powi(2))

@@ -157,13 +157,7 @@ pub fn read_window(
         for row in 0..roi.height {
             let band = region.band_of(row);
             let range = row * roi.width..(row + 1) * roi.width;
-            let sum: f64 = match &cropped {
-                Samples::U8(v) => v[range]
-                    .iter()
-                    .map(|&c| map.value(u16::from(c)) as f64)
-                    .sum(),
-                Samples::U16(v) => v[range].iter().map(|&c| map.value(c) as f64).sum(),
-            };
+            let sum = row_sum(&cropped, range, map);
             band_sums[band] += sum;
         }
         for (band, means) in window.band_means.iter_mut().enumerate() {
@@ -177,6 +171,28 @@ pub fn read_window(
         on_frame();
     }
     Ok(window)
+}
+
+/// Sum of the accumulation values of one row: exact integer sums of the codes for a linear
+/// map (no per-sample conversion), table look-ups otherwise.
+fn row_sum(samples: &Samples, range: std::ops::Range<usize>, map: &CodeMap) -> f64 {
+    match (samples, map) {
+        (Samples::U8(v), CodeMap::Linear { .. }) => v[range]
+            .chunks(1 << 16)
+            .map(|chunk| u64::from(chunk.iter().map(|&c| u32::from(c)).sum::<u32>()))
+            .sum::<u64>() as f64,
+        (Samples::U16(v), CodeMap::Linear { .. }) => {
+            v[range].iter().map(|&c| u64::from(c)).sum::<u64>() as f64
+        }
+        (Samples::U8(v), CodeMap::Table(t)) => v[range]
+            .iter()
+            .map(|&c| f64::from(t.get(usize::from(c)).copied().unwrap_or(1.0)))
+            .sum(),
+        (Samples::U16(v), CodeMap::Table(t)) => v[range]
+            .iter()
+            .map(|&c| f64::from(t.get(usize::from(c)).copied().unwrap_or(1.0)))
+            .sum(),
+    }
 }
 
 /// Cuts the region of interest out of a full frame (no copy when it is the whole frame).
