@@ -87,9 +87,10 @@ pub fn run(args: &DemoArgs) -> Result<()> {
         )?;
         let total_ms: f64 = out.timings.iter().map(|t| t.ms).sum();
         println!(
-            "{name:7} depth RMSE {:.2} mm, NRMSE {:.2} %, surface {:.1} %, normals mean {:.2}° median {:.2}°, {:.1} s",
+            "{name:7} depth RMSE {:.2} mm, NRMSE {}, surface {:.1} %, normals mean {:.2}° median {:.2}°, {:.1} s",
             e.rmse_mm,
-            100.0 * e.nrmse,
+            e.nrmse
+                .map_or_else(|| "n/a".into(), |n| format!("{:.2} %", 100.0 * n)),
             100.0 * e.reconstructed_fraction,
             out.angular_errors.mean_deg,
             out.angular_errors.median_deg,

@@ -4,7 +4,7 @@ pub mod carriers;
 pub mod common;
 pub mod decode;
 pub mod demo;
+pub mod device;
 pub mod integrate;
 pub mod photometric;
-pub mod device;
 pub mod simulate;
