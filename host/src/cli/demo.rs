@@ -4,8 +4,9 @@
 use anyhow::Result;
 use clap::Args;
 use indicatif::{ProgressBar, ProgressStyle};
-use meb::demo::{run as run_demo, thesis_capture_config, thesis_decode_config};
-use meb::reconstruct::ReconstructConfig;
+use meb::demo::{
+    decoded_reconstruct_config, run as run_demo, thesis_capture_config, thesis_decode_config,
+};
 use meb::rig::Rig;
 use meb::simulate::{Scene, SceneObject};
 use std::path::PathBuf;
@@ -48,7 +49,7 @@ pub fn run(args: &DemoArgs) -> Result<()> {
             Scene::single(object),
             thesis_capture_config(args.seed),
             &thesis_decode_config(rig.leds.len()),
-            &ReconstructConfig::default(),
+            &decoded_reconstruct_config(),
             &mut |done, total| {
                 bar.set_length(total as u64);
                 bar.set_position(done as u64);
