@@ -61,7 +61,7 @@ fn near_field_sphere_reconstructs_within_a_tenth_of_a_millimetre() {
         "analytic sphere, near field: RMSE {:.4} mm, NRMSE {:.3} %, {:.1} % of the ≥3-lit surface, \
          normals mean {:.3}° median {:.3}°, offset {:.3} mm",
         e.rmse_mm,
-        100.0 * e.nrmse,
+        100.0 * e.nrmse.unwrap_or(f64::NAN),
         100.0 * e.reconstructed_fraction,
         a.mean_deg,
         a.median_deg,

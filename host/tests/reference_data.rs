@@ -45,11 +45,11 @@ fn vase_nrmse(integrator: Integrator) -> (f64, f64) {
     eprintln!(
         "vase {integrator:?}: RMSE {:.4}, NRMSE {:.3} %, {:.1} % reconstructed, {} iterations",
         e.rmse_mm,
-        100.0 * e.nrmse,
+        100.0 * e.nrmse.unwrap_or(f64::NAN),
         100.0 * e.reconstructed_fraction,
         out.iterations
     );
-    (e.nrmse, e.reconstructed_fraction)
+    (e.nrmse.unwrap_or(f64::INFINITY), e.reconstructed_fraction)
 }
 
 #[test]

@@ -4,8 +4,9 @@
 use anyhow::Result;
 use clap::Args;
 use indicatif::{ProgressBar, ProgressStyle};
-use meb::demo::{run as run_demo, thesis_capture_config, thesis_decode_config};
-use meb::reconstruct::ReconstructConfig;
+use meb::demo::{
+    decoded_reconstruct_config, run as run_demo, thesis_capture_config, thesis_decode_config,
+};
 use meb::rig::Rig;
 use meb::simulate::{Scene, SceneObject};
 use std::path::PathBuf;
@@ -48,7 +49,7 @@ pub fn run(args: &DemoArgs) -> Result<()> {
             Scene::single(object),
             thesis_capture_config(args.seed),
             &thesis_decode_config(rig.leds.len()),
-            &ReconstructConfig::default(),
+            &decoded_reconstruct_config(),
             &mut |done, total| {
                 bar.set_length(total as u64);
                 bar.set_position(done as u64);
@@ -87,9 +88,10 @@ pub fn run(args: &DemoArgs) -> Result<()> {
         )?;
         let total_ms: f64 = out.timings.iter().map(|t| t.ms).sum();
         println!(
-            "{name:7} depth RMSE {:.2} mm, NRMSE {:.2} %, surface {:.1} %, normals mean {:.2}° median {:.2}°, {:.1} s",
+            "{name:7} depth RMSE {:.2} mm, NRMSE {}, surface {:.1} %, normals mean {:.2}° median {:.2}°, {:.1} s",
             e.rmse_mm,
-            100.0 * e.nrmse,
+            e.nrmse
+                .map_or_else(|| "n/a".into(), |n| format!("{:.2} %", 100.0 * n)),
             100.0 * e.reconstructed_fraction,
             out.angular_errors.mean_deg,
             out.angular_errors.median_deg,

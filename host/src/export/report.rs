@@ -164,7 +164,8 @@ fn html_page(
         rows.push(("depth RMSE".to_string(), format!("{:.3} mm", e.rmse_mm)));
         rows.push((
             "depth NRMSE".to_string(),
-            format!("{:.2} %", 100.0 * e.nrmse),
+            e.nrmse
+                .map_or_else(|| "n/a".into(), |n| format!("{:.2} %", 100.0 * n)),
         ));
         rows.push((
             "surface reconstructed".to_string(),

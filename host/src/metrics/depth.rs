@@ -8,8 +8,9 @@ use ndarray::Array2;
 pub struct DepthErrors {
     /// RMSE in mm after removing the best constant offset.
     pub rmse_mm: f64,
-    /// RMSE / (max − min of the true depth over the compared pixels).
-    pub nrmse: f64,
+    /// RMSE / (max − min of the true depth over the compared pixels); `None` (JSON `null`)
+    /// when the true depth is flat.
+    pub nrmse: Option<f64>,
     /// Fraction (0..1) of true-surface pixels with an estimate.
     pub reconstructed_fraction: f64,
     /// Pixels compared.
@@ -69,7 +70,7 @@ pub fn compare_depth(
     }
     Ok(DepthErrors {
         rmse_mm: rmse,
-        nrmse: if hi > lo { rmse / (hi - lo) } else { f64::NAN },
+        nrmse: (hi > lo).then(|| rmse / (hi - lo)),
         reconstructed_fraction: pairs.len() as f64 / surface_pixels as f64,
         compared_pixels: pairs.len(),
         offset_mm: offset,
@@ -95,7 +96,7 @@ mod tests {
             "{}",
             e.rmse_mm
         );
-        assert!((e.nrmse - e.rmse_mm / 5.0).abs() < 1e-9);
+        assert!(e.nrmse.is_some_and(|n| (n - e.rmse_mm / 5.0).abs() < 1e-9));
         let none = Array2::from_elem((4, 4), f32::NAN);
         assert!(matches!(
             compare_depth(&none, &truth, None),
