@@ -138,6 +138,13 @@ pub fn usable_led_images(decoded: &Decoded) -> LedImages {
     images
 }
 
+/// Per-pixel noise σ of the decoded on-levels A_i: the decoder reports σ of one frame sample,
+/// and an on-level averages about frames/2 samples, so σ_A = σ · √(2/frames).
+pub fn level_noise(decoded: &Decoded) -> Array2<f32> {
+    let frames = decoded.report.frames_used.max(2) as f32;
+    decoded.noise.mapv(|s| s * (2.0 / frames).sqrt())
+}
+
 /// Reconstruction settings for decoded captures: an LED below 7 % of the pixel's brightest
 /// counts as shadowed. Near the terminator such grazing values sit at the noise floor and
 /// tilted the whole least-squares surface (sphere e2e, seed 7: 0.58 mm at the default 2 %,
@@ -193,9 +200,7 @@ pub fn run(
         stage: "render frames + decode".into(),
         ms: start.elapsed().as_secs_f64() * 1e3,
     });
-    // The decoder reports σ of one frame sample; an on-level averages ~frames/2 samples.
-    let frames = decoded.report.frames_used.max(2) as f32;
-    let level_noise = decoded.noise.mapv(|s| s * (2.0 / frames).sqrt());
+    let level_noise = level_noise(&decoded);
     let reconstruction = reconstruct(
         &usable_led_images(&decoded),
         rig,

@@ -11,7 +11,7 @@ use meb::metrics::{
     AngularErrors, DepthErrors, compare_depth, compare_normals, load_mesh_triangles,
     normals_from_depth, render_mesh_depth,
 };
-use meb::reconstruct::{LightModel, ReconstructConfig, reconstruct};
+use meb::reconstruct::{LightModel, reconstruct};
 use meb::rig::Rig;
 use ndarray::{Array2, Array3};
 use std::path::{Path, PathBuf};
@@ -113,18 +113,15 @@ pub fn run(args: &ReconstructArgs) -> Result<()> {
         .map(|path| load_truth(path, &rig, shape))
         .transpose()?;
 
-    let mut config = ReconstructConfig::default();
+    // Decoded captures: grazing LEDs count as shadowed, and pixels the decoder flagged as
+    // saturated or under-exposed are left out (the same settings `meb demo` is measured with).
+    let mut config = meb::demo::decoded_reconstruct_config();
     config.integrate.integrator = args.integrator.into();
     if args.no_near_field {
         config.light_model = LightModel::Distant;
     }
-    let reconstruction = reconstruct(
-        &decoded.leds,
-        &rig,
-        mask.as_ref(),
-        Some(&decoded.noise),
-        &config,
-    )?;
+    let usable = meb::demo::usable_led_images(&decoded);
+    let reconstruction = reconstruct(&usable, &rig, mask.as_ref(), Some(&decoded.noise), &config)?;
     let field = &reconstruction.photometric.field;
     let depth = &reconstruction.integration.depth;
 
@@ -186,9 +183,12 @@ pub fn run(args: &ReconstructArgs) -> Result<()> {
     );
     if let Some(e) = &depth_errors {
         println!(
-            "depth RMSE {:.3} mm, NRMSE {:.2} %, surface reconstructed {:.1} %",
+            "depth RMSE {:.3} mm, NRMSE {}, surface reconstructed {:.1} %",
             e.rmse_mm,
-            100.0 * e.nrmse,
+            e.nrmse.map_or_else(
+                || "n/a (flat truth)".to_string(),
+                |n| format!("{:.2} %", 100.0 * n)
+            ),
             100.0 * e.reconstructed_fraction
         );
     }
