@@ -70,7 +70,7 @@ pub enum Effect {
     Start,
     /// Stop playing (LEDs off).
     Stop,
-    /// Blink all LEDs for `seconds` (0 = end a blink), then call
+    /// Blink the identify indicator for `seconds` (0 = end a blink), then call
     /// [`Luminaire::notify_identify_finished`].
     Identify {
         /// Blink duration.

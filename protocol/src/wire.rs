@@ -226,7 +226,8 @@ command_table! {
     Stop(()) -> Result<(), CommandError>;
     /// Runtime state and link counters.
     GetStatus(()) -> Status;
-    /// Blink all LEDs for the given number of seconds (0 ends a blink early).
+    /// Blink the identify indicator for the given number of seconds (0 ends a blink early); the
+    /// Black Pill firmware blinks its board LED (PC13), the virtual luminaire every output.
     Identify(u8) -> Result<(), CommandError>;
 }
 

@@ -51,7 +51,8 @@ enum DeviceAction {
     Start,
     /// Stop playing the carriers (LEDs off).
     Stop,
-    /// Blink all LEDs to find the luminaire (0 s ends a blink).
+    /// Blink to find the luminaire: the board LED (PC13) on a Black Pill, every output on the
+    /// virtual luminaire (0 s ends a blink).
     Identify {
         /// Blink duration in seconds (≤ 60).
         #[arg(long, default_value_t = 5)]
