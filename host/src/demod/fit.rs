@@ -11,6 +11,7 @@
 
 use super::basis::TemplateBasis;
 use super::waveform::{ReceivedWaveform, Timing};
+use rayon::prelude::*;
 
 /// What the fit may vary.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -83,14 +84,59 @@ fn explained(
     (explained, coefficients)
 }
 
+/// Variance of `signal` explained by the joint least-squares model (what [`explained`]
+/// returns first), without allocating: modified Gram–Schmidt of the centred templates in
+/// `work` (resized to K·F), summing the squared projections of the signal.
+fn explained_variance(
+    waves: &[ReceivedWaveform],
+    timing: Timing,
+    shifts: &[f64],
+    signal: &[f64],
+    work: &mut Vec<f64>,
+) -> f64 {
+    let f = signal.len();
+    work.resize(waves.len() * f, 0.0);
+    let mut total = 0.0;
+    for (k, (wave, &shift)) in waves.iter().zip(shifts).enumerate() {
+        let (done, rest) = work.split_at_mut(k * f);
+        let Some(v) = rest.get_mut(..f) else {
+            return total;
+        };
+        timing.fill_template(wave, shift, v);
+        let scale = v.iter().map(|x| x * x).sum::<f64>().sqrt().max(1e-300);
+        // Orthogonal to the constant column: subtract the mean.
+        let mean = v.iter().sum::<f64>() / f.max(1) as f64;
+        v.iter_mut().for_each(|x| *x -= mean);
+        for q in done.chunks_exact(f) {
+            let d: f64 = q.iter().zip(v.iter()).map(|(a, b)| a * b).sum();
+            v.iter_mut().zip(q).for_each(|(x, y)| *x -= d * y);
+        }
+        let norm = v.iter().map(|x| x * x).sum::<f64>().sqrt();
+        if norm > 1e-7 * scale {
+            v.iter_mut().for_each(|x| *x /= norm);
+            let d: f64 = v.iter().zip(signal).map(|(a, b)| a * b).sum();
+            total += d * d;
+        } else {
+            v.iter_mut().for_each(|x| *x = 0.0);
+        }
+    }
+    total
+}
+
 /// Score of one LED alone: squared correlation of its centred template with the centred signal.
-fn led_score(wave: &ReceivedWaveform, timing: Timing, shift: f64, centred: &[f64]) -> f64 {
+fn led_score(
+    wave: &ReceivedWaveform,
+    timing: Timing,
+    shift: f64,
+    centred: &[f64],
+    template: &mut [f64],
+) -> f64 {
     let f = centred.len();
+    timing.fill_template(wave, shift, template);
     let mut sum = 0.0;
     let mut template_sum = 0.0;
     let mut template_sq = 0.0;
-    for (j, &m) in centred.iter().enumerate() {
-        let t = timing.template(wave, shift, j);
+    for (&t, &m) in template.iter().zip(centred) {
         sum += t * m;
         template_sum += t;
         template_sq += t * t;
@@ -103,40 +149,102 @@ fn led_score(wave: &ReceivedWaveform, timing: Timing, shift: f64, centred: &[f64
     }
 }
 
-/// Best shift of one LED on a grid of `steps` per chip.
+/// Best shift of one LED on a grid of `steps` per chip. Only the first half period is
+/// searched: a half-period shift negates every MEB carrier (s[m + P/2] = −s[m], SPEC §2), which
+/// leaves the squared correlation unchanged; [`finish`] picks the sign.
 fn best_shift(
     wave: &ReceivedWaveform,
     timing: Timing,
     centred: &[f64],
     steps: usize,
 ) -> (f64, f64) {
-    let count = wave.period() * steps;
-    (0..count)
-        .map(|k| {
-            let shift = k as f64 / steps as f64;
-            (shift, led_score(wave, timing, shift, centred))
-        })
-        .fold((0.0, f64::NEG_INFINITY), |best, cand| {
-            if cand.1 > best.1 { cand } else { best }
-        })
+    best_shift_in(
+        wave,
+        timing,
+        centred,
+        steps,
+        0..(wave.period() / 2 * steps) as i64,
+    )
 }
 
-/// Sum over LEDs of each LED's best grid score, and the shifts.
+/// Best shift `k / steps` for k in `grid` (the first on ties).
+fn best_shift_in(
+    wave: &ReceivedWaveform,
+    timing: Timing,
+    centred: &[f64],
+    steps: usize,
+    grid: std::ops::Range<i64>,
+) -> (f64, f64) {
+    let mut template = vec![0.0; centred.len()];
+    grid.map(|k| {
+        let shift = k as f64 / steps as f64;
+        (
+            shift,
+            led_score(wave, timing, shift, centred, &mut template),
+        )
+    })
+    .fold((0.0, f64::NEG_INFINITY), |best, cand| {
+        if cand.1 > best.1 { cand } else { best }
+    })
+}
+
+/// Sum over LEDs of each LED's best grid score, and the shifts: over the whole half period,
+/// or within [`NEAR_CHIPS`] of `near[i]`.
 fn grid_score(
     waves: &[ReceivedWaveform],
     timing: Timing,
     centred: &[f64],
     steps: usize,
+    near: Option<&[f64]>,
 ) -> (f64, Vec<f64>) {
     let mut total = 0.0;
     let mut shifts = Vec::with_capacity(waves.len());
-    for wave in waves {
-        let (shift, score) = best_shift(wave, timing, centred, steps);
+    for (i, wave) in waves.iter().enumerate() {
+        let (shift, score) = match near.and_then(|n| n.get(i)) {
+            Some(&centre) => {
+                let k = (centre * steps as f64).round() as i64;
+                let reach = (NEAR_CHIPS * steps as f64).ceil() as i64;
+                best_shift_in(wave, timing, centred, steps, k - reach..k + reach + 1)
+            }
+            None => best_shift(wave, timing, centred, steps),
+        };
         total += score;
         shifts.push(shift);
     }
     (total, shifts)
 }
+
+/// The candidate timing with the highest grid score (the first on ties), with its shifts;
+/// candidates are scored in parallel.
+fn best_timing(
+    waves: &[ReceivedWaveform],
+    candidates: &[(Timing, Option<Vec<f64>>)],
+    centred: &[f64],
+    steps: usize,
+) -> Option<(Timing, Vec<f64>, f64)> {
+    let scored: Vec<(f64, Vec<f64>)> = candidates
+        .par_iter()
+        .map(|(timing, near)| grid_score(waves, *timing, centred, steps, near.as_deref()))
+        .collect();
+    let mut best: Option<(usize, f64)> = None;
+    for (index, (score, _)) in scored.iter().enumerate() {
+        if best.is_none_or(|(_, b)| *score > b) {
+            best = Some((index, *score));
+        }
+    }
+    best.and_then(|(index, score)| {
+        let (_, shifts) = scored.into_iter().nth(index)?;
+        Some((candidates.get(index)?.0, shifts, score))
+    })
+}
+
+/// Relative gain in explained variance a candidate must bring to be taken: below it, a move
+/// only chases rounding (at full exposure with whole-chip shifts the exposure is unobservable
+/// and its objective is flat, so ties go to the earlier candidate: the full exposure).
+const MIN_GAIN: f64 = 1e-9;
+
+/// Half-width, in chips, of the shift search at the shorter exposures of the coarse grid.
+const NEAR_CHIPS: f64 = 1.0;
 
 /// Fits timing and per-LED shifts of `leds` LEDs to the mean signal (one value per frame).
 pub fn fit_waveforms(mean: &[f64], leds: usize, limits: &FitLimits) -> WaveformFit {
@@ -148,45 +256,54 @@ pub fn fit_waveforms(mean: &[f64], leds: usize, limits: &FitLimits) -> WaveformF
 
     // Coarse rate ratio with full exposure.
     let mut rate = limits.rate_ratio.unwrap_or(1.0);
+    let exposure = limits.exposure.unwrap_or(1.0);
     if limits.rate_ratio.is_none() {
         let steps = ((limits.max_rate_mismatch / rate_step).ceil() as i64).min(400);
-        let mut best = f64::NEG_INFINITY;
-        for k in -steps..=steps {
-            let candidate = 1.0 + k as f64 * rate_step;
-            let timing = Timing {
-                rate_ratio: candidate,
-                exposure: limits.exposure.unwrap_or(1.0),
-            };
-            let (score, _) = grid_score(&waves, timing, &centred, 2);
-            if score > best {
-                best = score;
-                rate = candidate;
-            }
+        let candidates: Vec<(Timing, Option<Vec<f64>>)> = (-steps..=steps)
+            .map(|k| {
+                let timing = Timing {
+                    rate_ratio: 1.0 + k as f64 * rate_step,
+                    exposure,
+                };
+                (timing, None)
+            })
+            .collect();
+        if let Some((best, _, _)) = best_timing(&waves, &candidates, &centred, 2) {
+            rate = best.rate_ratio;
         }
     }
     // Coarse exposure.
     let mut timing = Timing {
         rate_ratio: rate,
-        exposure: limits.exposure.unwrap_or(1.0),
+        exposure,
     };
-    let (mut best_score, mut shifts) = grid_score(&waves, timing, &centred, 4);
+    let (best_score, mut shifts) = grid_score(&waves, timing, &centred, 4, None);
     if limits.exposure.is_none() {
-        for k in 1..10 {
-            let candidate = Timing {
-                exposure: k as f64 * 0.1,
-                ..timing
-            };
-            let (score, candidate_shifts) = grid_score(&waves, candidate, &centred, 4);
-            if score > best_score {
-                best_score = score;
-                shifts = candidate_shifts;
-                timing = candidate;
-            }
+        // A shorter exposure keeps the window centred where the full one was: Δ moves by
+        // (e₀ − e)·ρ/2, so each LED is searched near that shift only.
+        let candidates: Vec<(Timing, Option<Vec<f64>>)> = (1..10)
+            .map(|k| {
+                let candidate = Timing {
+                    exposure: k as f64 * 0.1,
+                    ..timing
+                };
+                let offset = (timing.exposure - candidate.exposure) * rate / 2.0;
+                let near = shifts.iter().map(|s| s + offset).collect();
+                (candidate, Some(near))
+            })
+            .collect();
+        if let Some((candidate, candidate_shifts, score)) =
+            best_timing(&waves, &candidates, &centred, 4)
+            && score > best_score * (1.0 + MIN_GAIN)
+        {
+            shifts = candidate_shifts;
+            timing = candidate;
         }
     }
     backfit(&waves, timing, &mut shifts, mean);
     // Joint refinement by coordinate search with shrinking steps.
-    let (mut objective, _) = explained(&waves, timing, &shifts, mean);
+    let mut work = Vec::new();
+    let mut objective = explained_variance(&waves, timing, &shifts, mean, &mut work);
     let mut step_rate = if limits.rate_ratio.is_none() {
         rate_step
     } else {
@@ -221,8 +338,14 @@ pub fn fit_waveforms(mean: &[f64], leds: usize, limits: &FitLimits) -> WaveformF
                     p if p >= 2 => candidate_shifts[p - 2] += sign * step_shift,
                     _ => continue,
                 }
-                let (value, _) = explained(&waves, candidate_timing, &candidate_shifts, mean);
-                if value > objective * (1.0 + 1e-12) {
+                let value = explained_variance(
+                    &waves,
+                    candidate_timing,
+                    &candidate_shifts,
+                    mean,
+                    &mut work,
+                );
+                if value > objective * (1.0 + MIN_GAIN) {
                     objective = value;
                     timing = candidate_timing;
                     shifts = candidate_shifts;
@@ -272,7 +395,8 @@ fn backfit(waves: &[ReceivedWaveform], timing: Timing, shifts: &mut [f64], mean:
 pub fn refit_shifts(mean: &[f64], timing: Timing, start: &[f64]) -> WaveformFit {
     let waves: Vec<ReceivedWaveform> = (0..start.len()).map(ReceivedWaveform::new).collect();
     let mut shifts = start.to_vec();
-    let (mut objective, _) = explained(&waves, timing, &shifts, mean);
+    let mut work = Vec::new();
+    let mut objective = explained_variance(&waves, timing, &shifts, mean, &mut work);
     let mut step = 0.25;
     while step >= 1e-4 {
         let mut improved = false;
@@ -280,8 +404,8 @@ pub fn refit_shifts(mean: &[f64], timing: Timing, start: &[f64]) -> WaveformFit 
             for sign in [-1.0, 1.0] {
                 let mut candidate = shifts.clone();
                 candidate[led] += sign * step;
-                let (value, _) = explained(&waves, timing, &candidate, mean);
-                if value > objective * (1.0 + 1e-12) {
+                let value = explained_variance(&waves, timing, &candidate, mean, &mut work);
+                if value > objective * (1.0 + MIN_GAIN) {
                     objective = value;
                     shifts = candidate;
                     improved = true;

@@ -14,6 +14,8 @@ use rayon::prelude::*;
 
 /// Pixels accumulated together in registers.
 const TILE: usize = 8;
+/// Frames added to a tile per visit.
+const GROUP: usize = 4;
 
 /// Per-pixel results of one window.
 #[derive(Debug, Clone)]
@@ -27,7 +29,7 @@ pub struct WindowAmplitudes {
 }
 
 /// A sample type the kernel reads.
-trait Code: Copy + Send + Sync {
+trait Code: Copy + Send + Sync + Ord + Default {
     /// The code value.
     fn code(self) -> u16;
 }
@@ -120,7 +122,14 @@ fn dispatch<T: Code>(
     }
 }
 
-/// The kernel for K model columns: per-row planes, then one image per LED.
+/// One row's output slices.
+struct RowOutput<'a> {
+    leds: Vec<&'a mut [f32]>,
+    noise_variance: &'a mut [f32],
+    max_code: &'a mut [u16],
+}
+
+/// The kernel for K model columns: every row in parallel, written straight into the images.
 fn run<const K: usize, T: Code>(
     plan: &Plan<'_>,
     frames: &[&[T]],
@@ -128,6 +137,7 @@ fn run<const K: usize, T: Code>(
 ) -> WindowAmplitudes {
     let width = plan.region.roi.width;
     let height = plan.region.roi.height;
+    let pixels = width * height;
     // Q column per frame, one [f32; K] per frame and band.
     let weights: Vec<Vec<[f32; K]>> = plan
         .bases
@@ -144,127 +154,267 @@ fn run<const K: usize, T: Code>(
                 .collect()
         })
         .collect();
-    let mut planes = vec![0.0f32; height * K * width];
-    let mut max_code = vec![0u16; height * width];
-    planes
-        .par_chunks_mut(K * width)
-        .zip(max_code.par_chunks_mut(width))
-        .enumerate()
-        .for_each(|(row, (row_planes, row_max))| {
-            let band = plan.region.band_of(row);
-            let rows: Vec<&[T]> = frames
-                .iter()
-                .map(|f| f.get(row * width..(row + 1) * width).unwrap_or(&[]))
-                .collect();
-            let mut x = 0;
-            while x < width {
-                let len = TILE.min(width - x);
-                let sums = accumulate::<K, T>(&rows, &weights[band], x, len, value);
-                solve::<K>(
-                    plan,
-                    &plan.bases[band],
-                    &sums,
-                    x,
-                    len,
+    let solvers: Vec<[[f32; K]; K]> = plan
+        .bases
+        .iter()
+        .map(|basis| {
+            std::array::from_fn(|row| {
+                std::array::from_fn(|col| {
+                    (basis.r_inverse.get(row * K + col).copied().unwrap_or(0.0) * plan.scale) as f32
+                })
+            })
+        })
+        .collect();
+    let noise_factor = (plan.scale * plan.scale / plan.dof) as f32;
+    // Zeroed by the allocator (untouched pages), so the parallel rows fault them in.
+    let mut leds: Vec<Vec<f32>> = (0..K - 1).map(|_| vec![0.0f32; pixels]).collect();
+    let mut noise_variance = vec![0.0f32; pixels];
+    let mut max_code = vec![0u16; pixels];
+    {
+        let mut led_rows: Vec<_> = leds.iter_mut().map(|p| p.chunks_mut(width)).collect();
+        let rows: Vec<RowOutput<'_>> = noise_variance
+            .chunks_mut(width)
+            .zip(max_code.chunks_mut(width))
+            .map(|(noise_variance, max_code)| RowOutput {
+                leds: led_rows.iter_mut().filter_map(Iterator::next).collect(),
+                noise_variance,
+                max_code,
+            })
+            .collect();
+        let simd = simd_available();
+        rows.into_par_iter()
+            .enumerate()
+            .for_each_init(Vec::new, |tiles, (row, mut out)| {
+                let band = plan.region.band_of(row);
+                let samples: Vec<&[T]> = frames
+                    .iter()
+                    .map(|f| f.get(row * width..(row + 1) * width).unwrap_or(&[]))
+                    .collect();
+                let job = RowJob {
+                    solver: &solvers[band],
+                    noise_factor,
+                    weights: &weights[band],
+                    samples: &samples,
                     width,
-                    row_planes,
-                    row_max,
-                );
-                x += len;
-            }
-        });
-    let plane = |i: usize| -> Vec<f32> {
-        planes
-            .chunks(K * width)
-            .flat_map(|row| row[i * width..(i + 1) * width].iter().copied())
-            .collect()
-    };
+                };
+                run_row::<K, T, _>(simd, &job, value, &mut out, tiles);
+            });
+    }
     WindowAmplitudes {
-        leds: (0..K - 1).map(plane).collect(),
-        noise_variance: plane(K - 1),
+        leds,
+        noise_variance,
         max_code,
     }
 }
 
-/// Sums of one tile: projections, squares and maximum code per pixel.
-struct TileSums<const K: usize> {
-    projections: [[f32; TILE]; K],
-    squares: [f32; TILE],
-    max_code: [u16; TILE],
+/// Inputs of one row.
+struct RowJob<'a, const K: usize, T> {
+    /// R⁻¹ of the row's band, times the code-to-fraction scale.
+    solver: &'a [[f32; K]; K],
+    /// From residual energy to per-frame variance in fraction²: scale² / (F − K).
+    noise_factor: f32,
+    weights: &'a [[f32; K]],
+    samples: &'a [&'a [T]],
+    width: usize,
 }
 
-/// Streams the frames over the tile of `len` pixels starting at column `x`.
+/// Whether the CPU runs the AVX2 + FMA build of the row kernel.
+fn simd_available() -> bool {
+    #[cfg(target_arch = "x86_64")]
+    {
+        std::arch::is_x86_feature_detected!("avx2") && std::arch::is_x86_feature_detected!("fma")
+    }
+    #[cfg(not(target_arch = "x86_64"))]
+    {
+        false
+    }
+}
+
+/// Runs one row with the widest kernel the CPU supports.
+fn run_row<const K: usize, T: Code, V: Fn(T) -> f32 + Copy>(
+    simd: bool,
+    job: &RowJob<'_, K, T>,
+    value: V,
+    out: &mut RowOutput<'_>,
+    tiles: &mut Vec<TileSums<K, T>>,
+) {
+    #[cfg(target_arch = "x86_64")]
+    if simd {
+        // SAFETY: `simd_available` checked that this CPU has AVX2 and FMA.
+        unsafe { row_avx2::<K, T, V>(job, value, out, tiles) };
+        return;
+    }
+    let _ = simd;
+    row_kernel::<K, false, T, V>(job, value, out, tiles);
+}
+
+/// The row kernel compiled for AVX2 + FMA (8 f32 lanes per tile, fused multiply-adds).
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx2,fma")]
+fn row_avx2<const K: usize, T: Code, V: Fn(T) -> f32 + Copy>(
+    job: &RowJob<'_, K, T>,
+    value: V,
+    out: &mut RowOutput<'_>,
+    tiles: &mut Vec<TileSums<K, T>>,
+) {
+    row_kernel::<K, true, T, V>(job, value, out, tiles);
+}
+
+/// The row's tiles of [`TILE`] pixels stream over the frames [`GROUP`] at a time: each
+/// group reads a few contiguous runs of the row (prefetcher-friendly), while every tile's
+/// running sums are loaded into registers once per group. Then every tile is solved.
+#[inline(always)]
+fn row_kernel<const K: usize, const FMA: bool, T: Code, V: Fn(T) -> f32 + Copy>(
+    job: &RowJob<'_, K, T>,
+    value: V,
+    out: &mut RowOutput<'_>,
+    tiles: &mut Vec<TileSums<K, T>>,
+) {
+    let count = job.width.div_ceil(TILE);
+    tiles.clear();
+    tiles.resize(count, TileSums::default());
+    let mut groups = job
+        .samples
+        .chunks_exact(GROUP)
+        .zip(job.weights.chunks_exact(GROUP));
+    for (rows, weights) in groups.by_ref() {
+        add_frames::<K, GROUP, FMA, T, V>(tiles, rows, weights, job.width, value);
+    }
+    let rest = job.samples.len() - job.samples.len() % GROUP;
+    for (row, weight) in job.samples[rest..]
+        .chunks(1)
+        .zip(job.weights[rest..].chunks(1))
+    {
+        add_frames::<K, 1, FMA, T, V>(tiles, row, weight, job.width, value);
+    }
+    for (t, sums) in tiles.iter().enumerate() {
+        let x = t * TILE;
+        solve::<K, T>(job, sums, x, TILE.min(job.width - x), out);
+    }
+}
+
+/// Running sums of one tile: projections, squares and maximum code per pixel (kept in the
+/// sample type so that the maximum vectorises).
+#[derive(Clone, Copy)]
+struct TileSums<const K: usize, T> {
+    projections: [[f32; TILE]; K],
+    squares: [f32; TILE],
+    max_code: [T; TILE],
+}
+
+impl<const K: usize, T: Code> Default for TileSums<K, T> {
+    fn default() -> Self {
+        Self {
+            projections: [[0.0; TILE]; K],
+            squares: [0.0; TILE],
+            max_code: [T::default(); TILE],
+        }
+    }
+}
+
+/// `acc + a·b`, fused when the kernel is built for FMA.
+#[inline(always)]
+fn multiply_add<const FMA: bool>(a: f32, b: f32, acc: f32) -> f32 {
+    if FMA { a.mul_add(b, acc) } else { acc + a * b }
+}
+
+/// Adds `G` frames (`rows[f]`, weights `weights[f]`) to every tile of the row.
 #[allow(clippy::needless_range_loop)] // indexed lanes keep the tile in registers
 #[inline(always)]
-fn accumulate<const K: usize, T: Code>(
+fn add_frames<const K: usize, const G: usize, const FMA: bool, T: Code, V: Fn(T) -> f32>(
+    tiles: &mut [TileSums<K, T>],
     rows: &[&[T]],
     weights: &[[f32; K]],
+    width: usize,
+    value: V,
+) {
+    let Some(rows) = rows.get(..G) else { return };
+    let Some(weights) = weights.get(..G) else {
+        return;
+    };
+    for (t, tile) in tiles.iter_mut().enumerate() {
+        let x = t * TILE;
+        let len = TILE.min(width - x);
+        let mut sums = *tile;
+        for (row, w) in rows.iter().zip(weights) {
+            let mut v = [0.0f32; TILE];
+            if let Some(samples) = row.get(x..x + TILE)
+                && let Ok(samples) = <[T; TILE]>::try_from(samples)
+                && len == TILE
+            {
+                for l in 0..TILE {
+                    v[l] = value(samples[l]);
+                    sums.max_code[l] = sums.max_code[l].max(samples[l]);
+                }
+            } else {
+                for l in 0..len {
+                    if let Some(&c) = row.get(x + l) {
+                        v[l] = value(c);
+                        sums.max_code[l] = sums.max_code[l].max(c);
+                    }
+                }
+            }
+            for c in 0..K {
+                for l in 0..TILE {
+                    sums.projections[c][l] =
+                        multiply_add::<FMA>(w[c], v[l], sums.projections[c][l]);
+                }
+            }
+            for l in 0..TILE {
+                sums.squares[l] = multiply_add::<FMA>(v[l], v[l], sums.squares[l]);
+            }
+        }
+        *tile = sums;
+    }
+}
+
+/// Solves the tile's least-squares systems, 8 lanes at a time in f32, and writes the
+/// coefficients, noise variances and maxima.
+#[allow(clippy::needless_range_loop)] // indexed lanes vectorise
+#[inline(always)]
+fn solve<const K: usize, T: Code>(
+    job: &RowJob<'_, K, T>,
+    sums: &TileSums<K, T>,
     x: usize,
     len: usize,
-    value: impl Fn(T) -> f32,
-) -> TileSums<K> {
-    let mut sums = TileSums {
-        projections: [[0.0f32; TILE]; K],
-        squares: [0.0f32; TILE],
-        max_code: [0u16; TILE],
-    };
-    for (row, w) in rows.iter().zip(weights) {
-        let mut v = [0.0f32; TILE];
-        if len == TILE
-            && let Some(tile) = row.get(x..x + TILE)
-        {
-            for l in 0..TILE {
-                v[l] = value(tile[l]);
-                sums.max_code[l] = sums.max_code[l].max(tile[l].code());
-            }
-        } else {
-            for l in 0..len {
-                if let Some(&c) = row.get(x + l) {
-                    v[l] = value(c);
-                    sums.max_code[l] = sums.max_code[l].max(c.code());
+    out: &mut RowOutput<'_>,
+) {
+    let mut explained = [0.0f32; TILE];
+    for c in 0..K {
+        for l in 0..TILE {
+            explained[l] += sums.projections[c][l] * sums.projections[c][l];
+        }
+    }
+    let mut noise = [0.0f32; TILE];
+    for l in 0..TILE {
+        noise[l] = (sums.squares[l] - explained[l]).max(0.0) * job.noise_factor;
+    }
+    let mut max_code = [0u16; TILE];
+    for l in 0..TILE {
+        max_code[l] = sums.max_code[l].code();
+    }
+    for (i, image) in out.leds.iter_mut().enumerate() {
+        // Coefficient i + 1 (column 0 is the background): row i + 1 of R⁻¹ times Q·r.
+        let mut coefficient = [0.0f32; TILE];
+        if let Some(row) = job.solver.get(i + 1) {
+            for c in i + 1..K {
+                for l in 0..TILE {
+                    coefficient[l] += row[c] * sums.projections[c][l];
                 }
             }
         }
-        for c in 0..K {
-            for l in 0..TILE {
-                sums.projections[c][l] += w[c] * v[l];
-            }
-        }
-        for l in 0..TILE {
-            sums.squares[l] += v[l] * v[l];
-        }
+        write_lanes(image, x, len, &coefficient);
     }
-    sums
+    write_lanes(out.noise_variance, x, len, &noise);
+    write_lanes(out.max_code, x, len, &max_code);
 }
 
-/// Solves the tile's least-squares systems and writes coefficients, noise and maxima.
-#[allow(clippy::too_many_arguments, clippy::needless_range_loop)]
+/// Writes the first `len` lanes to `target[x..]`.
 #[inline(always)]
-fn solve<const K: usize>(
-    plan: &Plan<'_>,
-    basis: &TemplateBasis,
-    sums: &TileSums<K>,
-    x: usize,
-    len: usize,
-    width: usize,
-    row_planes: &mut [f32],
-    row_max: &mut [u16],
-) {
-    let mut projections = [0.0f64; K];
-    let mut coefficients = [0.0f64; K];
-    for l in 0..len {
-        let mut explained = 0.0;
-        for (c, p) in projections.iter_mut().enumerate() {
-            *p = f64::from(sums.projections[c][l]);
-            explained += *p * *p;
-        }
-        basis.coefficients(&projections, &mut coefficients);
-        let residual = (f64::from(sums.squares[l]) - explained).max(0.0);
-        let col = x + l;
-        for i in 0..K - 1 {
-            row_planes[i * width + col] = (coefficients[i + 1] * plan.scale) as f32;
-        }
-        row_planes[(K - 1) * width + col] = (residual / plan.dof * plan.scale * plan.scale) as f32;
-        row_max[col] = sums.max_code[l];
+fn write_lanes<U: Copy>(target: &mut [U], x: usize, len: usize, lanes: &[U; TILE]) {
+    if let Some(slot) = target.get_mut(x..x + len)
+        && let Some(values) = lanes.get(..len)
+    {
+        slot.copy_from_slice(values);
     }
 }

@@ -37,6 +37,7 @@ use basis::TemplateBasis;
 use fit::{FitLimits, WaveformFit, fit_waveforms, refit_shifts, template_columns};
 use matched::WindowAmplitudes;
 use ndarray::Array2;
+use rayon::prelude::*;
 use waveform::ReceivedWaveform;
 use window::{CodeMap, Region, read_window};
 
@@ -46,6 +47,8 @@ pub const MAX_LEDS: usize = 8;
 const AUTO_MAX_LEDS: usize = 6;
 /// Largest decoding window, frames (bounds the cost of the waveform fit).
 const MAX_WINDOW_FRAMES: usize = 256;
+/// Largest number of pixels the reported median noise is computed from.
+const MEDIAN_SAMPLE: usize = 1 << 16;
 /// An LED is modulated when its scene-mean on-level exceeds this fraction of the strongest.
 const SIGNIFICANT_FRACTION: f64 = 0.03;
 /// … and this fraction of full scale.
@@ -160,7 +163,7 @@ pub fn decode(
             break;
         }
     }
-    finish(config, &format, region, &map, state)
+    finish(config, &format, region, state)
 }
 
 /// LED count named by the config (for errors before detection).
@@ -302,8 +305,10 @@ struct Accumulated {
     probe_fit: Option<WaveformFit>,
     windows: usize,
     frames: usize,
-    weighted_leds: Vec<Vec<f64>>,
-    weighted_variance: Vec<f64>,
+    /// Frame-weighted mean over the windows so far of each LED's A_i.
+    mean_leds: Vec<Vec<f32>>,
+    /// Frame-weighted mean of the per-frame noise variance.
+    mean_variance: Vec<f32>,
     max_code: Vec<u16>,
     fits: Vec<WaveformFit>,
     variance_factors: Vec<f64>,
@@ -346,29 +351,29 @@ fn decode_window(
             thesis::thesis_window(&window.frames[..used], region, leds, map)
         }
     };
-    let weight = frames as f64;
-    let pixels = region.roi.width * region.roi.height;
     if state.windows == 0 {
-        state.weighted_leds = vec![vec![0.0; pixels]; leds];
-        state.weighted_variance = vec![0.0; pixels];
-        state.max_code = vec![0; pixels];
         state.variance_factors = (0..leds).map(|i| bases[0].variance_factor(i + 1)).collect();
+        state.mean_leds = amplitudes.leds;
+        state.mean_variance = amplitudes.noise_variance;
+        state.max_code = amplitudes.max_code;
+    } else {
+        // Running frame-weighted means: m += (x − m)·F / (F_total + F).
+        let step = (frames as f64 / (state.frames + frames) as f64) as f32;
+        let update = |mean: &mut Vec<f32>, window: &[f32]| {
+            mean.par_iter_mut()
+                .zip(window)
+                .for_each(|(m, &x)| *m += (x - *m) * step);
+        };
+        for (mean, image) in state.mean_leds.iter_mut().zip(&amplitudes.leds) {
+            update(mean, image);
+        }
+        update(&mut state.mean_variance, &amplitudes.noise_variance);
+        state
+            .max_code
+            .par_iter_mut()
+            .zip(&amplitudes.max_code)
+            .for_each(|(m, &c)| *m = (*m).max(c));
     }
-    for (sum, image) in state.weighted_leds.iter_mut().zip(&amplitudes.leds) {
-        sum.iter_mut()
-            .zip(image)
-            .for_each(|(s, &a)| *s += weight * f64::from(a));
-    }
-    state
-        .weighted_variance
-        .iter_mut()
-        .zip(&amplitudes.noise_variance)
-        .for_each(|(s, &v)| *s += weight * f64::from(v));
-    state
-        .max_code
-        .iter_mut()
-        .zip(&amplitudes.max_code)
-        .for_each(|(m, &c)| *m = (*m).max(c));
     state.windows += 1;
     state.frames += frames;
     state.fits.push(global);
@@ -379,7 +384,6 @@ fn finish(
     config: &DecodeConfig,
     format: &FrameFormat,
     region: Region,
-    map: &CodeMap,
     state: Accumulated,
 ) -> Result<Decoded, DemodError> {
     let (height, width) = (region.roi.height, region.roi.width);
@@ -391,86 +395,59 @@ fn finish(
             leds: leds.max(1),
         });
     }
-    let total = state.frames as f64;
-    fn image<T>(shape: (usize, usize), values: Vec<T>) -> Result<Array2<T>, ndarray::ShapeError> {
-        Array2::from_shape_vec(shape, values)
-    }
-    let to_image_f = |values: Vec<f32>| image((height, width), values);
-    let to_image_b = |values: Vec<bool>| image((height, width), values);
-    let shape_error = |e: ndarray::ShapeError| DemodError::InvalidConfig(e.to_string());
-    let mut images = Vec::with_capacity(leds);
-    for sum in &state.weighted_leds {
-        images.push(
-            to_image_f(sum.iter().map(|s| (s / total) as f32).collect()).map_err(shape_error)?,
-        );
-    }
-    let noise = to_image_f(
-        state
-            .weighted_variance
-            .iter()
-            .map(|v| ((v / total).max(0.0)).sqrt() as f32)
-            .collect(),
-    )
-    .map_err(shape_error)?;
     let white_code = format.white_level - 0.5;
-    let saturated = to_image_b(
-        state
-            .max_code
-            .iter()
-            .map(|&c| f32::from(c) >= white_code)
-            .collect(),
-    )
-    .map_err(shape_error)?;
-    let underexposed = to_image_b(
-        state
-            .max_code
-            .iter()
-            .map(|&c| format.to_fraction(f32::from(c)) < config.underexposed_below)
-            .collect(),
-    )
-    .map_err(shape_error)?;
-    let _ = map;
-    let valid: Vec<usize> = (0..height * width)
-        .filter(|&p| !saturated.as_slice().is_some_and(|s| s[p]))
-        .filter(|&p| !underexposed.as_slice().is_some_and(|s| s[p]))
+    let dark_code = underexposed_code(format, config.underexposed_below);
+    let saturated: Vec<bool> = state
+        .max_code
+        .par_iter()
+        .map(|&c| f32::from(c) >= white_code)
         .collect();
-    let saturated_pixels = saturated.iter().filter(|&&s| s).count();
-    let underexposed_pixels = underexposed.iter().filter(|&&s| s).count();
-    if valid.is_empty() {
+    let underexposed: Vec<bool> = state
+        .max_code
+        .par_iter()
+        .map(|&c| f32::from(c) < dark_code)
+        .collect();
+    let mut noise_values = state.mean_variance;
+    noise_values
+        .par_iter_mut()
+        .for_each(|v| *v = v.max(0.0).sqrt());
+    let valid = |p: usize| !saturated[p] && !underexposed[p];
+    let stats = PixelStats::gather(&state.mean_leds, &noise_values, &saturated, &underexposed);
+    if stats.valid_pixels == 0 {
         return Err(DemodError::NothingToDecode(
-            if saturated_pixels >= underexposed_pixels {
+            if stats.saturated_pixels >= stats.underexposed_pixels {
                 "saturated"
             } else {
                 "under-exposed"
             },
         ));
     }
-    let noise_values = noise.as_slice().unwrap_or(&[]);
-    let mut sorted: Vec<f32> = valid.iter().map(|&p| noise_values[p]).collect();
-    let middle = sorted.len() / 2;
-    let median_noise = f64::from(*sorted.select_nth_unstable_by(middle, f32::total_cmp).1);
-    let noise_power: f64 = valid
-        .iter()
-        .map(|&p| f64::from(noise_values[p]).powi(2))
-        .sum::<f64>()
-        / valid.len() as f64;
-    let first = &state.fits[0];
+    let valid_count = stats.valid_pixels as f64;
+    let noise_power = stats.noise_power / valid_count;
+    let median_noise = median_of_valid(&noise_values, stats.valid_pixels, valid);
     let per_led = (0..leds)
         .map(|i| {
-            let values = images[i].as_slice().unwrap_or(&[]);
-            let mean_level =
-                valid.iter().map(|&p| f64::from(values[p])).sum::<f64>() / valid.len() as f64;
+            let mean_level = stats.level_sums[i] / valid_count;
             let amplitude_noise =
-                (noise_power * state.variance_factors[i] * state.frames as f64 / total).sqrt()
-                    / (state.windows as f64).sqrt();
+                (noise_power * state.variance_factors[i]).sqrt() / (state.windows as f64).sqrt();
             LedReport {
                 led: i + 1,
-                phase_chips: first.shifts[i],
+                phase_chips: state.fits[0].shifts[i],
                 mean_level,
                 snr_db: 20.0 * (mean_level.abs().max(1e-12) / amplitude_noise.max(1e-12)).log10(),
             }
         })
         .collect();
+    let shape_error = |e: ndarray::ShapeError| DemodError::InvalidConfig(e.to_string());
+    let images = state
+        .mean_leds
+        .into_iter()
+        .map(|values| Array2::from_shape_vec((height, width), values).map_err(shape_error))
+        .collect::<Result<Vec<_>, _>>()?;
+    let noise = Array2::from_shape_vec((height, width), noise_values).map_err(shape_error)?;
+    let saturated = Array2::from_shape_vec((height, width), saturated).map_err(shape_error)?;
+    let underexposed =
+        Array2::from_shape_vec((height, width), underexposed).map_err(shape_error)?;
     let n_fits = state.fits.len() as f64;
     let rate_ratio = state.fits.iter().map(|f| f.timing.rate_ratio).sum::<f64>() / n_fits;
     let report = DecodeReport {
@@ -487,8 +464,8 @@ fn finish(
         exposure: state.fits.iter().map(|f| f.timing.exposure).sum::<f64>() / n_fits,
         fit_residual: state.fits.iter().map(|f| f.residual_rms).sum::<f64>() / n_fits,
         median_noise,
-        saturated_pixels,
-        underexposed_pixels,
+        saturated_pixels: stats.saturated_pixels,
+        underexposed_pixels: stats.underexposed_pixels,
         per_led,
     };
     Ok(Decoded {
@@ -498,6 +475,89 @@ fn finish(
         underexposed,
         report,
     })
+}
+
+/// Sums over the decodable pixels (neither saturated nor under-exposed) for the report.
+#[derive(Debug, Clone, Default)]
+struct PixelStats {
+    saturated_pixels: usize,
+    underexposed_pixels: usize,
+    valid_pixels: usize,
+    /// Σ σ² over valid pixels.
+    noise_power: f64,
+    /// Σ A_i over valid pixels, per LED.
+    level_sums: Vec<f64>,
+}
+
+impl PixelStats {
+    /// One parallel pass over the images.
+    fn gather(leds: &[Vec<f32>], noise: &[f32], saturated: &[bool], underexposed: &[bool]) -> Self {
+        const CHUNK: usize = 1 << 14;
+        let chunk = |start: usize| {
+            let end = (start + CHUNK).min(noise.len());
+            let mut stats = Self {
+                level_sums: vec![0.0; leds.len()],
+                ..Self::default()
+            };
+            for p in start..end {
+                stats.saturated_pixels += usize::from(saturated[p]);
+                stats.underexposed_pixels += usize::from(underexposed[p]);
+                if saturated[p] || underexposed[p] {
+                    continue;
+                }
+                stats.valid_pixels += 1;
+                stats.noise_power += f64::from(noise[p]) * f64::from(noise[p]);
+                for (sum, image) in stats.level_sums.iter_mut().zip(leds) {
+                    *sum += f64::from(image[p]);
+                }
+            }
+            stats
+        };
+        (0..noise.len())
+            .into_par_iter()
+            .step_by(CHUNK)
+            .map(chunk)
+            .reduce(
+                || Self {
+                    level_sums: vec![0.0; leds.len()],
+                    ..Self::default()
+                },
+                |mut a, b| {
+                    a.saturated_pixels += b.saturated_pixels;
+                    a.underexposed_pixels += b.underexposed_pixels;
+                    a.valid_pixels += b.valid_pixels;
+                    a.noise_power += b.noise_power;
+                    a.level_sums
+                        .iter_mut()
+                        .zip(&b.level_sums)
+                        .for_each(|(x, y)| *x += y);
+                    a
+                },
+            )
+    }
+}
+
+/// The code value below which a pixel's brightest frame counts as under-exposed.
+fn underexposed_code(format: &FrameFormat, below: f32) -> f32 {
+    (f64::from(format.black_level)
+        + f64::from(below) * f64::from(format.white_level - format.black_level)) as f32
+}
+
+/// Median of the valid pixels' values: exact up to [`MEDIAN_SAMPLE`] valid pixels, else the
+/// median of an evenly strided sample of that many (a report statistic, accurate to well
+/// under 1 % and independent of the image size).
+fn median_of_valid(values: &[f32], valid_pixels: usize, valid: impl Fn(usize) -> bool) -> f64 {
+    let stride = valid_pixels.div_ceil(MEDIAN_SAMPLE).max(1);
+    let mut sample: Vec<f32> = (0..values.len())
+        .filter(|&p| valid(p))
+        .step_by(stride)
+        .map(|p| values[p])
+        .collect();
+    if sample.is_empty() {
+        return f64::NAN;
+    }
+    let middle = sample.len() / 2;
+    f64::from(*sample.select_nth_unstable_by(middle, f32::total_cmp).1)
 }
 
 /// Bytes of a frame's samples (for memory budgeting by callers).

@@ -52,20 +52,37 @@ impl ReceivedWaveform {
         self.chips.len()
     }
 
-    /// The cumulative integral S(t) = ∫_0^t s(u) du (periodic).
-    fn integral(&self, t: f64) -> f64 {
-        let period = self.chips.len() as f64;
-        let u = t.rem_euclid(period);
-        let m = (u.floor() as usize).min(self.chips.len() - 1);
-        self.cumulative[m] + (u - m as f64) * self.chips[m]
+    /// Chip index (within one period) and fraction of the chip at chip time `t`: the floor
+    /// is taken with an integer cast because this sits in the waveform fit's innermost loop
+    /// (`f64::rem_euclid` and `floor` are library calls on the baseline x86-64 target).
+    #[inline]
+    fn locate(&self, t: f64) -> (usize, f64) {
+        let truncated = t as i64;
+        let floor = if (truncated as f64) > t {
+            truncated - 1
+        } else {
+            truncated
+        };
+        // The period is a power of two, so masking is the Euclidean remainder.
+        let chip = (floor & (self.chips.len() as i64 - 1)) as usize;
+        (chip, t - floor as f64)
+    }
+
+    /// The cumulative integral S(t) = ∫_0^t s(u) du (periodic: S(period) = 0), in chips.
+    #[inline]
+    pub fn integral(&self, t: f64) -> f64 {
+        let (m, fraction) = self.locate(t);
+        match (self.cumulative.get(m), self.chips.get(m)) {
+            (Some(c), Some(s)) => c + fraction * s,
+            _ => 0.0,
+        }
     }
 
     /// g(t): the carrier averaged over the window `[t, t + width]` (width > 0, in chips).
+    #[inline]
     pub fn average(&self, t: f64, width: f64) -> f64 {
         if width <= 1e-9 {
-            let period = self.chips.len() as f64;
-            let m = (t.rem_euclid(period).floor() as usize).min(self.chips.len() - 1);
-            return self.chips[m];
+            return self.chips.get(self.locate(t).0).copied().unwrap_or(0.0);
         }
         (self.integral(t + width) - self.integral(t)) / width
     }
@@ -83,11 +100,41 @@ pub struct Timing {
 impl Timing {
     /// Template value of an LED with shift `shift` (chips) at frame `frame`: g(j·ρ + Δ) / 2, so
     /// that its least-squares coefficient is the on-level A_i.
+    #[inline]
     pub fn template(&self, wave: &ReceivedWaveform, shift: f64, frame: usize) -> f64 {
         0.5 * wave.average(
             frame as f64 * self.rate_ratio + shift,
             self.exposure * self.rate_ratio,
         )
+    }
+}
+
+impl Timing {
+    /// Writes the template of frames `0..out.len()` (see [`Timing::template`]) into `out`.
+    /// At full exposure frame j's window ends where frame j + 1's starts, so each cumulative
+    /// integral serves two frames.
+    pub fn fill_template(&self, wave: &ReceivedWaveform, shift: f64, out: &mut [f64]) {
+        let rate = self.rate_ratio;
+        let width = self.exposure * rate;
+        if width <= 1e-9 {
+            for (j, v) in out.iter_mut().enumerate() {
+                *v = self.template(wave, shift, j);
+            }
+        } else if self.exposure == 1.0 {
+            let scale = 0.5 / width;
+            let mut start = wave.integral(shift);
+            for (j, v) in out.iter_mut().enumerate() {
+                let end = wave.integral((j + 1) as f64 * rate + shift);
+                *v = (end - start) * scale;
+                start = end;
+            }
+        } else {
+            let scale = 0.5 / width;
+            for (j, v) in out.iter_mut().enumerate() {
+                let t = j as f64 * rate + shift;
+                *v = (wave.integral(t + width) - wave.integral(t)) * scale;
+            }
+        }
     }
 }
 
@@ -106,6 +153,26 @@ mod tests {
             let expected = (1.0 - alpha) * s[(j + k) % 8] + alpha * s[(j + k + 1) % 8];
             let got = wave.average(j as f64 + k as f64 + alpha, 1.0);
             assert!((got - expected).abs() < 1e-12, "j={j}: {got} vs {expected}");
+        }
+    }
+
+    #[test]
+    fn filled_templates_match_pointwise_ones() {
+        for exposure in [1.0, 0.6, 0.0] {
+            let timing = Timing {
+                rate_ratio: 1.037,
+                exposure,
+            };
+            let wave = ReceivedWaveform::new(2);
+            let mut filled = vec![0.0; 40];
+            timing.fill_template(&wave, 3.3, &mut filled);
+            for (j, v) in filled.iter().enumerate() {
+                let expected = timing.template(&wave, 3.3, j);
+                assert!(
+                    (v - expected).abs() < 1e-9,
+                    "e={exposure} j={j}: {v} vs {expected}"
+                );
+            }
         }
     }
 

@@ -1,12 +1,13 @@
 //! Reading a window of frames: region of interest, code-value conversion, per-band means.
 //!
 //! Frames are kept in their native 8/16-bit form (a 128-frame 720p 8-bit window is 118 MB);
-//! the spatial mean of every row band is computed as each frame arrives, because the waveform
-//! fit ([`super::fit`]) needs it before the per-pixel pass.
+//! the spatial mean of every row band (frames in parallel) is computed once the window is
+//! read, because the waveform fit ([`super::fit`]) needs it before the per-pixel pass.
 
 use super::config::{Linearize, Roi};
 use super::error::DemodError;
 use crate::capture::{FrameFormat, FrameSource, Samples};
+use rayon::prelude::*;
 
 /// Maps code values to fractions of full scale (optionally linearised).
 #[derive(Debug, Clone)]
@@ -133,11 +134,6 @@ pub fn read_window(
         mean: Vec::with_capacity(count),
     };
     let roi = region.roi;
-    let mut band_sums = vec![0.0f64; region.bands];
-    let mut band_pixels = vec![0usize; region.bands];
-    for row in 0..roi.height {
-        band_pixels[region.band_of(row)] += roi.width;
-    }
     while window.frames.len() < count {
         let Some(frame) = source.next_frame()? else {
             break;
@@ -152,14 +148,27 @@ pub fn read_window(
             ))
             .into());
         }
-        let cropped = crop(frame.samples, format.width, roi);
-        band_sums.iter_mut().for_each(|s| *s = 0.0);
-        for row in 0..roi.height {
-            let band = region.band_of(row);
-            let range = row * roi.width..(row + 1) * roi.width;
-            let sum = row_sum(&cropped, range, map);
-            band_sums[band] += sum;
-        }
+        window.frames.push(crop(frame.samples, format.width, roi));
+        on_frame();
+    }
+    let mut band_pixels = vec![0usize; region.bands];
+    for row in 0..roi.height {
+        band_pixels[region.band_of(row)] += roi.width;
+    }
+    // Every frame's band sums, frames in parallel.
+    let sums: Vec<Vec<f64>> = window
+        .frames
+        .par_iter()
+        .map(|frame| {
+            let mut band_sums = vec![0.0f64; region.bands];
+            for row in 0..roi.height {
+                let range = row * roi.width..(row + 1) * roi.width;
+                band_sums[region.band_of(row)] += row_sum(frame, range, map);
+            }
+            band_sums
+        })
+        .collect();
+    for band_sums in &sums {
         for (band, means) in window.band_means.iter_mut().enumerate() {
             means.push(map.mean_fraction(band_sums[band] / band_pixels[band].max(1) as f64));
         }
@@ -167,8 +176,6 @@ pub fn read_window(
         window
             .mean
             .push(map.mean_fraction(total / (roi.width * roi.height).max(1) as f64));
-        window.frames.push(cropped);
-        on_frame();
     }
     Ok(window)
 }
