@@ -171,6 +171,25 @@ fn bench(c: &mut Criterion) {
         b.iter(|| black_box(naive(&rig, &images, &mask)))
     });
     group.finish();
+
+    // The two stages of "meb" separately.
+    let config = PhotometricConfig::default();
+    let ps = estimate_normals(&images, &lights, Some(&mask), None, &config).unwrap();
+    let mut stages = c.benchmark_group("stages 1280x720 sphere");
+    stages.sample_size(10);
+    stages.bench_function("photometric stereo", |b| {
+        b.iter(|| {
+            black_box(estimate_normals(&images, &lights, Some(&mask), None, &config).unwrap())
+        })
+    });
+    stages.bench_function("least-squares integration", |b| {
+        b.iter(|| {
+            black_box(
+                integrate_normals(&ps.field, pitch, &IntegrateConfig::default(), None).unwrap(),
+            )
+        })
+    });
+    stages.finish();
 }
 
 criterion_group!(benches, bench);
