@@ -2,10 +2,10 @@
 //!
 //! Normals become slopes ∂z/∂x = −n_x/n_z, ∂z/∂y = −n_y/n_z with y up (towards row 0)
 //! ([`gradients`]). Two integrators work on arbitrary masks: masked least squares (the Poisson
-//! equation restricted to the mask, solved by conjugate gradients with a modified incomplete
-//! Cholesky preconditioner; [`least_squares`]) as the default, and the thesis' Fast Marching
-//! integrator on W = z + λf ([`fast_marching`]). The thesis' artefact filter ([`filter`]) then
-//! drops points that jump more than 10 mm from a neighbour.
+//! equation restricted to the mask, solved by conjugate gradients with an aggregation-multigrid
+//! preconditioner; [`least_squares`]) as the default, and the thesis' Fast Marching integrator
+//! on W = z + λf ([`fast_marching`]). The thesis' artefact filter ([`filter`]) then drops points
+//! that jump more than 10 mm from a neighbour. Both work on the mask's bounding box only.
 
 pub mod fast_marching;
 pub mod filter;
