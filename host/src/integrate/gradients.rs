@@ -2,7 +2,7 @@
 
 use super::IntegrateError;
 use crate::types::NormalField;
-use ndarray::Array2;
+use ndarray::{Array2, ArrayView2, ArrayView3};
 
 /// Dimensionless slopes of z(x, y) on the pixel grid and the pixels to integrate over.
 #[derive(Debug, Clone, PartialEq)]
@@ -28,15 +28,25 @@ impl SurfaceGradients {
                 expected: shape,
             });
         }
+        Self::from_normal_views(field.normals.view(), field.mask.view(), max_slope)
+    }
+
+    /// [`Self::from_normals`] on views of equal shape (H×W×3 normals, H×W mask).
+    pub(crate) fn from_normal_views(
+        normals: ArrayView3<f32>,
+        mask: ArrayView2<bool>,
+        max_slope: f64,
+    ) -> Result<Self, IntegrateError> {
+        let shape = mask.dim();
         let mut bad = (0usize, 0, 0);
-        let mut mask = field.mask.clone();
+        let mut mask = mask.to_owned();
         let mut dzdx = Array2::zeros(shape);
         let mut dzdy = Array2::zeros(shape);
         for ((r, c), m) in mask.indexed_iter_mut() {
             if !*m {
                 continue;
             }
-            let n = [0, 1, 2].map(|j| f64::from(field.normals[(r, c, j)]));
+            let n = [0, 1, 2].map(|j| f64::from(normals[(r, c, j)]));
             if n.iter().any(|v| !v.is_finite()) {
                 if bad.0 == 0 {
                     bad = (0, r, c);
@@ -61,8 +71,8 @@ impl SurfaceGradients {
         Ok(Self { dzdx, dzdy, mask })
     }
 
-    /// Checks shapes and finiteness inside the mask.
-    pub fn validate(&self) -> Result<(), IntegrateError> {
+    /// Checks that the slope arrays have the mask's shape.
+    pub fn check_shapes(&self) -> Result<(), IntegrateError> {
         let shape = self.mask.dim();
         for (what, a) in [("dzdx", &self.dzdx), ("dzdy", &self.dzdy)] {
             if a.dim() != shape {
@@ -73,6 +83,12 @@ impl SurfaceGradients {
                 });
             }
         }
+        Ok(())
+    }
+
+    /// Checks shapes and finiteness inside the mask.
+    pub fn validate(&self) -> Result<(), IntegrateError> {
+        self.check_shapes()?;
         let mut first = None;
         let mut count = 0;
         for ((r, c), &m) in self.mask.indexed_iter() {

@@ -2,21 +2,22 @@
 //!
 //! Normals become slopes ∂z/∂x = −n_x/n_z, ∂z/∂y = −n_y/n_z with y up (towards row 0)
 //! ([`gradients`]). Two integrators work on arbitrary masks: masked least squares (the Poisson
-//! equation restricted to the mask, solved by conjugate gradients with a modified incomplete
-//! Cholesky preconditioner; [`least_squares`]) as the default, and the thesis' Fast Marching
-//! integrator on W = z + λf ([`fast_marching`]). The thesis' artefact filter ([`filter`]) then
-//! drops points that jump more than 10 mm from a neighbour.
+//! equation restricted to the mask, solved by conjugate gradients with an aggregation-multigrid
+//! preconditioner; [`least_squares`]) as the default, and the thesis' Fast Marching integrator
+//! on W = z + λf ([`fast_marching`]). The thesis' artefact filter ([`filter`]) then drops points
+//! that jump more than 10 mm from a neighbour. Both work on the mask's bounding box only.
 
 pub mod fast_marching;
 pub mod filter;
 pub mod gradients;
 pub mod least_squares;
+mod multigrid;
 
 pub use filter::{ArtefactFilter, filter_artefacts};
 pub use gradients::SurfaceGradients;
 
 use crate::types::{DepthMap, NormalField};
-use ndarray::Array2;
+use ndarray::{Array2, s};
 use thiserror::Error;
 
 /// Which integrator to use.
@@ -129,8 +130,26 @@ pub fn integrate_normals(
     config: &IntegrateConfig,
     initial: Option<&Array2<f32>>,
 ) -> Result<Integration, IntegrateError> {
-    let gradients = SurfaceGradients::from_normals(field, config.max_slope)?;
-    integrate_gradients(&gradients, pitch_mm, config, initial)
+    let shape = field.mask.dim();
+    let (nr, nc, three) = field.normals.dim();
+    if (nr, nc) != shape || three != 3 {
+        return Err(IntegrateError::SizeMismatch {
+            what: "normal field".into(),
+            got: (nr, nc),
+            expected: shape,
+        });
+    }
+    check_pitch(pitch_mm)?;
+    let window = Window::around(&field.mask).ok_or(IntegrateError::EmptyMask)?;
+    let gradients = SurfaceGradients::from_normal_views(
+        field
+            .normals
+            .slice(s![window.rows.clone(), window.cols.clone(), ..]),
+        window.view(&field.mask),
+        config.max_slope,
+    )
+    .map_err(|e| window.shift_error(e))?;
+    integrate_window(&gradients, &window, shape, pitch_mm, config, initial)
 }
 
 /// Integrates slopes ∂z/∂x, ∂z/∂y (dimensionless) with grid pitch `pitch_mm`.
@@ -140,26 +159,117 @@ pub fn integrate_gradients(
     config: &IntegrateConfig,
     initial: Option<&Array2<f32>>,
 ) -> Result<Integration, IntegrateError> {
-    if !(pitch_mm.is_finite() && pitch_mm > 0.0) {
-        return Err(IntegrateError::BadPitch(pitch_mm));
+    check_pitch(pitch_mm)?;
+    gradients.check_shapes()?;
+    let shape = gradients.mask.dim();
+    let window = Window::around(&gradients.mask).ok_or(IntegrateError::EmptyMask)?;
+    let cropped = SurfaceGradients {
+        dzdx: window.view(&gradients.dzdx).to_owned(),
+        dzdy: window.view(&gradients.dzdy).to_owned(),
+        mask: window.view(&gradients.mask).to_owned(),
+    };
+    integrate_window(&cropped, &window, shape, pitch_mm, config, initial)
+}
+
+/// Rejects a grid pitch that is not a positive finite number.
+fn check_pitch(pitch_mm: f64) -> Result<(), IntegrateError> {
+    if pitch_mm.is_finite() && pitch_mm > 0.0 {
+        Ok(())
+    } else {
+        Err(IntegrateError::BadPitch(pitch_mm))
     }
-    gradients.validate()?;
+}
+
+/// Integrates `gradients` cropped to `window` of a `shape` grid and places the result in it.
+fn integrate_window(
+    gradients: &SurfaceGradients,
+    window: &Window,
+    shape: (usize, usize),
+    pitch_mm: f64,
+    config: &IntegrateConfig,
+    initial: Option<&Array2<f32>>,
+) -> Result<Integration, IntegrateError> {
+    gradients.validate().map_err(|e| window.shift_error(e))?;
+    let initial = initial
+        .filter(|d| d.dim() == shape)
+        .map(|d| window.view(d).to_owned());
     let (mut depth, iterations) = match config.integrator {
-        Integrator::LeastSquares => least_squares::integrate(gradients, pitch_mm, config, initial)?,
+        Integrator::LeastSquares => {
+            least_squares::integrate(gradients, pitch_mm, config, initial.as_ref())?
+        }
         Integrator::FastMarching => fast_marching::integrate(gradients, pitch_mm, config.lambda)?,
     };
     let valid = depth.mapv(f64::is_finite);
     anchor(&mut depth, &valid, config.anchor);
     let (kept, kept_fraction) = filter_artefacts(&depth, &valid, &config.filter);
-    let depth_mm = Array2::from_shape_fn(depth.dim(), |p| {
-        if kept[p] { depth[p] as f32 } else { f32::NAN }
-    });
+    let mut depth_mm = Array2::from_elem(shape, f32::NAN);
+    let mut kept_full = Array2::from_elem(shape, false);
+    ndarray::Zip::from(window.view_mut(&mut depth_mm))
+        .and(window.view_mut(&mut kept_full))
+        .and(&depth)
+        .and(&kept)
+        .for_each(|out, k_out, &z, &k| {
+            if k {
+                *out = z as f32;
+                *k_out = true;
+            }
+        });
     Ok(Integration {
         depth: DepthMap { depth_mm, pitch_mm },
-        kept,
+        kept: kept_full,
         kept_fraction,
         iterations,
     })
+}
+
+/// The bounding box of a mask: everything outside it is unmasked, so integrating inside it gives
+/// the same result as on the whole grid at a fraction of the cost.
+struct Window {
+    rows: std::ops::Range<usize>,
+    cols: std::ops::Range<usize>,
+}
+
+impl Window {
+    /// The smallest box holding every set pixel of `mask`, or `None` if there is none.
+    fn around(mask: &Array2<bool>) -> Option<Self> {
+        let mut rows: Option<(usize, usize)> = None;
+        let (mut c0, mut c1) = (usize::MAX, 0);
+        for (r, row) in mask.outer_iter().enumerate() {
+            let first = row.iter().position(|&m| m);
+            if let Some(first) = first {
+                let last = row.len() - 1 - row.iter().rev().position(|&m| m).unwrap_or(0);
+                rows = Some((rows.map_or(r, |(r0, _)| r0), r + 1));
+                c0 = c0.min(first);
+                c1 = c1.max(last + 1);
+            }
+        }
+        rows.map(|(r0, r1)| Self {
+            rows: r0..r1,
+            cols: c0..c1,
+        })
+    }
+
+    /// The part of `a` inside the window.
+    fn view<'a, T>(&self, a: &'a Array2<T>) -> ndarray::ArrayView2<'a, T> {
+        a.slice(s![self.rows.clone(), self.cols.clone()])
+    }
+
+    /// The part of `a` inside the window, mutable.
+    fn view_mut<'a, T>(&self, a: &'a mut Array2<T>) -> ndarray::ArrayViewMut2<'a, T> {
+        a.slice_mut(s![self.rows.clone(), self.cols.clone()])
+    }
+
+    /// Moves pixel positions in an error from window to grid coordinates.
+    fn shift_error(&self, e: IntegrateError) -> IntegrateError {
+        match e {
+            IntegrateError::NonFinite { count, row, col } => IntegrateError::NonFinite {
+                count,
+                row: row + self.rows.start,
+                col: col + self.cols.start,
+            },
+            other => other,
+        }
+    }
 }
 
 /// Shifts `depth` by a constant according to `anchor`.

@@ -24,6 +24,9 @@ pub struct PhotometricResult {
     pub object_mask: Array2<bool>,
 }
 
+/// Image rows per parallel task.
+const ROWS_PER_TASK: usize = 8;
+
 /// One solved pixel: normal, albedo, LEDs used.
 type PixelSolution = Option<(Vector3<f64>, f64, u8)>;
 
@@ -92,64 +95,93 @@ pub fn estimate_normals(
     }
     let cache = subset_inverses(lights, config.min_lit_leds);
     let (rows, cols) = shape;
-    let solved: Vec<Vec<PixelSolution>> = (0..rows)
-        .into_par_iter()
-        .map(|r| {
+    // Zero-filled outputs are allocated lazily; each row band then writes every one of its pixels.
+    let mut normals = Array3::<f32>::zeros((rows, cols, 3));
+    let mut albedo = Array2::<f32>::zeros(shape);
+    let mut lit_count = Array2::<u8>::zeros(shape);
+    let mut valid = Array2::from_elem(shape, false);
+    // Freshly allocated arrays are contiguous in row-major order.
+    let (Some(n_all), Some(rho_all), Some(lit_all), Some(valid_all)) = (
+        normals.as_slice_mut(),
+        albedo.as_slice_mut(),
+        lit_count.as_slice_mut(),
+        valid.as_slice_mut(),
+    ) else {
+        unreachable!("new arrays are in standard layout")
+    };
+    let band = ROWS_PER_TASK * cols;
+    let solved: usize = n_all
+        .par_chunks_mut(3 * band)
+        .zip(rho_all.par_chunks_mut(band))
+        .zip(lit_all.par_chunks_mut(band))
+        .zip(valid_all.par_chunks_mut(band))
+        .enumerate()
+        .map(|(chunk, (((n_out, rho_out), lit_out), valid_out))| {
             let mut values = vec![0.0f64; k];
             let mut l = vec![Vector3::zeros(); k];
             if let Lights::Distant(v) = lights {
                 l.copy_from_slice(v);
             }
-            (0..cols)
-                .map(|c| {
-                    if mask.is_some_and(|m| !m[(r, c)]) {
-                        return None;
+            let mut count = 0;
+            for dr in 0..rho_out.len() / cols {
+                let r = chunk * ROWS_PER_TASK + dr;
+                let image_rows: Vec<_> = images.images.iter().map(|im| im.row(r)).collect();
+                let mask_row = mask.map(|m| m.row(r));
+                for c in 0..cols {
+                    let solution = if mask_row.is_some_and(|m| !m[c]) {
+                        None
+                    } else {
+                        for (v, im) in values.iter_mut().zip(&image_rows) {
+                            *v = f64::from(im[c]);
+                        }
+                        if !lights.is_distant() {
+                            lights.at(r, c, &mut l);
+                        }
+                        let sigma = noise.map_or(0.0, |n| f64::from(n[(r, c)]));
+                        solve_pixel(&values, &l, sigma, config, cache.as_deref())
+                    };
+                    let p = dr * cols + c;
+                    match solution {
+                        Some((n, rho, used)) => {
+                            for j in 0..3 {
+                                n_out[3 * p + j] = n[j] as f32;
+                            }
+                            rho_out[p] = rho as f32;
+                            lit_out[p] = used;
+                            valid_out[p] = true;
+                            count += 1;
+                        }
+                        None => {
+                            n_out[3 * p..3 * p + 3].fill(f32::NAN);
+                            rho_out[p] = f32::NAN;
+                        }
                     }
-                    for (v, im) in values.iter_mut().zip(&images.images) {
-                        *v = f64::from(im[(r, c)]);
-                    }
-                    if !lights.is_distant() {
-                        lights.at(r, c, &mut l);
-                    }
-                    let sigma = noise.map_or(0.0, |n| f64::from(n[(r, c)]));
-                    solve_pixel(&values, &l, sigma, config, cache.as_deref())
-                })
-                .collect()
-        })
-        .collect();
-
-    let mut normals = Array3::from_elem((rows, cols, 3), f32::NAN);
-    let mut albedo = Array2::from_elem(shape, f32::NAN);
-    let mut lit_count = Array2::zeros(shape);
-    let mut valid = Array2::from_elem(shape, false);
-    for (r, row) in solved.iter().enumerate() {
-        for (c, s) in row.iter().enumerate() {
-            if let Some((n, rho, used)) = s {
-                for j in 0..3 {
-                    normals[(r, c, j)] = n[j] as f32;
                 }
-                albedo[(r, c)] = *rho as f32;
-                lit_count[(r, c)] = *used;
-                valid[(r, c)] = true;
             }
+            count
+        })
+        .sum();
+
+    // A given mask was applied during the solve; a found one is applied now.
+    let (object, any) = match mask {
+        Some(m) => (m.clone(), solved > 0),
+        None => {
+            let object = object_mask(images, &albedo, &valid, noise, &config.mask);
+            let mut any = false;
+            for ((r, c), v) in valid.indexed_iter_mut() {
+                if !object[(r, c)] && *v {
+                    *v = false;
+                    albedo[(r, c)] = f32::NAN;
+                    lit_count[(r, c)] = 0;
+                    for j in 0..3 {
+                        normals[(r, c, j)] = f32::NAN;
+                    }
+                }
+                any |= *v;
+            }
+            (object, any)
         }
-    }
-    let object = match mask {
-        Some(m) => m.clone(),
-        None => object_mask(images, &albedo, &valid, noise, &config.mask),
     };
-    let mut any = false;
-    for ((r, c), v) in valid.indexed_iter_mut() {
-        if !object[(r, c)] && *v {
-            *v = false;
-            albedo[(r, c)] = f32::NAN;
-            lit_count[(r, c)] = 0;
-            for j in 0..3 {
-                normals[(r, c, j)] = f32::NAN;
-            }
-        }
-        any |= *v;
-    }
     if !any {
         return Err(PhotometricError::EmptyMask(format!(
             "no pixel inside the object mask is lit by {} or more LEDs",
