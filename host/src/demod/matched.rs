@@ -8,6 +8,7 @@
 //! inner loop has no branches or allocations.
 
 use super::basis::TemplateBasis;
+use super::stats::PixelStats;
 use super::window::{CodeMap, Region};
 use crate::capture::Samples;
 use rayon::prelude::*;
@@ -24,8 +25,45 @@ pub struct WindowAmplitudes {
     pub leds: Vec<Vec<f32>>,
     /// Per-frame noise variance σ² of pixel p (fraction² of full scale).
     pub noise_variance: Vec<f32>,
-    /// Largest code value of pixel p over the window.
-    pub max_code: Vec<u16>,
+    /// Pixel p reached the white level in some frame of the window.
+    pub saturated: Vec<bool>,
+    /// Pixel p's brightest frame of the window stayed below the under-exposure level.
+    pub underexposed: Vec<bool>,
+    /// Report statistics of this window, when gathered while writing.
+    pub stats: Option<PixelStats>,
+}
+
+/// Code-value limits that classify a pixel by its brightest frame.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct CodeLimits {
+    /// Codes at or above this are saturated.
+    pub white: u32,
+    /// A pixel whose largest code is below this is under-exposed.
+    pub dark: u32,
+}
+
+impl CodeLimits {
+    /// Limits for a stream: saturated from `white_level − ½` (the last code that rounds to
+    /// white), under-exposed below `black + below·(white − black)`.
+    pub fn new(format: &crate::capture::FrameFormat, underexposed_below: f32) -> Self {
+        let white = (f64::from(format.white_level) - 0.5).ceil().max(0.0);
+        let black = f64::from(format.black_level);
+        let dark = (black
+            + f64::from(underexposed_below) * (f64::from(format.white_level) - black))
+            .ceil()
+            .max(0.0);
+        Self {
+            white: white.min(f64::from(u32::MAX)) as u32,
+            dark: dark.min(f64::from(u32::MAX)) as u32,
+        }
+    }
+
+    /// (saturated, under-exposed) for a pixel whose largest code is `max_code`.
+    #[inline(always)]
+    pub fn classify(&self, max_code: u16) -> (bool, bool) {
+        let code = u32::from(max_code);
+        (code >= self.white, code < self.dark)
+    }
 }
 
 /// A sample type the kernel reads.
@@ -51,6 +89,7 @@ impl Code for u16 {
 /// Shared inputs of one window's kernel.
 struct Plan<'a> {
     region: Region,
+    limits: CodeLimits,
     bases: &'a [TemplateBasis],
     scale: f64,
     dof: f64,
@@ -62,10 +101,12 @@ pub fn matched_filter(
     region: Region,
     bases: &[TemplateBasis],
     map: &CodeMap,
+    limits: CodeLimits,
 ) -> WindowAmplitudes {
     let k = bases.first().map_or(1, |b| b.columns);
     let plan = Plan {
         region,
+        limits,
         bases,
         scale: f64::from(map.scale()),
         dof: frames.len().saturating_sub(k).max(1) as f64,
@@ -126,7 +167,10 @@ fn dispatch<T: Code>(
 struct RowOutput<'a> {
     leds: Vec<&'a mut [f32]>,
     noise_variance: &'a mut [f32],
-    max_code: &'a mut [u16],
+    saturated: &'a mut [bool],
+    underexposed: &'a mut [bool],
+    /// The row's report statistics.
+    stats: PixelStats,
 }
 
 /// The kernel for K model columns: every row in parallel, written straight into the images.
@@ -169,22 +213,26 @@ fn run<const K: usize, T: Code>(
     // Zeroed by the allocator (untouched pages), so the parallel rows fault them in.
     let mut leds: Vec<Vec<f32>> = (0..K - 1).map(|_| vec![0.0f32; pixels]).collect();
     let mut noise_variance = vec![0.0f32; pixels];
-    let mut max_code = vec![0u16; pixels];
-    {
+    let mut saturated = vec![false; pixels];
+    let mut underexposed = vec![false; pixels];
+    let stats = {
         let mut led_rows: Vec<_> = leds.iter_mut().map(|p| p.chunks_mut(width)).collect();
         let rows: Vec<RowOutput<'_>> = noise_variance
             .chunks_mut(width)
-            .zip(max_code.chunks_mut(width))
-            .map(|(noise_variance, max_code)| RowOutput {
+            .zip(saturated.chunks_mut(width))
+            .zip(underexposed.chunks_mut(width))
+            .map(|((noise_variance, saturated), underexposed)| RowOutput {
                 leds: led_rows.iter_mut().filter_map(Iterator::next).collect(),
                 noise_variance,
-                max_code,
+                saturated,
+                underexposed,
+                stats: PixelStats::new(K - 1),
             })
             .collect();
         let simd = simd_available();
         rows.into_par_iter()
             .enumerate()
-            .for_each_init(Vec::new, |tiles, (row, mut out)| {
+            .map_init(Vec::new, |tiles, (row, mut out)| {
                 let band = plan.region.band_of(row);
                 let samples: Vec<&[T]> = frames
                     .iter()
@@ -193,17 +241,22 @@ fn run<const K: usize, T: Code>(
                 let job = RowJob {
                     solver: &solvers[band],
                     noise_factor,
+                    limits: plan.limits,
                     weights: &weights[band],
                     samples: &samples,
                     width,
                 };
                 run_row::<K, T, _>(simd, &job, value, &mut out, tiles);
-            });
-    }
+                out.stats
+            })
+            .reduce(|| PixelStats::new(K - 1), |a, b| a.merge(&b))
+    };
     WindowAmplitudes {
         leds,
         noise_variance,
-        max_code,
+        saturated,
+        underexposed,
+        stats: Some(stats),
     }
 }
 
@@ -213,6 +266,8 @@ struct RowJob<'a, const K: usize, T> {
     solver: &'a [[f32; K]; K],
     /// From residual energy to per-frame variance in fraction²: scale² / (F − K).
     noise_factor: f32,
+    /// Saturation and under-exposure limits.
+    limits: CodeLimits,
     weights: &'a [[f32; K]],
     samples: &'a [&'a [T]],
     width: usize,
@@ -389,13 +444,15 @@ fn solve<const K: usize, T: Code>(
     for l in 0..TILE {
         noise[l] = (sums.squares[l] - explained[l]).max(0.0) * job.noise_factor;
     }
-    let mut max_code = [0u16; TILE];
+    let mut saturated = [false; TILE];
+    let mut underexposed = [false; TILE];
     for l in 0..TILE {
-        max_code[l] = sums.max_code[l].code();
+        (saturated[l], underexposed[l]) = job.limits.classify(sums.max_code[l].code());
     }
+    let mut coefficients = [[0.0f32; TILE]; K];
     for (i, image) in out.leds.iter_mut().enumerate() {
         // Coefficient i + 1 (column 0 is the background): row i + 1 of R⁻¹ times Q·r.
-        let mut coefficient = [0.0f32; TILE];
+        let coefficient = &mut coefficients[i];
         if let Some(row) = job.solver.get(i + 1) {
             for c in i + 1..K {
                 for l in 0..TILE {
@@ -403,10 +460,16 @@ fn solve<const K: usize, T: Code>(
                 }
             }
         }
-        write_lanes(image, x, len, &coefficient);
+        write_lanes(image, x, len, coefficient);
+    }
+    for l in 0..len {
+        out.stats.add(saturated[l], underexposed[l], noise[l], |i| {
+            coefficients[i][l]
+        });
     }
     write_lanes(out.noise_variance, x, len, &noise);
-    write_lanes(out.max_code, x, len, &max_code);
+    write_lanes(out.saturated, x, len, &saturated);
+    write_lanes(out.underexposed, x, len, &underexposed);
 }
 
 /// Writes the first `len` lanes to `target[x..]`.

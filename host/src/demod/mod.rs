@@ -19,6 +19,7 @@ pub mod fit;
 mod matched;
 pub mod output;
 mod report;
+mod stats;
 #[cfg(test)]
 mod synthetic;
 #[cfg(test)]
@@ -35,9 +36,10 @@ use crate::capture::{FrameFormat, FrameSource, Samples};
 use crate::types::LedImages;
 use basis::TemplateBasis;
 use fit::{FitLimits, WaveformFit, fit_waveforms, refit_shifts, template_columns};
-use matched::WindowAmplitudes;
+use matched::{CodeLimits, WindowAmplitudes};
 use ndarray::Array2;
 use rayon::prelude::*;
+use stats::PixelStats;
 use waveform::ReceivedWaveform;
 use window::{CodeMap, Region, read_window};
 
@@ -87,6 +89,7 @@ pub fn decode(
     }
     let region = validate(config, &format)?;
     let map = CodeMap::new(&format, config.linearize)?;
+    let code_limits = CodeLimits::new(&format, config.underexposed_below);
     for _ in 0..config.start {
         if source.next_frame()?.is_none() {
             return Err(DemodError::TooFewFrames {
@@ -158,7 +161,7 @@ pub fn decode(
             }
             break;
         }
-        decode_window(config, region, &map, leds, &window, &mut state);
+        decode_window(config, region, &map, code_limits, leds, &window, &mut state);
         if got < want {
             break;
         }
@@ -309,7 +312,12 @@ struct Accumulated {
     mean_leds: Vec<Vec<f32>>,
     /// Frame-weighted mean of the per-frame noise variance.
     mean_variance: Vec<f32>,
-    max_code: Vec<u16>,
+    /// Saturated in some window.
+    saturated: Vec<bool>,
+    /// Under-exposed in every window.
+    underexposed: Vec<bool>,
+    /// The first window's report statistics, when the kernel gathered them.
+    stats: Option<PixelStats>,
     fits: Vec<WaveformFit>,
     variance_factors: Vec<f64>,
 }
@@ -319,6 +327,7 @@ fn decode_window(
     config: &DecodeConfig,
     region: Region,
     map: &CodeMap,
+    code_limits: CodeLimits,
     leds: usize,
     window: &window::Window,
     state: &mut Accumulated,
@@ -344,18 +353,22 @@ fn decode_window(
         })
         .collect();
     let amplitudes: WindowAmplitudes = match config.estimator {
-        Estimator::Waveform => matched::matched_filter(&window.frames, region, &bases, map),
+        Estimator::Waveform => {
+            matched::matched_filter(&window.frames, region, &bases, map, code_limits)
+        }
         Estimator::Thesis => {
             let chips = 1usize << (leds + 1);
             let used = frames - frames % chips;
-            thesis::thesis_window(&window.frames[..used], region, leds, map)
+            thesis::thesis_window(&window.frames[..used], region, leds, map, code_limits)
         }
     };
     if state.windows == 0 {
         state.variance_factors = (0..leds).map(|i| bases[0].variance_factor(i + 1)).collect();
         state.mean_leds = amplitudes.leds;
         state.mean_variance = amplitudes.noise_variance;
-        state.max_code = amplitudes.max_code;
+        state.saturated = amplitudes.saturated;
+        state.underexposed = amplitudes.underexposed;
+        state.stats = amplitudes.stats;
     } else {
         // Running frame-weighted means: m += (x − m)·F / (F_total + F).
         let step = (frames as f64 / (state.frames + frames) as f64) as f32;
@@ -369,10 +382,15 @@ fn decode_window(
         }
         update(&mut state.mean_variance, &amplitudes.noise_variance);
         state
-            .max_code
+            .saturated
             .par_iter_mut()
-            .zip(&amplitudes.max_code)
-            .for_each(|(m, &c)| *m = (*m).max(c));
+            .zip(&amplitudes.saturated)
+            .for_each(|(s, &w)| *s |= w);
+        state
+            .underexposed
+            .par_iter_mut()
+            .zip(&amplitudes.underexposed)
+            .for_each(|(u, &w)| *u &= w);
     }
     state.windows += 1;
     state.frames += frames;
@@ -395,24 +413,21 @@ fn finish(
             leds: leds.max(1),
         });
     }
-    let white_code = format.white_level - 0.5;
-    let dark_code = underexposed_code(format, config.underexposed_below);
-    let saturated: Vec<bool> = state
-        .max_code
-        .par_iter()
-        .map(|&c| f32::from(c) >= white_code)
-        .collect();
-    let underexposed: Vec<bool> = state
-        .max_code
-        .par_iter()
-        .map(|&c| f32::from(c) < dark_code)
-        .collect();
+    let (saturated, underexposed) = (state.saturated, state.underexposed);
+    let stats = match state.stats {
+        Some(stats) if state.windows == 1 => stats,
+        _ => PixelStats::gather(
+            &state.mean_leds,
+            &state.mean_variance,
+            &saturated,
+            &underexposed,
+        ),
+    };
     let mut noise_values = state.mean_variance;
     noise_values
         .par_iter_mut()
         .for_each(|v| *v = v.max(0.0).sqrt());
     let valid = |p: usize| !saturated[p] && !underexposed[p];
-    let stats = PixelStats::gather(&state.mean_leds, &noise_values, &saturated, &underexposed);
     if stats.valid_pixels == 0 {
         return Err(DemodError::NothingToDecode(
             if stats.saturated_pixels >= stats.underexposed_pixels {
@@ -424,7 +439,7 @@ fn finish(
     }
     let valid_count = stats.valid_pixels as f64;
     let noise_power = stats.noise_power / valid_count;
-    let median_noise = median_of_valid(&noise_values, stats.valid_pixels, valid);
+    let median_noise = median_of_valid(&noise_values, valid);
     let per_led = (0..leds)
         .map(|i| {
             let mean_level = stats.level_sums[i] / valid_count;
@@ -477,82 +492,23 @@ fn finish(
     })
 }
 
-/// Sums over the decodable pixels (neither saturated nor under-exposed) for the report.
-#[derive(Debug, Clone, Default)]
-struct PixelStats {
-    saturated_pixels: usize,
-    underexposed_pixels: usize,
-    valid_pixels: usize,
-    /// Σ σ² over valid pixels.
-    noise_power: f64,
-    /// Σ A_i over valid pixels, per LED.
-    level_sums: Vec<f64>,
-}
-
-impl PixelStats {
-    /// One parallel pass over the images.
-    fn gather(leds: &[Vec<f32>], noise: &[f32], saturated: &[bool], underexposed: &[bool]) -> Self {
-        const CHUNK: usize = 1 << 14;
-        let chunk = |start: usize| {
-            let end = (start + CHUNK).min(noise.len());
-            let mut stats = Self {
-                level_sums: vec![0.0; leds.len()],
-                ..Self::default()
-            };
-            for p in start..end {
-                stats.saturated_pixels += usize::from(saturated[p]);
-                stats.underexposed_pixels += usize::from(underexposed[p]);
-                if saturated[p] || underexposed[p] {
-                    continue;
-                }
-                stats.valid_pixels += 1;
-                stats.noise_power += f64::from(noise[p]) * f64::from(noise[p]);
-                for (sum, image) in stats.level_sums.iter_mut().zip(leds) {
-                    *sum += f64::from(image[p]);
-                }
-            }
-            stats
-        };
-        (0..noise.len())
-            .into_par_iter()
-            .step_by(CHUNK)
-            .map(chunk)
-            .reduce(
-                || Self {
-                    level_sums: vec![0.0; leds.len()],
-                    ..Self::default()
-                },
-                |mut a, b| {
-                    a.saturated_pixels += b.saturated_pixels;
-                    a.underexposed_pixels += b.underexposed_pixels;
-                    a.valid_pixels += b.valid_pixels;
-                    a.noise_power += b.noise_power;
-                    a.level_sums
-                        .iter_mut()
-                        .zip(&b.level_sums)
-                        .for_each(|(x, y)| *x += y);
-                    a
-                },
-            )
-    }
-}
-
-/// The code value below which a pixel's brightest frame counts as under-exposed.
-fn underexposed_code(format: &FrameFormat, below: f32) -> f32 {
-    (f64::from(format.black_level)
-        + f64::from(below) * f64::from(format.white_level - format.black_level)) as f32
-}
-
-/// Median of the valid pixels' values: exact up to [`MEDIAN_SAMPLE`] valid pixels, else the
-/// median of an evenly strided sample of that many (a report statistic, accurate to well
-/// under 1 % and independent of the image size).
-fn median_of_valid(values: &[f32], valid_pixels: usize, valid: impl Fn(usize) -> bool) -> f64 {
-    let stride = valid_pixels.div_ceil(MEDIAN_SAMPLE).max(1);
+/// Median of the valid pixels' values: exact up to [`MEDIAN_SAMPLE`] pixels, else the median
+/// of the valid ones among an evenly strided sample of that many (a report statistic,
+/// accurate to well under 1 % and independent of the image size).
+fn median_of_valid(values: &[f32], valid: impl Fn(usize) -> bool) -> f64 {
+    let stride = values.len().div_ceil(MEDIAN_SAMPLE).max(1);
     let mut sample: Vec<f32> = (0..values.len())
-        .filter(|&p| valid(p))
         .step_by(stride)
+        .filter(|&p| valid(p))
         .map(|p| values[p])
         .collect();
+    if sample.is_empty() {
+        // Few valid pixels, none on the stride: take them all.
+        sample = (0..values.len())
+            .filter(|&p| valid(p))
+            .map(|p| values[p])
+            .collect();
+    }
     if sample.is_empty() {
         return f64::NAN;
     }

@@ -133,6 +133,7 @@ pub fn thesis_window(
     region: Region,
     leds: usize,
     map: &CodeMap,
+    limits: super::matched::CodeLimits,
 ) -> super::matched::WindowAmplitudes {
     let decoder = ThesisDecoder::new(leds);
     let n = decoder.chips();
@@ -181,18 +182,21 @@ pub fn thesis_window(
     );
     let mut images = vec![vec![0.0f32; height * width]; leds];
     let mut noise_variance = vec![0.0f32; height * width];
-    let mut max_code = vec![0u16; height * width];
+    let mut saturated = vec![false; height * width];
+    let mut underexposed = vec![false; height * width];
     for (p, pixel) in out.chunks(k).enumerate() {
         for (i, image) in images.iter_mut().enumerate() {
             image[p] = pixel[i];
         }
         noise_variance[p] = pixel[leds];
-        max_code[p] = pixel[leds + 1] as u16;
+        (saturated[p], underexposed[p]) = limits.classify(pixel[leds + 1] as u16);
     }
     super::matched::WindowAmplitudes {
         leds: images,
         noise_variance,
-        max_code,
+        saturated,
+        underexposed,
+        stats: None,
     }
 }
 
