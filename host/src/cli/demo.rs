@@ -70,8 +70,8 @@ pub fn run(args: &DemoArgs) -> Result<()> {
             out.lit_by_three.iter().filter(|&&m| m).count().into(),
         );
         summary.insert(
-            "kept by artefact filter".into(),
-            out.reconstruction.integration.kept_fraction.into(),
+            "kept by artefact filter (%)".into(),
+            (100.0 * out.reconstruction.integration.kept_fraction).into(),
         );
         let dir = args.out.join(name);
         let written = super::common::write_outputs(

@@ -148,8 +148,8 @@ pub fn run(args: &ReconstructArgs) -> Result<()> {
         field.mask.iter().filter(|&&m| m).count().into(),
     );
     summary.insert(
-        "kept by artefact filter".into(),
-        reconstruction.integration.kept_fraction.into(),
+        "kept by artefact filter (%)".into(),
+        (100.0 * reconstruction.integration.kept_fraction).into(),
     );
     if let Some(path) = &args.ground_truth {
         summary.insert("ground truth".into(), path.display().to_string().into());
