@@ -8,27 +8,12 @@ use meb::simulate::capture::{SimConfig, SimulatedCapture};
 use meb::simulate::scene::{Scene, SceneObject};
 use meb::simulate::sensor::NoiseModel;
 use std::path::Path;
-use std::process::Command;
 
-const RIG: &str = r#"
-[camera]
-width = 160
-height = 90
-fps = 960.0
-distance_mm = 420.0
-pixel_pitch_mm = 0.6
-[[led]]
-position_mm = [-270.0, 420.0, 100.0]
-[[led]]
-position_mm = [-140.0, 420.0, 350.0]
-[[led]]
-position_mm = [140.0, 420.0, 350.0]
-[[led]]
-position_mm = [270.0, 420.0, 100.0]
-"#;
+mod common;
+use common::{OUT_OF_PLANE_LEDS, meb, rig_toml};
 
 fn capture(exposure: f64, chip_rate_hz: Option<f64>, seed: u64) -> SimulatedCapture {
-    let rig = Rig::from_toml_str(RIG, "test").unwrap();
+    let rig = Rig::from_toml_str(&rig_toml(160, 90, 0.6, &OUT_OF_PLANE_LEDS), "test").unwrap();
     let config = SimConfig {
         frames: 128,
         exposure,
@@ -122,18 +107,11 @@ fn rate_mismatch_of_five_percent_is_estimated_and_decoded() {
     }
 }
 
-fn meb(args: &[&str]) -> std::process::Output {
-    Command::new(env!("CARGO_BIN_EXE_meb"))
-        .args(args)
-        .output()
-        .unwrap()
-}
-
 #[test]
 fn cli_decodes_what_simulate_writes() {
     let tmp = tempfile::tempdir().unwrap();
     let rig = tmp.path().join("rig.toml");
-    std::fs::write(&rig, RIG.replace("160", "96").replace("= 90", "= 54")).unwrap();
+    std::fs::write(&rig, rig_toml(96, 54, 0.6, &OUT_OF_PLANE_LEDS)).unwrap();
     let sim = tmp.path().join("sim");
     let out = meb(&[
         "simulate",

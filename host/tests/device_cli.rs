@@ -7,6 +7,9 @@ use std::process::{Child, Command, Output, Stdio};
 use nix::sys::signal::{Signal, kill};
 use nix::unistd::Pid;
 
+mod common;
+use common::{OUT_OF_PLANE_LEDS, rig_toml, stdout_of};
+
 const MEB: &str = env!("CARGO_BIN_EXE_meb");
 
 struct Emulator {
@@ -57,21 +60,12 @@ impl Drop for Emulator {
     }
 }
 
-fn stdout(output: &Output) -> String {
-    assert!(
-        output.status.success(),
-        "failed: {}",
-        String::from_utf8_lossy(&output.stderr)
-    );
-    String::from_utf8_lossy(&output.stdout).into_owned()
-}
-
 #[test]
 fn set_get_save_survives_emulator_restart() {
     let dir = tempfile::tempdir().unwrap();
     let emulator = Emulator::start(dir.path());
-    stdout(&emulator.meb(&["ping"]));
-    stdout(&emulator.meb(&[
+    stdout_of(&emulator.meb(&["ping"]));
+    stdout_of(&emulator.meb(&[
         "set",
         "--leds",
         "4",
@@ -83,7 +77,7 @@ fn set_get_save_survives_emulator_restart() {
         "0,3,0,7",
     ]));
     let json: serde_json::Value =
-        serde_json::from_str(&stdout(&emulator.meb(&["get", "--json"]))).unwrap();
+        serde_json::from_str(&stdout_of(&emulator.meb(&["get", "--json"]))).unwrap();
     assert_eq!(json["chip_rate_millihertz"], 959_500);
     assert_eq!(
         json["brightness_permille"],
@@ -97,9 +91,9 @@ fn set_get_save_survives_emulator_restart() {
     let message = String::from_utf8_lossy(&rejected.stderr);
     assert!(message.contains("phase_chips[1]"), "{message}");
 
-    assert!(stdout(&emulator.meb(&["save"])).contains("saved"));
+    assert!(stdout_of(&emulator.meb(&["save"])).contains("saved"));
     let status: serde_json::Value =
-        serde_json::from_str(&stdout(&emulator.meb(&["status", "--json"]))).unwrap();
+        serde_json::from_str(&stdout_of(&emulator.meb(&["status", "--json"]))).unwrap();
     assert_eq!(status["unsaved_changes"], false);
     emulator.stop();
 
@@ -108,37 +102,19 @@ fn set_get_save_survives_emulator_restart() {
 
     let emulator = Emulator::start(dir.path());
     let json: serde_json::Value =
-        serde_json::from_str(&stdout(&emulator.meb(&["get", "--json"]))).unwrap();
+        serde_json::from_str(&stdout_of(&emulator.meb(&["get", "--json"]))).unwrap();
     assert_eq!(json["phase_chips"], serde_json::json!([0, 3, 0, 7]));
     let status: serde_json::Value =
-        serde_json::from_str(&stdout(&emulator.meb(&["status", "--json"]))).unwrap();
+        serde_json::from_str(&stdout_of(&emulator.meb(&["status", "--json"]))).unwrap();
     assert_eq!(status["config_source"], "Restored");
     emulator.stop();
 }
-
-const SMALL_RIG: &str = r#"
-[camera]
-width = 64
-height = 48
-fps = 960.0
-distance_mm = 420.0
-pixel_pitch_mm = 1.0
-
-[[led]]
-position_mm = [-270.0, 420.0, 100.0]
-[[led]]
-position_mm = [-140.0, 420.0, 350.0]
-[[led]]
-position_mm = [140.0, 420.0, 350.0]
-[[led]]
-position_mm = [270.0, 420.0, 100.0]
-"#;
 
 #[test]
 fn simulate_renders_what_the_emulated_luminaire_emits() {
     let dir = tempfile::tempdir().unwrap();
     let emulator = Emulator::start(dir.path());
-    stdout(&emulator.meb(&[
+    stdout_of(&emulator.meb(&[
         "set",
         "--leds",
         "4",
@@ -149,7 +125,7 @@ fn simulate_renders_what_the_emulated_luminaire_emits() {
     ]));
     emulator.stop();
     let rig = dir.path().join("rig.toml");
-    std::fs::write(&rig, SMALL_RIG).unwrap();
+    std::fs::write(&rig, rig_toml(64, 48, 1.0, &OUT_OF_PLANE_LEDS)).unwrap();
     let out = dir.path().join("capture");
     let simulate = |leds_out: &Path, timeline: &str| {
         Command::new(MEB)
@@ -162,7 +138,7 @@ fn simulate_renders_what_the_emulated_luminaire_emits() {
             .output()
             .unwrap()
     };
-    stdout(&simulate(&out, "timeline.json"));
+    stdout_of(&simulate(&out, "timeline.json"));
     assert!(out.join("frame_00007.png").exists());
     // A timeline that is not one is a clear error, not a capture.
     std::fs::write(dir.path().join("bad.json"), "{}").unwrap();

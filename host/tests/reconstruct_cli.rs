@@ -8,57 +8,17 @@
 
 use ndarray::{Array2, Array3};
 use std::path::{Path, PathBuf};
-use std::process::{Command, Output};
 
-const RIG: &str = r#"
-[camera]
-width = 160
-height = 96
-fps = 960.0
-distance_mm = 420.0
-pixel_pitch_mm = 0.4
-[[led]]
-position_mm = [-270.0, 420.0, 100.0]
-[[led]]
-position_mm = [-140.0, 420.0, 350.0]
-[[led]]
-position_mm = [140.0, 420.0, 350.0]
-[[led]]
-position_mm = [270.0, 420.0, 100.0]
-"#;
+mod common;
+use common::{OUT_OF_PLANE_LEDS, meb, rig_toml, run_ok};
 
-const TWO_LED_RIG: &str = r#"
-[camera]
-width = 160
-height = 96
-fps = 960.0
-distance_mm = 420.0
-pixel_pitch_mm = 0.4
-[[led]]
-position_mm = [-270.0, 420.0, 100.0]
-[[led]]
-position_mm = [270.0, 420.0, 100.0]
-"#;
+/// The test rig: 160×96 at 0.4 mm/px with the first `leds` out-of-plane LEDs.
+fn test_rig(leds: &[[f64; 3]]) -> String {
+    rig_toml(160, 96, 0.4, leds)
+}
 
 /// Depth RMSE bound in mm (module docs).
 const MAX_RMSE_MM: f64 = 0.3;
-
-fn meb(args: &[&str]) -> Output {
-    Command::new(env!("CARGO_BIN_EXE_meb"))
-        .args(args)
-        .output()
-        .expect("meb runs")
-}
-
-fn run_ok(args: &[&str]) -> String {
-    let out = meb(args);
-    assert!(
-        out.status.success(),
-        "meb {args:?} failed: {}",
-        String::from_utf8_lossy(&out.stderr)
-    );
-    String::from_utf8_lossy(&out.stdout).into_owned()
-}
 
 /// Runs a command that must fail and returns its one-line error message.
 fn run_err(args: &[&str]) -> String {
@@ -86,7 +46,7 @@ struct Setup {
 impl Setup {
     fn new() -> Self {
         let tmp = tempfile::tempdir().unwrap();
-        std::fs::write(tmp.path().join("rig.toml"), RIG).unwrap();
+        std::fs::write(tmp.path().join("rig.toml"), test_rig(&OUT_OF_PLANE_LEDS)).unwrap();
         let setup = Self { tmp };
         run_ok(&[
             "simulate",
@@ -218,7 +178,8 @@ fn bad_inputs_give_clear_errors() {
         run_err(&args)
     };
 
-    std::fs::write(t.path("two.toml"), TWO_LED_RIG).unwrap();
+    let two = [OUT_OF_PLANE_LEDS[0], OUT_OF_PLANE_LEDS[3]];
+    std::fs::write(t.path("two.toml"), test_rig(&two)).unwrap();
     let err = reconstruct(&t.p("dec"), &t.p("two.toml"), &t.p("o1"), &[]);
     assert!(err.contains("at least 3 LEDs"), "{err}");
 
@@ -226,8 +187,7 @@ fn bad_inputs_give_clear_errors() {
     assert!(err.contains("1280x720") && err.contains("160x96"), "{err}");
 
     // A 3-LED rig with 4 decoded images.
-    let three = RIG.rsplit_once("[[led]]").unwrap().0;
-    std::fs::write(t.path("three.toml"), three).unwrap();
+    std::fs::write(t.path("three.toml"), test_rig(&OUT_OF_PLANE_LEDS[..3])).unwrap();
     let err = reconstruct(&t.p("dec"), &t.p("three.toml"), &t.p("o3"), &[]);
     assert!(
         err.contains("3 LEDs but") && err.contains("4 LED images"),

@@ -1,47 +1,17 @@
 //! `meb simulate` end to end on small rigs: files written, formats, determinism, bad input.
 
 use std::path::{Path, PathBuf};
-use std::process::{Command, Output};
+use std::process::Command;
 
-const SMALL_RIG: &str = r#"
-[camera]
-width = 64
-height = 36
-fps = 960.0
-distance_mm = 420.0
-pixel_pitch_mm = 2.0
-[[led]]
-position_mm = [-270.0, 420.0, 100.0]
-[[led]]
-position_mm = [-140.0, 420.0, 350.0]
-[[led]]
-position_mm = [140.0, 420.0, 350.0]
-[[led]]
-position_mm = [270.0, 420.0, 100.0]
-"#;
-
-fn meb(args: &[&str]) -> Output {
-    Command::new(env!("CARGO_BIN_EXE_meb"))
-        .args(args)
-        .output()
-        .expect("meb runs")
-}
+mod common;
+use common::{OUT_OF_PLANE_LEDS, meb, rig_toml, run_ok};
 
 fn setup() -> (tempfile::TempDir, String) {
     let tmp = tempfile::tempdir().unwrap();
     let rig = tmp.path().join("small.toml");
-    std::fs::write(&rig, SMALL_RIG).unwrap();
+    std::fs::write(&rig, rig_toml(64, 36, 2.0, &OUT_OF_PLANE_LEDS)).unwrap();
     let rig = rig.display().to_string();
     (tmp, rig)
-}
-
-fn run_ok(args: &[&str]) {
-    let out = meb(args);
-    assert!(
-        out.status.success(),
-        "meb {args:?} failed: {}",
-        String::from_utf8_lossy(&out.stderr)
-    );
 }
 
 fn run_err(args: &[&str]) -> String {

@@ -1,0 +1,53 @@
+//! Helpers shared by the CLI test files: running the `meb` binary and small test rigs.
+#![allow(dead_code)] // each test binary uses a different subset
+
+use std::process::{Command, Output};
+
+/// Runs the `meb` binary built for these tests.
+pub fn meb(args: &[&str]) -> Output {
+    Command::new(env!("CARGO_BIN_EXE_meb"))
+        .args(args)
+        .output()
+        .expect("meb runs")
+}
+
+/// The standard output of a command that must have succeeded (its stderr in the failure).
+pub fn stdout_of(output: &Output) -> String {
+    assert!(
+        output.status.success(),
+        "meb failed: {}",
+        String::from_utf8_lossy(&output.stderr)
+    );
+    String::from_utf8_lossy(&output.stdout).into_owned()
+}
+
+/// Runs `meb args`, which must succeed, and returns its standard output.
+pub fn run_ok(args: &[&str]) -> String {
+    let out = meb(args);
+    assert!(
+        out.status.success(),
+        "meb {args:?} failed: {}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    String::from_utf8_lossy(&out.stdout).into_owned()
+}
+
+/// The thesis' out-of-plane LED positions (SPEC §5), mm.
+pub const OUT_OF_PLANE_LEDS: [[f64; 3]; 4] = [
+    [-270.0, 420.0, 100.0],
+    [-140.0, 420.0, 350.0],
+    [140.0, 420.0, 350.0],
+    [270.0, 420.0, 100.0],
+];
+
+/// A rig TOML: a 960 fps camera at 420 mm with the given size and pixel pitch, and `leds`.
+pub fn rig_toml(width: usize, height: usize, pitch_mm: f64, leds: &[[f64; 3]]) -> String {
+    let mut toml = format!(
+        "[camera]\nwidth = {width}\nheight = {height}\nfps = 960.0\ndistance_mm = 420.0\n\
+         pixel_pitch_mm = {pitch_mm:?}\n"
+    );
+    for [x, y, z] in leds {
+        toml.push_str(&format!("[[led]]\nposition_mm = [{x:?}, {y:?}, {z:?}]\n"));
+    }
+    toml
+}
