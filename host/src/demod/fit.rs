@@ -258,18 +258,29 @@ pub fn fit_waveforms(mean: &[f64], leds: usize, limits: &FitLimits) -> WaveformF
     let mut rate = limits.rate_ratio.unwrap_or(1.0);
     let exposure = limits.exposure.unwrap_or(1.0);
     if limits.rate_ratio.is_none() {
+        // Every other grid rate first (a drift of ≤ ½ chip over the window at the true rate
+        // keeps its score well above the wrong rates'), then the two between around the best.
         let steps = ((limits.max_rate_mismatch / rate_step).ceil() as i64).min(400);
-        let candidates: Vec<(Timing, Option<Vec<f64>>)> = (-steps..=steps)
-            .map(|k| {
+        let candidates = |ks: &mut dyn Iterator<Item = i64>| -> Vec<(Timing, Option<Vec<f64>>)> {
+            ks.map(|k| {
                 let timing = Timing {
                     rate_ratio: 1.0 + k as f64 * rate_step,
                     exposure,
                 };
                 (timing, None)
             })
-            .collect();
-        if let Some((best, _, _)) = best_timing(&waves, &candidates, &centred, 2) {
+            .collect()
+        };
+        let coarse = candidates(&mut (-steps..=steps).filter(|k| k % 2 == 0));
+        if let Some((best, _, score)) = best_timing(&waves, &coarse, &centred, 2) {
             rate = best.rate_ratio;
+            let k = ((rate - 1.0) / rate_step).round() as i64;
+            let fine = candidates(&mut [k - 1, k + 1].into_iter().filter(|k| k.abs() <= steps));
+            if let Some((candidate, _, fine_score)) = best_timing(&waves, &fine, &centred, 2)
+                && fine_score > score * (1.0 + MIN_GAIN)
+            {
+                rate = candidate.rate_ratio;
+            }
         }
     }
     // Coarse exposure.
