@@ -47,6 +47,36 @@ fn parse_rate(value: Option<&serde_json::Value>) -> Option<f64> {
     (den > 0.0 && num > 0.0).then_some(num / den)
 }
 
+/// Luma bits per sample of an FFmpeg pixel format name: `yuv420p10le` → 10, `gray12le` → 12,
+/// `p010le` → 10; `yuv420p`, `nv12`, `yuv410p` and anything unknown → 8.
+fn pix_fmt_bit_depth(pix_fmt: &str) -> u8 {
+    let base = pix_fmt
+        .strip_suffix("le")
+        .or_else(|| pix_fmt.strip_suffix("be"))
+        .unwrap_or(pix_fmt);
+    let (stem, digits) = base.split_at(base.trim_end_matches(|c: char| c.is_ascii_digit()).len());
+    let bits: Option<u8> =
+        if stem == "gray" || stem == "ya" || (stem.starts_with("yuv") && stem.ends_with('p')) {
+            digits.parse().ok()
+        } else if stem == "p" && digits.len() == 3 {
+            // Semi-planar high depth: p010, p012, p016, p210, p410, …
+            digits[1..].parse().ok()
+        } else {
+            None
+        };
+    bits.filter(|b| (9..=16).contains(b)).unwrap_or(8)
+}
+
+/// Whether a stream is limited ("tv") range: the container's flag decides; without one, JPEG
+/// (`yuvj*`) and grey formats are full range and video formats are limited.
+fn is_limited_range(color_range: Option<&str>, pix_fmt: &str) -> bool {
+    match color_range {
+        Some("tv" | "mpeg") => true,
+        Some("pc" | "jpeg") => false,
+        _ => !(pix_fmt.starts_with("yuvj") || pix_fmt.starts_with("gray")),
+    }
+}
+
 /// Runs `ffprobe` on `path`.
 pub fn probe(path: &Path) -> Result<VideoInfo, CaptureError> {
     let output = Command::new("ffprobe")
@@ -83,17 +113,9 @@ pub fn probe(path: &Path) -> Result<VideoInfo, CaptureError> {
     let width = number("width").ok_or_else(|| bad("video stream has no width".into()))? as usize;
     let height = number("height").ok_or_else(|| bad("video stream has no height".into()))? as usize;
     let pix_fmt = stream.get("pix_fmt").and_then(|v| v.as_str()).unwrap_or("");
-    let bit_depth = if pix_fmt.contains("16") {
-        16
-    } else if pix_fmt.contains("12") {
-        12
-    } else if pix_fmt.contains("10") {
-        10
-    } else {
-        8
-    };
+    let bit_depth = pix_fmt_bit_depth(pix_fmt);
     let range = stream.get("color_range").and_then(|v| v.as_str());
-    let full = range == Some("pc") || pix_fmt.starts_with("yuvj") || pix_fmt.starts_with("gray");
+    let limited_range = is_limited_range(range, pix_fmt);
     let frames = stream
         .get("nb_frames")
         .and_then(|v| v.as_str())
@@ -105,7 +127,7 @@ pub fn probe(path: &Path) -> Result<VideoInfo, CaptureError> {
         width,
         height,
         bit_depth,
-        limited_range: !full,
+        limited_range,
         fps,
         frames,
     })
@@ -300,5 +322,46 @@ impl Drop for FfmpegSource {
             let _ = self.child.kill();
             let _ = self.child.wait();
         }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::{is_limited_range, pix_fmt_bit_depth};
+
+    #[test]
+    fn bit_depth_from_pixel_format_names() {
+        for (name, bits) in [
+            ("yuv420p", 8),
+            ("yuvj420p", 8),
+            ("yuv410p", 8),
+            ("nv12", 8),
+            ("nv21", 8),
+            ("gray", 8),
+            ("yuv420p10le", 10),
+            ("yuv422p10be", 10),
+            ("yuv444p12le", 12),
+            ("yuva444p16le", 16),
+            ("gray10le", 10),
+            ("gray12le", 12),
+            ("gray16be", 16),
+            ("p010le", 10),
+            ("p016le", 16),
+            ("rgb24", 8),
+            ("", 8),
+        ] {
+            assert_eq!(pix_fmt_bit_depth(name), bits, "{name}");
+        }
+    }
+
+    #[test]
+    fn range_flag_wins_over_pixel_format() {
+        assert!(is_limited_range(Some("tv"), "gray"));
+        assert!(is_limited_range(Some("tv"), "yuvj420p"));
+        assert!(!is_limited_range(Some("pc"), "yuv420p"));
+        assert!(is_limited_range(None, "yuv420p10le"));
+        assert!(is_limited_range(Some("unknown"), "nv12"));
+        assert!(!is_limited_range(Some("unknown"), "gray10le"));
+        assert!(!is_limited_range(None, "yuvj420p"));
     }
 }

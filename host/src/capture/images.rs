@@ -1,5 +1,8 @@
 //! Image-sequence sources: a directory of PNG/TIFF frames sorted by name, and a multi-page TIFF.
 //!
+//! Names sort naturally: runs of digits compare as numbers, so `frame10.png` follows
+//! `frame9.png` whether or not the numbers are zero-padded.
+//!
 //! Colour frames are converted to luma (Rec. 709 weights, as the `image` crate does); 16-bit
 //! files stay 16-bit (reading them as 8-bit would throw away the precision PS needs).
 
@@ -74,7 +77,7 @@ impl ImageSequence {
             .filter(|p| is_frame_file(p))
             .collect();
         files = largest_numbered_group(files);
-        files.sort();
+        files.sort_by(|a, b| natural_order(&file_name(a), &file_name(b)).then_with(|| a.cmp(b)));
         let Some(first_path) = files.first() else {
             return Err(CaptureError::Format {
                 path: dir.to_path_buf(),
@@ -146,6 +149,41 @@ fn largest_numbered_group(files: Vec<PathBuf>) -> Vec<PathBuf> {
         .into_values()
         .max_by_key(Vec::len)
         .unwrap_or_default()
+}
+
+/// The file name of `path` (empty when it has none).
+fn file_name(path: &Path) -> String {
+    path.file_name()
+        .map(|n| n.to_string_lossy().into_owned())
+        .unwrap_or_default()
+}
+
+/// Natural order of two names: digit runs compare by numeric value, the rest character by
+/// character.
+fn natural_order(a: &str, b: &str) -> std::cmp::Ordering {
+    use std::cmp::Ordering;
+    let (mut a, mut b) = (a, b);
+    loop {
+        let (Some(ca), Some(cb)) = (a.chars().next(), b.chars().next()) else {
+            return a.len().cmp(&b.len());
+        };
+        if ca.is_ascii_digit() && cb.is_ascii_digit() {
+            let split = |s: &str| s.find(|c: char| !c.is_ascii_digit()).unwrap_or(s.len());
+            let (na, ra) = a.split_at(split(a));
+            let (nb, rb) = b.split_at(split(b));
+            let (ta, tb) = (na.trim_start_matches('0'), nb.trim_start_matches('0'));
+            let order = ta.len().cmp(&tb.len()).then_with(|| ta.cmp(tb));
+            if order != Ordering::Equal {
+                return order;
+            }
+            (a, b) = (ra, rb);
+        } else {
+            if ca != cb {
+                return ca.cmp(&cb);
+            }
+            (a, b) = (&a[ca.len_utf8()..], &b[cb.len_utf8()..]);
+        }
+    }
 }
 
 /// Checks a frame's size against the stream.
@@ -291,5 +329,23 @@ impl FromLuma for u8 {
 impl FromLuma for u16 {
     fn from_luma(y: f32) -> Self {
         y.round().clamp(0.0, 65535.0) as u16
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::natural_order;
+    use std::cmp::Ordering::{Equal, Greater, Less};
+
+    #[test]
+    fn digit_runs_compare_as_numbers() {
+        assert_eq!(natural_order("frame9.png", "frame10.png"), Less);
+        assert_eq!(natural_order("frame10.png", "frame9.png"), Greater);
+        assert_eq!(natural_order("f_0009.png", "f_0010.png"), Less);
+        assert_eq!(natural_order("frame007.png", "frame7.png"), Equal);
+        assert_eq!(natural_order("a2b10.png", "a2b9.png"), Greater);
+        assert_eq!(natural_order("frame1.png", "frame1.tif"), Less);
+        assert_eq!(natural_order("frame", "frame1"), Less);
+        assert_eq!(natural_order("é2", "é10"), Less);
     }
 }

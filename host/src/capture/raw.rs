@@ -38,7 +38,13 @@ impl RawSource {
         }
         let file = std::fs::File::open(path).map_err(io)?;
         let size = file.metadata().map_err(io)?.len() as usize;
-        let frame_bytes = layout.width * layout.height * if layout.bit_depth > 8 { 2 } else { 1 };
+        let frame_bytes = layout
+            .width
+            .checked_mul(layout.height)
+            .and_then(|p| p.checked_mul(if layout.bit_depth > 8 { 2 } else { 1 }))
+            .ok_or_else(|| {
+                CaptureError::Other(format!("raw frame size {layout:?} is too large"))
+            })?;
         if !size.is_multiple_of(frame_bytes) {
             return Err(CaptureError::Format {
                 path: path.to_path_buf(),

@@ -1,6 +1,7 @@
 //! YUV4MPEG2 (`.y4m`) reader: the luma plane of every frame, 8-bit or high bit depth
 //! (`Cmono16`, `C420p10`, … stored little-endian in two bytes). A file ending inside a frame is
-//! an error, not a short stream.
+//! an error, not a short stream. FFmpeg's `XCOLORRANGE=LIMITED` marks limited ("tv") range:
+//! black 16·2^(b−8), white 235·2^(b−8), as for video containers.
 
 use super::{CaptureError, Frame, FrameFormat, FrameSource, Samples};
 use std::io::{BufRead, BufReader, Read};
@@ -40,6 +41,7 @@ impl Y4mSource {
             return Err(bad("not a YUV4MPEG2 file".into()));
         }
         let (mut width, mut height, mut rate, mut colour) = (0usize, 0usize, 0.0f64, "420jpeg");
+        let mut limited_range = false;
         for word in words {
             let (tag, value) = word.split_at(1);
             match tag {
@@ -60,6 +62,7 @@ impl Y4mSource {
                     rate = if den > 0.0 { num / den } else { 0.0 };
                 }
                 "C" => colour = value,
+                "X" if value == "COLORRANGE=LIMITED" => limited_range = true,
                 _ => {}
             }
         }
@@ -71,7 +74,13 @@ impl Y4mSource {
             .and_then(|(_, b)| b.parse().ok())
             .or_else(|| colour.strip_prefix("mono").and_then(|b| b.parse().ok()))
             .unwrap_or(8);
-        let pixels = width * height;
+        if !(8..=16).contains(&bits) {
+            return Err(bad(format!("unsupported bit depth {bits} (C{colour})")));
+        }
+        let pixels = width
+            .checked_mul(height)
+            .filter(|p| p.checked_mul(6).is_some())
+            .ok_or_else(|| bad(format!("frame size {width}x{height} is too large")))?;
         let chroma_pixels = if colour.starts_with("mono") {
             0
         } else if colour.starts_with("444") {
@@ -82,8 +91,14 @@ impl Y4mSource {
             2 * (width.div_ceil(2) * height.div_ceil(2))
         };
         let sample_bytes = if bits > 8 { 2 } else { 1 };
+        let mut format = FrameFormat::full_range(width, height, bits, fps.unwrap_or(rate));
+        if limited_range {
+            let scale = f32::from(1u16 << (bits - 8));
+            format.black_level = 16.0 * scale;
+            format.white_level = 235.0 * scale;
+        }
         Ok(Self {
-            format: FrameFormat::full_range(width, height, bits, fps.unwrap_or(rate)),
+            format,
             path: path.to_path_buf(),
             reader,
             chroma_bytes: chroma_pixels * sample_bytes,
@@ -119,11 +134,18 @@ impl FrameSource for Y4mSource {
             reason: format!("file is truncated inside frame {index}"),
         };
         let pixels = self.format.pixels();
-        let samples = if self.format.bit_depth > 8 {
-            let mut bytes = vec![0u8; 2 * pixels];
-            self.reader
-                .read_exact(&mut bytes)
-                .map_err(|_| truncated(self.index))?;
+        let sample_bytes = if self.format.bit_depth > 8 { 2 } else { 1 };
+        // Read up to one luma plane, growing the buffer as data arrives, so a bad header's
+        // size cannot allocate more than the file holds.
+        let mut bytes = Vec::new();
+        (&mut self.reader)
+            .take((sample_bytes * pixels) as u64)
+            .read_to_end(&mut bytes)
+            .map_err(|_| truncated(self.index))?;
+        if bytes.len() != sample_bytes * pixels {
+            return Err(truncated(self.index));
+        }
+        let samples = if sample_bytes == 2 {
             Samples::U16(
                 bytes
                     .chunks_exact(2)
@@ -131,10 +153,6 @@ impl FrameSource for Y4mSource {
                     .collect(),
             )
         } else {
-            let mut bytes = vec![0u8; pixels];
-            self.reader
-                .read_exact(&mut bytes)
-                .map_err(|_| truncated(self.index))?;
             Samples::U8(bytes)
         };
         let skipped = std::io::copy(
