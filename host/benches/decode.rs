@@ -1,9 +1,11 @@
 //! Decoding speed: 1280×720 8-bit, 4 LEDs, 32 and 128 frames (targets ≤ 15 ms and ≤ 50 ms on
 //! 2 cores), against a straightforward per-pixel least-squares implementation.
 //!
-//! Measured on the 2-core CI machine (criterion medians): 32 frames 14.0 ms (straightforward,
-//! 32 frames: 346 ms, so 25× faster); 128 frames 46.4 ms. Before the kernel and fit rework:
-//! 88 ms and 223 ms. The 128-frame case includes the five-LED count check (`check_led_count`).
+//! Measured on the 2-core CI machine (criterion medians, several runs on a shared VM whose
+//! memory speed varies from run to run): 32 frames 12.3–14.8 ms (straightforward: 346–438 ms,
+//! ~28× slower); 128 frames 30.6–58.9 ms, median of six runs 48.3 ms. Before the kernel and
+//! fit rework: 88 ms and 223 ms. The 128-frame case includes the five-LED count check
+//! (`check_led_count`).
 
 use criterion::{BatchSize, Criterion, criterion_group, criterion_main};
 use meb::capture::memory::MemorySource;
