@@ -19,15 +19,7 @@ impl SurfaceGradients {
     /// Slopes of a normal field inside its mask; normals facing away from the camera (n_z ≤ 0)
     /// are left out and slopes are clipped to ±`max_slope`. NaN normals inside the mask are an error.
     pub fn from_normals(field: &NormalField, max_slope: f64) -> Result<Self, IntegrateError> {
-        let shape = field.mask.dim();
-        let (nr, nc, three) = field.normals.dim();
-        if (nr, nc) != shape || three != 3 {
-            return Err(IntegrateError::SizeMismatch {
-                what: "normal field".into(),
-                got: (nr, nc),
-                expected: shape,
-            });
-        }
+        check_field_shape(field)?;
         Self::from_normal_views(field.normals.view(), field.mask.view(), max_slope)
     }
 
@@ -105,6 +97,20 @@ impl SurfaceGradients {
         }
         Ok(())
     }
+}
+
+/// Checks that a normal field is H×W×3 over its H×W mask.
+pub(crate) fn check_field_shape(field: &NormalField) -> Result<(), IntegrateError> {
+    let shape = field.mask.dim();
+    let (nr, nc, three) = field.normals.dim();
+    if (nr, nc) != shape || three != 3 {
+        return Err(IntegrateError::SizeMismatch {
+            what: "normal field".into(),
+            got: (nr, nc),
+            expected: shape,
+        });
+    }
+    Ok(())
 }
 
 #[cfg(test)]

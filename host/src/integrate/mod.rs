@@ -130,15 +130,8 @@ pub fn integrate_normals(
     config: &IntegrateConfig,
     initial: Option<&Array2<f32>>,
 ) -> Result<Integration, IntegrateError> {
+    gradients::check_field_shape(field)?;
     let shape = field.mask.dim();
-    let (nr, nc, three) = field.normals.dim();
-    if (nr, nc) != shape || three != 3 {
-        return Err(IntegrateError::SizeMismatch {
-            what: "normal field".into(),
-            got: (nr, nc),
-            expected: shape,
-        });
-    }
     check_pitch(pitch_mm)?;
     let window = Window::around(&field.mask).ok_or(IntegrateError::EmptyMask)?;
     let gradients = SurfaceGradients::from_normal_views(
