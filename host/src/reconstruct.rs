@@ -2,22 +2,28 @@
 //! refinement (SPEC §5–§6).
 //!
 //! The first pass uses light vectors at the plane z = 0; every further pass recomputes each
-//! pixel's light vectors L_i(X(p)) at X(p) = (x, y, z(p)) from the previous depth, re-solves the
-//! normals and re-integrates (warm-started). Depth zero is put on the object's outline, which
-//! Integration fixes depth only up to a constant, and the light vectors depend on it: after each
-//! integration the constant is chosen by a golden-section search that minimises the Lambertian
-//! misfit of the pixels lit by more than three LEDs ([`model_misfit`]), bracketed to ±`offset
-//! search` mm around the outline-anchored depth.
+//! pixel's light vectors L_i(X(p)) at the point X(p) of its ray at the previous depth, re-solves
+//! the normals and re-integrates (warm-started). Pixels lit by two LEDs and holes inside the
+//! object are integrated with the rest ([`crate::integrate::coverage`]). Integration fixes depth
+//! only up to a constant per separate piece of the object (a scale for a perspective camera), and
+//! the light vectors depend on it: after each integration every piece's constant is chosen by a
+//! golden-section search that minimises the Lambertian misfit of its pixels lit by more than three
+//! LEDs ([`model_misfit`]), bracketed to ±`offset_search_mm` around the outline-anchored depth.
 
-use crate::integrate::{IntegrateConfig, IntegrateError, Integration, integrate_normals};
+use crate::integrate::{
+    Confidence, IntegrateConfig, IntegrateError, Integration, SurfaceEvidence, integrate_surface,
+};
 use crate::photometric::{
     Lights, PhotometricConfig, PhotometricError, PhotometricResult, estimate_normals, model_misfit,
 };
-use crate::rig::Rig;
-use crate::types::LedImages;
-use ndarray::Array2;
+use crate::rig::{Projection, Rig};
+use crate::types::{LedImages, NormalField};
+use ndarray::{Array2, Zip};
 use std::time::Instant;
 use thiserror::Error;
+
+/// Bilateral reweightings of the near-field passes before the last.
+const EARLY_PASS_REWEIGHTINGS: usize = 20;
 
 /// Settings of the whole reconstruction.
 #[derive(Debug, Clone, PartialEq, serde::Serialize, serde::Deserialize)]
@@ -97,6 +103,34 @@ pub struct Reconstruction {
     pub timings: Vec<StageTiming>,
 }
 
+impl Reconstruction {
+    /// Normals of every reconstructed pixel: measured where three or more LEDs lit it, the
+    /// integrator's choice for two-LED and filled pixels; the mask is the reconstructed pixels.
+    pub fn surface_normals(&self) -> NormalField {
+        let measured = &self.photometric.field;
+        let mut normals = measured.normals.clone();
+        Zip::indexed(&self.integration.confidence).for_each(|(r, c), &k| {
+            for j in 0..3 {
+                normals[(r, c, j)] = match k {
+                    Confidence::Measured => measured.normals[(r, c, j)],
+                    Confidence::None => f32::NAN,
+                    _ => self.integration.completed_normals[(r, c, j)],
+                };
+            }
+        });
+        NormalField {
+            normals,
+            albedo: measured.albedo.clone(),
+            mask: self.integration.kept.clone(),
+        }
+    }
+
+    /// How each pixel's depth is known.
+    pub fn confidence(&self) -> &Array2<Confidence> {
+        &self.integration.confidence
+    }
+}
+
 /// Reconstructs a surface from LED images taken with `rig`.
 pub fn reconstruct(
     images: &LedImages,
@@ -118,7 +152,8 @@ pub fn reconstruct(
             images.images.len()
         )));
     }
-    let pitch = rig.camera.pitch_mm();
+    config.integrate.validate()?;
+    let projection = rig.camera.projection();
     let mut timings = Vec::new();
     let mut time = |stage: String, start: Instant| {
         timings.push(StageTiming {
@@ -155,17 +190,26 @@ pub fn reconstruct(
         time(format!("photometric stereo (pass {})", pass + 1), start);
         object_mask.get_or_insert_with(|| ps.object_mask.clone());
         let start = Instant::now();
-        let mut integration = integrate_normals(&ps.field, pitch, &config.integrate, depth)?;
+        let evidence = SurfaceEvidence {
+            field: &ps.field,
+            planes: &ps.planes,
+            fill: Some(&ps.fill),
+        };
+        // Early passes only feed the light vectors of the next: a few reweightings suffice.
+        let mut integrate_config = config.integrate.clone();
+        if pass + 1 < passes {
+            integrate_config.bilateral.max_iterations = integrate_config
+                .bilateral
+                .max_iterations
+                .min(EARLY_PASS_REWEIGHTINGS);
+        }
+        let mut integration = integrate_surface(&evidence, &projection, &integrate_config, depth)?;
         time(format!("integration (pass {})", pass + 1), start);
         if matches!(config.light_model, LightModel::NearField { .. })
             && config.offset_search_mm > 0.0
         {
             let start = Instant::now();
-            let offset = best_depth_offset(images, rig, &integration.depth.depth_mm, &ps, config);
-            integration
-                .depth
-                .depth_mm
-                .mapv_inplace(|z| z + offset as f32);
+            place_pieces(images, rig, noise, &ps, &mut integration, config);
             time(format!("depth offset search (pass {})", pass + 1), start);
         }
         previous = Some((ps, integration));
@@ -179,11 +223,76 @@ pub fn reconstruct(
     })
 }
 
-/// The constant added to `depth` that minimises the Lambertian misfit (module docs).
-fn best_depth_offset(
+/// `depth` with the pixels of `piece` moved by `offset` mm towards the camera: a shift for an
+/// orthographic camera, a scale about the camera centre for a perspective one (which moves the
+/// plane z = 0 by `offset`).
+fn moved_piece(
+    depth: &Array2<f32>,
+    pieces: &Array2<u32>,
+    piece: u32,
+    offset: f64,
+    projection: &Projection,
+) -> Array2<f32> {
+    let mut out = depth.clone();
+    Zip::from(&mut out).and(pieces).for_each(|z, &p| {
+        if p == piece && z.is_finite() {
+            *z = match projection {
+                Projection::Orthographic { .. } => (f64::from(*z) + offset) as f32,
+                Projection::Perspective { distance_mm, .. } => {
+                    let d = distance_mm - f64::from(*z);
+                    (distance_mm - d * (1.0 - offset / distance_mm)) as f32
+                }
+            };
+        }
+    });
+    out
+}
+
+/// Moves every piece of the integrated depth to the offset that minimises the Lambertian
+/// misfit of its pixels lit by more than three LEDs (module docs); pieces with too few such
+/// pixels keep their outline anchor.
+fn place_pieces(
     images: &LedImages,
     rig: &Rig,
+    noise: Option<&Array2<f32>>,
+    ps: &PhotometricResult,
+    integration: &mut Integration,
+    config: &ReconstructConfig,
+) {
+    let projection = rig.camera.projection();
+    for piece in 0..integration.pieces as u32 {
+        let offset = best_piece_offset(
+            images,
+            rig,
+            noise,
+            &integration.depth.depth_mm,
+            &integration.piece,
+            piece,
+            ps,
+            config,
+        );
+        if offset != 0.0 {
+            integration.depth.depth_mm = moved_piece(
+                &integration.depth.depth_mm,
+                &integration.piece,
+                piece,
+                offset,
+                &projection,
+            );
+        }
+    }
+}
+
+/// The offset of one piece that minimises the Lambertian misfit (module docs), 0 when the piece
+/// has too few pixels lit by more than three LEDs.
+#[allow(clippy::too_many_arguments)]
+fn best_piece_offset(
+    images: &LedImages,
+    rig: &Rig,
+    noise: Option<&Array2<f32>>,
     depth: &Array2<f32>,
+    pieces: &Array2<u32>,
+    piece: u32,
     ps: &PhotometricResult,
     config: &ReconstructConfig,
 ) -> f64 {
@@ -191,7 +300,7 @@ fn best_depth_offset(
     let pixels: Vec<(usize, usize)> = ps
         .lit_count
         .indexed_iter()
-        .filter(|(p, n)| **n > 3 && depth[*p].is_finite())
+        .filter(|(p, n)| **n > 3 && pieces[*p] == piece && depth[*p].is_finite())
         .map(|(p, _)| p)
         .collect();
     if pixels.len() < 16 {
@@ -199,12 +308,15 @@ fn best_depth_offset(
     }
     let step = pixels.len().div_ceil(20_000);
     let pixels: Vec<(usize, usize)> = pixels.into_iter().step_by(step).collect();
+    let projection = rig.camera.projection();
     let misfit = |offset: f64| {
-        let shifted = depth.mapv(|z| z + offset as f32);
+        let moved = moved_piece(depth, pieces, piece, offset, &projection);
         model_misfit(
             images,
-            &Lights::near_field(rig, Some(&shifted)),
+            &Lights::near_field(rig, Some(&moved)),
             &pixels,
+            noise,
+            &ps.noise_gains,
             &config.photometric,
         )
     };

@@ -40,3 +40,30 @@ pub struct DepthMap {
     /// Grid pitch h in mm per pixel.
     pub pitch_mm: f64,
 }
+
+/// A pixel lit by exactly two LEDs: its normal n lies on the great circle n·`across` = 0
+/// (across = A₂·L₁ − A₁·L₂ for values A and light vectors L) on the side n·`towards` > 0.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct NormalPlane {
+    /// Pixel (row, column).
+    pub pixel: (usize, usize),
+    /// The normal is perpendicular to it.
+    pub across: nalgebra::Vector3<f64>,
+    /// The normal has a positive component along it (e.g. L₁/|L₁| + L₂/|L₂|).
+    pub towards: nalgebra::Vector3<f64>,
+}
+
+/// How a reconstructed pixel's depth is known (written as `confidence.npy`, one byte a pixel).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, PartialOrd, Ord, Default)]
+#[repr(u8)]
+pub enum Confidence {
+    /// 0: not reconstructed.
+    #[default]
+    None = 0,
+    /// 1: filled by the integrator (a hole inside the object, lit by fewer than two LEDs).
+    Filled = 1,
+    /// 2: lit by two LEDs; normal from the two measurements and the surface's integrability.
+    TwoLeds = 2,
+    /// 3: full photometric-stereo normal from three or more LEDs.
+    Measured = 3,
+}

@@ -1,8 +1,11 @@
-//! Light vectors per pixel: the distant model L_i = L_i(0) or the near-field L_i(X(p)) with
-//! X(p) = (x, y, z(p)) from the current depth estimate (SPEC §5, thesis Eq. 3.3).
+//! Light and view vectors per pixel: the distant model L_i = L_i(0) or the near-field L_i(X(p))
+//! with X(p) the point of pixel p's ray at the current depth estimate z(p) (SPEC §5, thesis
+//! Eq. 3.3; for a perspective camera the ray runs through the camera centre), and checks of the
+//! light geometry (three independent directions are needed).
 
+use super::PhotometricError;
 use crate::rig::Rig;
-use nalgebra::Vector3;
+use nalgebra::{DMatrix, Vector3};
 use ndarray::Array2;
 
 /// Where each pixel's light vectors come from.
@@ -72,16 +75,106 @@ impl Lights<'_> {
                 depth_mm,
                 scale,
             } => {
-                let (x, y) = rig.camera.pixel_centre_xy(row as f64, col as f64);
                 let z = depth_mm
                     .and_then(|d| d.get((row, col)).copied())
                     .filter(|z| z.is_finite())
                     .map_or(0.0, f64::from);
-                let point = Vector3::new(x, y, z);
+                let point = rig.camera.ray(row as f64, col as f64).at(z);
                 for (slot, led) in out.iter_mut().zip(&rig.leds) {
                     *slot = led.light_vector_at(&point) * *scale;
                 }
             }
         }
     }
+
+    /// Unit vector from pixel (row, col)'s surface point towards the camera.
+    pub fn view_at(&self, row: usize, col: usize) -> Vector3<f64> {
+        match self {
+            Lights::Distant(_) => Vector3::z(),
+            Lights::NearField { rig, .. } => rig.camera.ray(row as f64, col as f64).towards_camera(),
+        }
+    }
+
+    /// One light vector per LED for geometry checks: the distant vectors, or L_i at the origin.
+    fn representative(&self) -> Vec<Vector3<f64>> {
+        match self {
+            Lights::Distant(v) => v.clone(),
+            Lights::NearField { rig, .. } => rig.distant_light_vectors(),
+        }
+    }
+
+    /// Checks the vectors are finite and non-zero and that a near-field rig and depth fit
+    /// images of `shape`.
+    pub fn check(&self, shape: (usize, usize)) -> Result<(), PhotometricError> {
+        match self {
+            Lights::Distant(v) => {
+                for (i, l) in v.iter().enumerate() {
+                    if !l.iter().all(|c| c.is_finite()) || l.norm() == 0.0 {
+                        return Err(PhotometricError::BadLight(i + 1));
+                    }
+                }
+            }
+            Lights::NearField { rig, depth_mm, .. } => {
+                let cam = (rig.camera.height, rig.camera.width);
+                if cam != shape {
+                    return Err(PhotometricError::SizeMismatch {
+                        what: "LED images vs the rig's camera".into(),
+                        got_rows: shape.0,
+                        got_cols: shape.1,
+                        rows: cam.0,
+                        cols: cam.1,
+                    });
+                }
+                if let Some(d) = depth_mm {
+                    super::check_shape("depth estimate", d, shape)?;
+                }
+            }
+        }
+        Ok(())
+    }
+}
+
+/// Numerical rank of the light vectors (singular values above 10⁻⁶ of the largest).
+pub(crate) fn light_rank(lights: &Lights) -> usize {
+    let v = lights.representative();
+    if v.is_empty() {
+        return 0;
+    }
+    let m = DMatrix::from_fn(v.len(), 3, |i, j| v[i][j] / v[i].norm().max(f64::MIN_POSITIVE));
+    let singular = m.singular_values();
+    let largest = singular.max();
+    singular.iter().filter(|&&s| s > 1e-6 * largest).count()
+}
+
+/// What is wrong with the light geometry, in words: its rank, parallel (duplicated) pairs and
+/// vectors pointing away from the camera.
+pub(crate) fn describe_geometry(lights: &Lights) -> String {
+    let v = lights.representative();
+    let mut parts = vec![match light_rank(lights) {
+        0 | 1 => "all light vectors point the same way".to_string(),
+        2 => "the light vectors span only a plane (coplanar or collinear LEDs)".to_string(),
+        _ => "the light vectors span space".to_string(),
+    }];
+    for i in 0..v.len() {
+        for j in i + 1..v.len() {
+            let (a, b) = (v[i].normalize(), v[j].normalize());
+            if a.cross(&b).norm() < 1e-6 {
+                let how = if a.dot(&b) > 0.0 { "parallel (duplicated?)" } else { "opposite" };
+                parts.push(format!("LEDs {} and {} are {how}", i + 1, j + 1));
+            }
+        }
+    }
+    let away: Vec<String> = v
+        .iter()
+        .enumerate()
+        .filter(|(_, l)| l.z < 0.0)
+        .map(|(i, _)| (i + 1).to_string())
+        .collect();
+    if !away.is_empty() {
+        parts.push(format!(
+            "LED {} points away from the camera (negative intensity?)",
+            away.join(", ")
+        ));
+    }
+    parts.join("; ")
 }

@@ -178,10 +178,10 @@ impl SimulatedCapture {
             field: field.into(),
             reason,
         };
-        rig.validate().map_err(|e| bad("rig", e.to_string()))?;
+        rig.validate()?;
         validate(&config, &scene)?;
         let leds = rig.leds.len();
-        let table = ChipTable::new(leds as u8).map_err(|e| bad("rig", e.to_string()))?;
+        let table = ChipTable::new(leds as u8)?;
         let n = table.chips();
         let phases = match &config.phases_chips {
             Some(p) if p.len() == leds => p.clone(),
@@ -531,6 +531,7 @@ mod tests {
             distance_mm: 420.0,
             fov_deg: None,
             pixel_pitch_mm: Some(pitch),
+            intrinsics: None,
         };
         rig
     }
