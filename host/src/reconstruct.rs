@@ -260,22 +260,22 @@ fn place_pieces(
     config: &ReconstructConfig,
 ) {
     let projection = rig.camera.projection();
-    for piece in 0..integration.pieces as u32 {
+    for part in 0..integration.parts as u32 {
         let offset = best_piece_offset(
             images,
             rig,
             noise,
             &integration.depth.depth_mm,
-            &integration.piece,
-            piece,
+            &integration.part,
+            part,
             ps,
             config,
         );
         if offset != 0.0 {
             integration.depth.depth_mm = moved_piece(
                 &integration.depth.depth_mm,
-                &integration.piece,
-                piece,
+                &integration.part,
+                part,
                 offset,
                 &projection,
             );

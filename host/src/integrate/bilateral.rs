@@ -61,6 +61,26 @@ pub(crate) fn bilateral(
     units: f64,
     stiffness: f64,
 ) -> Vec<SideWeights> {
+    sigmoid_weights(topology, x, slopes, units, stiffness)
+        .into_iter()
+        .enumerate()
+        .map(|(k, w)| {
+            let (sx, sy) = slopes[k];
+            let scale = confidence[k] / (1.0 + sx * sx + sy * sy);
+            w.map(|v| v * scale)
+        })
+        .collect()
+}
+
+/// The sigmoid weights w⁺, w⁻ of every node along both axes (right, down, left, up), before the
+/// n_z² and confidence factors.
+fn sigmoid_weights(
+    topology: &Topology,
+    x: &[f64],
+    slopes: &[(f64, f64)],
+    units: f64,
+    stiffness: f64,
+) -> Vec<SideWeights> {
     let sigmoid = |t: f64| 1.0 / (1.0 + (-t).exp());
     topology
         .neighbours
@@ -73,7 +93,7 @@ pub(crate) fn bilateral(
             // Axis 0: right (0) / left (2); axis 1: down (1) / up (3).
             for (forward, backward) in [(0, 2), (1, 3)] {
                 let (f, b) = (nb[forward], nb[backward]);
-                let (wf, wb) = match (f != NONE, b != NONE) {
+                (w[forward], w[backward]) = match (f != NONE, b != NONE) {
                     (true, true) => {
                         let ahead = (x[f as usize] - x[k]) * units;
                         let behind = (x[k] - x[b as usize]) * units;
@@ -84,10 +104,33 @@ pub(crate) fn bilateral(
                     (false, true) => (0.0, 1.0),
                     (false, false) => (0.0, 0.0),
                 };
-                w[forward] = confidence[k] * nz2 * wf;
-                w[backward] = confidence[k] * nz2 * wb;
             }
             w
+        })
+        .collect()
+}
+
+/// Edges (right, down of each node) where both one-sided equations have turned away — the
+/// forward weight of the node and the backward weight of its neighbour both below `cut`: the
+/// depth discontinuities the bilateral integrator found.
+pub(crate) fn discontinuities(
+    topology: &Topology,
+    x: &[f64],
+    slopes: &[(f64, f64)],
+    units: f64,
+    stiffness: f64,
+    cut: f64,
+) -> Vec<[bool; 2]> {
+    let w = sigmoid_weights(topology, x, slopes, units, stiffness);
+    topology
+        .neighbours
+        .iter()
+        .enumerate()
+        .map(|(k, nb)| {
+            [0, 1].map(|d| {
+                let j = nb[d];
+                j != NONE && w[k][d] < cut && w[j as usize][d + 2] < cut
+            })
         })
         .collect()
 }

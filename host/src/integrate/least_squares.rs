@@ -89,6 +89,22 @@ impl Topology {
 
     /// Connected piece of every node and the number of pieces.
     pub fn components(&self) -> (Vec<u32>, usize) {
+        self.components_without(&[])
+    }
+
+    /// Connected pieces when the edges marked in `cut` (right, down of each node; empty for
+    /// none) are removed.
+    pub fn components_without(&self, cut: &[[bool; 2]]) -> (Vec<u32>, usize) {
+        let is_cut = |k: usize, d: usize| {
+            // Right/down edges are stored at k; left/up ones at the neighbour.
+            match d {
+                0 | 1 => cut.get(k).is_some_and(|c| c[d]),
+                _ => {
+                    let j = self.neighbours[k][d];
+                    j != NONE && cut.get(j as usize).is_some_and(|c| c[d - 2])
+                }
+            }
+        };
         let mut label = vec![NONE; self.len()];
         let mut count = 0u32;
         let mut stack = Vec::new();
@@ -99,8 +115,8 @@ impl Topology {
             label[start] = count;
             stack.push(start);
             while let Some(k) = stack.pop() {
-                for &j in &self.neighbours[k] {
-                    if j != NONE && label[j as usize] == NONE {
+                for (d, &j) in self.neighbours[k].iter().enumerate() {
+                    if j != NONE && label[j as usize] == NONE && !is_cut(k, d) {
                         label[j as usize] = count;
                         stack.push(j as usize);
                     }

@@ -264,6 +264,11 @@ pub struct Integration {
     pub pieces: usize,
     /// Piece of every kept pixel (`u32::MAX` elsewhere).
     pub piece: Array2<u32>,
+    /// Parts: the pieces split further along depth discontinuities that the bilateral
+    /// integrator found all the way across one (the normals cannot tell their relative depth).
+    pub parts: usize,
+    /// Part of every kept pixel (`u32::MAX` elsewhere).
+    pub part: Array2<u32>,
     /// How each pixel's depth is known ([`Confidence::None`] where not kept).
     pub confidence: Array2<Confidence>,
     /// Normals the integrator chose for two-LED and filled pixels (NaN elsewhere).
@@ -637,6 +642,22 @@ fn solve_window(
         }
     }
     anchor(&mut depth, &topology, &piece_of_node, pieces, config.anchor);
+    // Parts: pieces further split where the bilateral integrator found a depth discontinuity
+    // all the way across (their relative depth is unknown to the normals).
+    let (part_of_node, parts) = if bilateral {
+        let cut = bilateral::discontinuities(
+            &topology,
+            &x,
+            &slopes,
+            grid.pixel_units(),
+            config.bilateral.stiffness,
+            DISCONTINUITY_WEIGHT,
+        );
+        let min_part = MIN_PART_PIXELS.max(topology.len() / 100);
+        absorb_small_parts(&topology, topology.components_without(&cut), min_part)
+    } else {
+        (piece_of_node.clone(), pieces)
+    };
     let depth_mm = depth.mapv(|u| if u.is_finite() { grid.to_mm(u) } else { f64::NAN });
     let valid = depth_mm.mapv(f64::is_finite);
     let (kept, kept_fraction) = filter_artefacts(&depth_mm, &valid, &config.filter);
@@ -654,6 +675,8 @@ fn solve_window(
         passes,
         pieces,
         piece: Array2::from_elem(shape, u32::MAX),
+        parts,
+        part: Array2::from_elem(shape, u32::MAX),
         confidence: Array2::from_elem(shape, Confidence::None),
         completed_normals: Array3::from_elem((shape.0, shape.1, 3), f32::NAN),
     };
@@ -668,6 +691,7 @@ fn solve_window(
         out.depth.depth_mm[full] = depth_mm[(r, c)] as f32;
         out.kept[full] = true;
         out.piece[full] = piece_of_node[k];
+        out.part[full] = part_of_node[k];
         let class = problem.class[(r, c)];
         out.confidence[full] = class;
         if class != Confidence::Measured {
@@ -678,6 +702,58 @@ fn solve_window(
         }
     }
     Ok(out)
+}
+
+/// A bilateral weight below which both sides of an edge have turned away from it.
+const DISCONTINUITY_WEIGHT: f64 = 0.05;
+
+/// Fewest pixels of a part (or 1 % of the mask, if more); smaller ones join a neighbour.
+const MIN_PART_PIXELS: usize = 200;
+
+/// Merges parts with fewer than `min` nodes into a neighbouring part and numbers the rest
+/// 0, 1, …; a small part with no neighbour (a piece of its own) stays.
+fn absorb_small_parts(
+    topology: &Topology,
+    (mut label, count): (Vec<u32>, usize),
+    min: usize,
+) -> (Vec<u32>, usize) {
+    let mut size = vec![0usize; count];
+    for &l in &label {
+        size[l as usize] += 1;
+    }
+    let small = |l: u32, size: &[usize]| size[l as usize] < min;
+    loop {
+        let mut changed = false;
+        for k in 0..topology.len() {
+            if !small(label[k], &size) {
+                continue;
+            }
+            let big = topology.neighbours[k]
+                .iter()
+                .filter(|&&j| j != NONE)
+                .map(|&j| label[j as usize])
+                .find(|&l| !small(l, &size));
+            if let Some(l) = big {
+                size[label[k] as usize] -= 1;
+                size[l as usize] += 1;
+                label[k] = l;
+                changed = true;
+            }
+        }
+        if !changed {
+            break;
+        }
+    }
+    let mut renumber = vec![NONE; count];
+    let mut next = 0u32;
+    for l in &mut label {
+        if renumber[*l as usize] == NONE {
+            renumber[*l as usize] = next;
+            next += 1;
+        }
+        *l = renumber[*l as usize];
+    }
+    (label, next as usize)
 }
 
 /// The bounding box of a mask: everything outside it is unmasked, so integrating inside it gives
