@@ -35,6 +35,12 @@ enum Command {
 
 fn main() -> ExitCode {
     let cli = Cli::parse();
+    // An interrupted command leaves its previous output and no temporary folder behind.
+    if let Err(err) = meb::export::files::remove_temporaries_on_signal() {
+        eprintln!(
+            "warning: cannot watch for interrupts ({err}); an interrupted run may leave a temporary folder"
+        );
+    }
     let result = match cli.command {
         Command::Demo(args) => cli::demo::run(&args),
         Command::Integrate(args) => cli::integrate::run(&args),
@@ -48,8 +54,28 @@ fn main() -> ExitCode {
     match result {
         Ok(()) => ExitCode::SUCCESS,
         Err(err) => {
-            eprintln!("error: {err:#}");
+            eprintln!("error: {}", error_chain(&err));
             ExitCode::FAILURE
         }
     }
+}
+
+/// The error and its causes on one line, "outer: inner: …", leaving out a cause whose text
+/// the message before it already contains (libraries that print their source in their own
+/// message would otherwise show it twice, as in "entity not found: entity not found").
+fn error_chain(err: &anyhow::Error) -> String {
+    let mut line = String::new();
+    let mut previous = String::new();
+    for cause in err.chain() {
+        let text = cause.to_string();
+        if text.is_empty() || previous.contains(&text) {
+            continue;
+        }
+        if !line.is_empty() {
+            line.push_str(": ");
+        }
+        line.push_str(&text);
+        previous = text;
+    }
+    line
 }

@@ -2,7 +2,7 @@
 //! σ = 1 %, background 0 dB SNR, exposure 0.8, gamma 2.2) simulated, decoded and reconstructed
 //! must reach depth RMSE ≤ 0.5 mm over ≥ 95 % of the surface lit by ≥ 3 LEDs (thesis: 2.69 mm).
 
-use meb::demo::{decoded_reconstruct_config, run, thesis_capture_config, thesis_decode_config};
+use meb::demo::{run, thesis_capture_config, thesis_decode_config};
 use meb::reconstruct::ReconstructConfig;
 use meb::rig::Rig;
 use meb::simulate::{Scene, SceneObject};
@@ -18,7 +18,7 @@ fn simulated_sphere_depth_rmse_within_half_a_millimetre() {
         Scene::single(SceneObject::sphere(48.0)),
         thesis_capture_config(7),
         &thesis_decode_config(4),
-        &decoded_reconstruct_config(),
+        &ReconstructConfig::decoded_capture(),
         &mut |_, _| {},
     )
     .unwrap();

@@ -78,20 +78,9 @@ impl FrameSource for RawSource {
             path: self.path.clone(),
             source,
         };
-        let samples = if self.format.bit_depth > 8 {
-            let mut bytes = vec![0u8; 2 * pixels];
-            self.reader.read_exact(&mut bytes).map_err(io)?;
-            Samples::U16(
-                bytes
-                    .chunks_exact(2)
-                    .map(|b| u16::from_le_bytes([b[0], b[1]]))
-                    .collect(),
-            )
-        } else {
-            let mut bytes = vec![0u8; pixels];
-            self.reader.read_exact(&mut bytes).map_err(io)?;
-            Samples::U8(bytes)
-        };
+        let mut bytes = vec![0u8; Samples::bytes_per_sample(self.format.bit_depth) * pixels];
+        self.reader.read_exact(&mut bytes).map_err(io)?;
+        let samples = Samples::from_le_bytes(bytes, self.format.bit_depth);
         let frame = Frame {
             index: self.index,
             samples,
