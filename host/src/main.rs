@@ -35,12 +35,6 @@ enum Command {
 
 fn main() -> ExitCode {
     let cli = Cli::parse();
-    // An interrupted command leaves its previous output and no temporary folder behind.
-    if let Err(err) = meb::export::files::remove_temporaries_on_signal() {
-        eprintln!(
-            "warning: cannot watch for interrupts ({err}); an interrupted run may leave a temporary folder"
-        );
-    }
     let result = match cli.command {
         Command::Demo(args) => cli::demo::run(&args),
         Command::Integrate(args) => cli::integrate::run(&args),

@@ -2,7 +2,9 @@
 //! rule, and writing a reconstruction's folder.
 
 use anyhow::{Context, Result};
-use meb::export::files::{FilesError, OutputFolder, Replace, read_mask};
+use meb::export::files::{
+    FilesError, OutputFolder, Replace, read_mask, remove_temporaries_on_signal,
+};
 use meb::export::report::{ReportInputs, WrittenReport, write_report};
 use meb::metrics::{AngularErrors, DepthErrors};
 use meb::timing::StageTiming;
@@ -28,8 +30,19 @@ pub fn load_mask(path: &Path) -> Result<Array2<bool>> {
 
 /// Starts the atomic output folder `out` of `command` (see `meb::export::files::folder`):
 /// refuses, before any work, a non-empty `out` that is not an earlier output of `command`
-/// unless `force`.
+/// unless `force`. The first call installs the handler that deletes the temporary folder on
+/// SIGINT/SIGTERM/SIGHUP (only commands that write folders get it: `meb device emulate`
+/// handles SIGTERM itself).
 pub fn output_folder(out: &Path, command: &str, force: bool) -> Result<OutputFolder> {
+    static SIGNALS: std::sync::Once = std::sync::Once::new();
+    SIGNALS.call_once(|| {
+        if let Err(err) = remove_temporaries_on_signal() {
+            eprintln!(
+                "warning: cannot watch for interrupts ({err}); an interrupted run may leave a \
+                 temporary folder, which the next run into the same folder removes"
+            );
+        }
+    });
     let replace = if force {
         Replace::Anything
     } else {
