@@ -5,11 +5,17 @@
 //! pixel's light vectors L_i(X(p)) at the point X(p) of its ray at the previous depth, re-solves
 //! the normals and re-integrates (warm-started). Pixels lit by two LEDs and holes inside the
 //! object are integrated with the rest ([`crate::integrate::coverage`]). Integration fixes depth
-//! only up to a constant per separate piece of the object (a scale for a perspective camera), and
-//! the light vectors depend on it: after each integration every piece's constant is chosen by a
-//! golden-section search that minimises the Lambertian misfit of its pixels lit by more than three
-//! LEDs ([`model_misfit`]), bracketed to ±`offset_search_mm` around the outline-anchored depth.
+//! only up to a constant per separate part of the object (a scale for a perspective camera): per
+//! piece of the mask, and per part the bilateral integrator cut off along a depth discontinuity.
+//! The light vectors depend on it: after each integration every part's constant is chosen by a
+//! golden-section search that minimises the Lambertian misfit of its pixels lit by more than
+//! three LEDs ([`model_misfit`]), bracketed to ±`offset_search_mm` around the integrated depth.
+//!
+//! [`from_decoded`] is the one path from a decoded capture to a reconstruction: `meb
+//! reconstruct`, `meb demo` and the hardware-in-the-loop tests all call it, with the
+//! decoded-capture settings of [`ReconstructConfig::decoded_capture`].
 
+use crate::demod::Decoded;
 use crate::integrate::{
     Confidence, IntegrateConfig, IntegrateError, Integration, SurfaceEvidence, integrate_surface,
 };
@@ -17,6 +23,7 @@ use crate::photometric::{
     Lights, PhotometricConfig, PhotometricError, PhotometricResult, estimate_normals, model_misfit,
 };
 use crate::rig::{Projection, Rig};
+pub use crate::timing::StageTiming;
 use crate::types::{LedImages, NormalField};
 use ndarray::{Array2, Zip};
 use std::time::Instant;
@@ -46,6 +53,16 @@ impl Default for ReconstructConfig {
             light_model: LightModel::default(),
             offset_search_mm: 60.0,
         }
+    }
+}
+
+impl ReconstructConfig {
+    /// Settings for decoded captures. They are the defaults: with the decoder's noise map the
+    /// shadow test is statistical per LED ([`crate::photometric::solve`]), which replaced a
+    /// fixed 7 % ratio (an LED image's noise can be 3.5 times the level noise, so grazing and
+    /// shadowed values were mixed up; the ratio hid that at the cost of coverage).
+    pub fn decoded_capture() -> Self {
+        Self::default()
     }
 }
 
@@ -81,15 +98,6 @@ pub enum ReconstructError {
     /// Integration failed.
     #[error(transparent)]
     Integrate(#[from] IntegrateError),
-}
-
-/// Wall-clock time of one stage.
-#[derive(Debug, Clone, serde::Serialize)]
-pub struct StageTiming {
-    /// Stage name.
-    pub stage: String,
-    /// Milliseconds.
-    pub ms: f64,
 }
 
 /// Normals, albedo, depth and timings.
@@ -354,4 +362,48 @@ fn best_piece_offset(
     } else {
         best
     }
+}
+
+/// Reconstructs a decoded capture taken with `rig`: the pixels the decoder flagged as
+/// saturated or under-exposed are left out ([`usable_led_images`]) and photometric stereo
+/// weighs the LED images with their own noise ([`level_noise`]). Use
+/// [`ReconstructConfig::decoded_capture`] unless a setting is deliberately changed.
+pub fn from_decoded(
+    decoded: &Decoded,
+    rig: &Rig,
+    mask: Option<&Array2<bool>>,
+    config: &ReconstructConfig,
+) -> Result<Reconstruction, ReconstructError> {
+    reconstruct(
+        &usable_led_images(decoded),
+        rig,
+        mask,
+        Some(&level_noise(decoded)),
+        config,
+    )
+}
+
+/// The decoded LED images with the pixels the decoder flagged as saturated or under-exposed
+/// set to NaN, so photometric stereo leaves them out.
+pub fn usable_led_images(decoded: &Decoded) -> LedImages {
+    let mut images = decoded.leds.clone();
+    for image in &mut images.images {
+        Zip::from(image)
+            .and(&decoded.saturated)
+            .and(&decoded.underexposed)
+            .for_each(|v, &sat, &under| {
+                if sat || under {
+                    *v = f32::NAN;
+                }
+            });
+    }
+    images
+}
+
+/// Per-pixel noise σ_A of the decoded on-levels A_i. The decoder reports σ of one frame
+/// sample; an on-level averages about frames/2 samples (each carrier is on half the time), so
+/// σ_A = σ · √(2/frames).
+pub fn level_noise(decoded: &Decoded) -> Array2<f32> {
+    let frames = decoded.report.frames_used.max(2) as f32;
+    decoded.noise.mapv(|s| s * (2.0 / frames).sqrt())
 }
