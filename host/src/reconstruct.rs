@@ -17,8 +17,10 @@
 
 use crate::demod::Decoded;
 use crate::integrate::{
-    Confidence, IntegrateConfig, IntegrateError, Integration, SurfaceEvidence, integrate_surface,
+    Confidence, DepthPrior, IntegrateConfig, IntegrateError, Integration, SurfaceEvidence,
+    integrate_surface,
 };
+use crate::photometric::lights::moved_depth;
 use crate::photometric::{
     Lights, PhotometricConfig, PhotometricError, PhotometricResult, estimate_normals, model_misfit,
 };
@@ -29,8 +31,9 @@ use ndarray::{Array2, Zip};
 use std::time::Instant;
 use thiserror::Error;
 
-/// Bilateral reweightings of the near-field passes before the last.
-const EARLY_PASS_REWEIGHTINGS: usize = 20;
+/// Bilateral reweightings of the near-field passes before the last (they only feed the next
+/// pass's light vectors).
+const EARLY_PASS_REWEIGHTINGS: usize = 8;
 
 /// Settings of the whole reconstruction.
 #[derive(Debug, Clone, PartialEq, serde::Serialize, serde::Deserialize)]
@@ -43,6 +46,9 @@ pub struct ReconstructConfig {
     pub light_model: LightModel,
     /// Half-width in mm of the search for the depth offset in near-field passes (0 = off).
     pub offset_search_mm: f64,
+    /// Weight of the coarse depth from near-field shading in the integration of the later
+    /// near-field passes (0 = off; see [`DepthPrior`]).
+    pub depth_prior_weight: f64,
 }
 
 impl Default for ReconstructConfig {
@@ -52,6 +58,7 @@ impl Default for ReconstructConfig {
             integrate: IntegrateConfig::default(),
             light_model: LightModel::default(),
             offset_search_mm: 60.0,
+            depth_prior_weight: 1e-3,
         }
     }
 }
@@ -181,6 +188,7 @@ pub fn reconstruct(
     );
     let mut object_mask = mask.cloned();
     let mut previous: Option<(PhotometricResult, Integration)> = None;
+    let mut prior: Option<Array2<f32>> = None;
     for pass in 0..passes {
         let start = Instant::now();
         let depth = previous.as_ref().map(|(_, i)| &i.depth.depth_mm);
@@ -202,6 +210,10 @@ pub fn reconstruct(
             field: &ps.field,
             planes: &ps.planes,
             fill: Some(&ps.fill),
+            prior: prior.as_ref().map(|target_mm| DepthPrior {
+                target_mm,
+                weight: config.depth_prior_weight,
+            }),
         };
         // Early passes only feed the light vectors of the next: a few reweightings suffice.
         let mut integrate_config = config.integrate.clone();
@@ -217,8 +229,13 @@ pub fn reconstruct(
             && config.offset_search_mm > 0.0
         {
             let start = Instant::now();
-            place_pieces(images, rig, noise, &ps, &mut integration, config);
+            place_parts(images, rig, noise, &ps, &mut integration, config);
             time(format!("depth offset search (pass {})", pass + 1), start);
+            if config.depth_prior_weight > 0.0 && pass + 1 < passes {
+                let start = Instant::now();
+                prior = Some(shading_depth(images, rig, noise, &ps, &integration, config));
+                time(format!("depth from shading (pass {})", pass + 1), start);
+            }
         }
         previous = Some((ps, integration));
     }
@@ -231,35 +248,28 @@ pub fn reconstruct(
     })
 }
 
-/// `depth` with the pixels of `piece` moved by `offset` mm towards the camera: a shift for an
-/// orthographic camera, a scale about the camera centre for a perspective one (which moves the
-/// plane z = 0 by `offset`).
-fn moved_piece(
+/// `depth` with the pixels of `part` moved by `offset` mm towards the camera
+/// ([`moved_depth`]).
+fn moved_part(
     depth: &Array2<f32>,
-    pieces: &Array2<u32>,
-    piece: u32,
+    parts: &Array2<u32>,
+    part: u32,
     offset: f64,
     projection: &Projection,
 ) -> Array2<f32> {
     let mut out = depth.clone();
-    Zip::from(&mut out).and(pieces).for_each(|z, &p| {
-        if p == piece && z.is_finite() {
-            *z = match projection {
-                Projection::Orthographic { .. } => (f64::from(*z) + offset) as f32,
-                Projection::Perspective { distance_mm, .. } => {
-                    let d = distance_mm - f64::from(*z);
-                    (distance_mm - d * (1.0 - offset / distance_mm)) as f32
-                }
-            };
+    Zip::from(&mut out).and(parts).for_each(|z, &p| {
+        if p == part && z.is_finite() {
+            *z = moved_depth(f64::from(*z), offset, projection) as f32;
         }
     });
     out
 }
 
-/// Moves every piece of the integrated depth to the offset that minimises the Lambertian
-/// misfit of its pixels lit by more than three LEDs (module docs); pieces with too few such
-/// pixels keep their outline anchor.
-fn place_pieces(
+/// Moves every part of the integrated depth to the offset that minimises the Lambertian
+/// misfit of its pixels lit by more than three LEDs (module docs); parts with too few such
+/// pixels stay where the integrator put them.
+fn place_parts(
     images: &LedImages,
     rig: &Rig,
     noise: Option<&Array2<f32>>,
@@ -269,18 +279,21 @@ fn place_pieces(
 ) {
     let projection = rig.camera.projection();
     for part in 0..integration.parts as u32 {
-        let offset = best_piece_offset(
+        let pixels = constraining_pixels(ps, &integration.depth.depth_mm, |p| {
+            integration.part[p] == part
+        });
+        let offset = best_offset(
             images,
             rig,
             noise,
             &integration.depth.depth_mm,
-            &integration.part,
-            part,
+            &pixels,
             ps,
             config,
+            config.offset_search_mm,
         );
         if offset != 0.0 {
-            integration.depth.depth_mm = moved_piece(
+            integration.depth.depth_mm = moved_part(
                 &integration.depth.depth_mm,
                 &integration.part,
                 part,
@@ -291,45 +304,124 @@ fn place_pieces(
     }
 }
 
-/// The offset of one piece that minimises the Lambertian misfit (module docs), 0 when the piece
-/// has too few pixels lit by more than three LEDs.
+/// Side of the square tiles of [`shading_depth`], pixels.
+const SHADING_TILE: usize = 32;
+
+/// Fewest pixels lit by four or more LEDs a tile needs for its own offset.
+const SHADING_TILE_PIXELS: usize = 150;
+
+/// Largest offset searched per tile, mm.
+const SHADING_TILE_RANGE_MM: f64 = 25.0;
+
+/// The depth the near-field shading alone suggests: in every square tile with enough pixels lit
+/// by four or more LEDs, the offset of the integrated depth that minimises their Lambertian
+/// misfit; tiles without one take their neighbours' (push–pull), and the offsets are
+/// interpolated bilinearly between tile centres. Where a part of the surface sits at the wrong
+/// depth (e.g. behind a discontinuity the normals cannot see, as an ear behind a head) its tiles
+/// say so, and the next integration, pulled towards this coarse depth, moves it.
+fn shading_depth(
+    images: &LedImages,
+    rig: &Rig,
+    noise: Option<&Array2<f32>>,
+    ps: &PhotometricResult,
+    integration: &Integration,
+    config: &ReconstructConfig,
+) -> Array2<f32> {
+    let depth = &integration.depth.depth_mm;
+    let (rows, cols) = depth.dim();
+    let (tile_rows, tile_cols) = (rows.div_ceil(SHADING_TILE), cols.div_ceil(SHADING_TILE));
+    let mut offsets = Array2::zeros((tile_rows, tile_cols));
+    let mut known = Array2::from_elem((tile_rows, tile_cols), false);
+    for tr in 0..tile_rows {
+        for tc in 0..tile_cols {
+            let pixels = constraining_pixels(ps, depth, |(r, c)| {
+                r / SHADING_TILE == tr && c / SHADING_TILE == tc
+            });
+            if pixels.len() < SHADING_TILE_PIXELS {
+                continue;
+            }
+            offsets[(tr, tc)] = best_offset(
+                images,
+                rig,
+                noise,
+                depth,
+                &pixels,
+                ps,
+                config,
+                SHADING_TILE_RANGE_MM,
+            );
+            known[(tr, tc)] = true;
+        }
+    }
+    let wanted = Array2::from_elem((tile_rows, tile_cols), true);
+    if known.iter().any(|&k| k) {
+        crate::integrate::coverage::inpaint(&mut offsets, &known, &wanted);
+    }
+    let projection = rig.camera.projection();
+    let half = SHADING_TILE as f64 / 2.0;
+    Array2::from_shape_fn((rows, cols), |(r, c)| {
+        let z = depth[(r, c)];
+        if !z.is_finite() {
+            return f32::NAN;
+        }
+        // Bilinear between tile centres, clamped at the border tiles.
+        let fr = ((r as f64 + 0.5 - half) / SHADING_TILE as f64).clamp(0.0, (tile_rows - 1) as f64);
+        let fc = ((c as f64 + 0.5 - half) / SHADING_TILE as f64).clamp(0.0, (tile_cols - 1) as f64);
+        let (r0, c0) = (fr.floor() as usize, fc.floor() as usize);
+        let (r1, c1) = ((r0 + 1).min(tile_rows - 1), (c0 + 1).min(tile_cols - 1));
+        let (ar, ac) = (fr - r0 as f64, fc - c0 as f64);
+        let top = offsets[(r0, c0)] * (1.0 - ac) + offsets[(r0, c1)] * ac;
+        let bottom = offsets[(r1, c0)] * (1.0 - ac) + offsets[(r1, c1)] * ac;
+        let offset = top * (1.0 - ar) + bottom * ar;
+        moved_depth(f64::from(z), offset, &projection) as f32
+    })
+}
+
+/// The pixels chosen by `inside` that constrain absolute depth: lit by more than three LEDs,
+/// with a depth; at most about 20 000, evenly spread.
+fn constraining_pixels(
+    ps: &PhotometricResult,
+    depth: &Array2<f32>,
+    inside: impl Fn((usize, usize)) -> bool,
+) -> Vec<(usize, usize)> {
+    let pixels: Vec<(usize, usize)> = ps
+        .lit_count
+        .indexed_iter()
+        .filter(|(p, n)| **n > 3 && depth[*p].is_finite() && inside(*p))
+        .map(|(p, _)| p)
+        .collect();
+    let step = pixels.len().div_ceil(20_000).max(1);
+    pixels.into_iter().step_by(step).collect()
+}
+
+/// The offset (mm towards the camera, within ±`half_range`) of the depth of `pixels` that
+/// minimises their Lambertian misfit (module docs); 0 with fewer than 16 pixels.
 #[allow(clippy::too_many_arguments)]
-fn best_piece_offset(
+fn best_offset(
     images: &LedImages,
     rig: &Rig,
     noise: Option<&Array2<f32>>,
     depth: &Array2<f32>,
-    pieces: &Array2<u32>,
-    piece: u32,
+    pixels: &[(usize, usize)],
     ps: &PhotometricResult,
     config: &ReconstructConfig,
+    half_range: f64,
 ) -> f64 {
-    // Only pixels lit by more than three LEDs constrain the offset; use at most ~20 000.
-    let pixels: Vec<(usize, usize)> = ps
-        .lit_count
-        .indexed_iter()
-        .filter(|(p, n)| **n > 3 && pieces[*p] == piece && depth[*p].is_finite())
-        .map(|(p, _)| p)
-        .collect();
     if pixels.len() < 16 {
         return 0.0;
     }
-    let step = pixels.len().div_ceil(20_000);
-    let pixels: Vec<(usize, usize)> = pixels.into_iter().step_by(step).collect();
-    let projection = rig.camera.projection();
     let misfit = |offset: f64| {
-        let moved = moved_piece(depth, pieces, piece, offset, &projection);
         model_misfit(
             images,
-            &Lights::near_field(rig, Some(&moved)),
-            &pixels,
+            &Lights::near_field(rig, Some(depth)).moved(offset),
+            pixels,
             noise,
             &ps.noise_gains,
             &config.photometric,
         )
     };
     // Coarse scan, then golden-section refinement around the best sample.
-    let half = config.offset_search_mm;
+    let half = half_range;
     let samples = 13;
     let step = 2.0 * half / (samples - 1) as f64;
     let (mut best, mut best_value) = (0.0, misfit(0.0));

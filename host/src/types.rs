@@ -37,8 +37,36 @@ pub struct NormalField {
 pub struct DepthMap {
     /// H×W depth z in mm towards the camera; NaN where not reconstructed.
     pub depth_mm: Array2<f32>,
-    /// Grid pitch h in mm per pixel.
+    /// Grid pitch h in mm per pixel (for a perspective camera: on the plane z = 0).
     pub pitch_mm: f64,
+    /// The pinhole camera that saw it, `None` for the orthographic grid.
+    pub perspective: Option<crate::rig::Projection>,
+}
+
+impl DepthMap {
+    /// The 3-D point of pixel (row, col) in mm, `None` where there is no depth: on the
+    /// orthographic grid (x right, y up, z towards the camera, origin at the image centre), or
+    /// for a perspective camera in metric camera coordinates (origin at the camera centre, x
+    /// right, y down, z along the optical axis, as OpenCV's).
+    pub fn point(&self, row: usize, col: usize) -> Option<[f32; 3]> {
+        let z = *self.depth_mm.get((row, col))?;
+        if !z.is_finite() {
+            return None;
+        }
+        match &self.perspective {
+            Some(projection @ crate::rig::Projection::Perspective { distance_mm, .. }) => {
+                let p = projection.ray(row as f64, col as f64).at(f64::from(z));
+                Some([p.x as f32, -p.y as f32, (distance_mm - p.z) as f32])
+            }
+            _ => {
+                let (rows, cols) = self.depth_mm.dim();
+                let h = self.pitch_mm as f32;
+                let x = (col as f32 + 0.5 - cols as f32 / 2.0) * h;
+                let y = (rows as f32 / 2.0 - row as f32 - 0.5) * h;
+                Some([x, y, z])
+            }
+        }
+    }
 }
 
 /// A pixel lit by exactly two LEDs: its normal n lies on the great circle n·`across` = 0

@@ -24,9 +24,10 @@ use super::multigrid::NONE;
 /// Weights of a node's one-sided equations: right (forward x), down (forward row), left, up.
 pub(crate) type SideWeights = [f64; 4];
 
-/// Smallest edge weight kept, relative to a pixel's full weight: keeps every piece of the graph
-/// connected (the regularisation then fixes nothing but the constants).
-const WEIGHT_FLOOR: f64 = 1e-9;
+/// Smallest edge weight kept, relative to the weights of its two pixels: across a cut the two
+/// sides stay weakly tied (the near-field stage places them anyway), which keeps the system well
+/// conditioned.
+const WEIGHT_FLOOR: f64 = 1e-4;
 
 /// ½·confidence on both sides of both axes: plain (confidence-weighted) least squares. Nodes
 /// marked `scaled` get the n_z² factor of the bilateral equations, so a steep slope guessed
@@ -169,7 +170,11 @@ pub(crate) fn side_equations(
             };
         }
     }
-    EdgeEquations { weight, target }
+    EdgeEquations {
+        weight,
+        target,
+        prior: Vec::new(),
+    }
 }
 
 /// Σ over one-sided equations of w·(Δz − h·s)² at `x` (the bilateral energy).

@@ -284,6 +284,20 @@ pub struct SurfaceEvidence<'a> {
     pub planes: &'a [NormalPlane],
     /// Pixels to reconstruct with no normal information (holes inside the object).
     pub fill: Option<&'a Array2<bool>>,
+    /// A coarse estimate of the absolute depth (e.g. from near-field shading).
+    pub prior: Option<DepthPrior<'a>>,
+}
+
+/// A coarse depth the integrated surface is pulled towards: every pixel with a finite target
+/// adds the equation z = target with `weight` relative to a pixel's slope equations, so over
+/// about 1/√weight pixels the normals decide the shape and the prior the absolute depth
+/// (a screened Poisson problem).
+#[derive(Debug, Clone, Copy)]
+pub struct DepthPrior<'a> {
+    /// Target depth in mm (NaN where none).
+    pub target_mm: &'a Array2<f32>,
+    /// Weight of each pixel's equation.
+    pub weight: f64,
 }
 
 /// Integrates a normal field on an orthographic grid of pitch `pitch_mm`; `initial` (depth in
@@ -301,6 +315,7 @@ pub fn integrate_normals(
             field,
             planes: &[],
             fill: None,
+            prior: None,
         },
         &Projection::Orthographic {
             pitch_mm,
@@ -425,6 +440,10 @@ pub fn integrate_surface(
             .collect(),
         origin: (window.rows.start, window.cols.start),
         grid,
+        prior: evidence
+            .prior
+            .filter(|p| p.target_mm.dim() == shape && p.weight > 0.0)
+            .map(|p| (window.view(p.target_mm).to_owned(), p.weight)),
     };
     solve_window(&problem, &window, shape, config, initial)
 }
@@ -461,6 +480,7 @@ pub fn integrate_gradients(
         planes: Vec::new(),
         origin: (window.rows.start, window.cols.start),
         grid: DepthGrid::Orthographic { pitch_mm },
+        prior: None,
     };
     solve_window(&problem, &window, shape, config, initial)
 }
@@ -486,6 +506,8 @@ struct Problem {
     origin: (usize, usize),
     /// The unknown and its slopes.
     grid: DepthGrid,
+    /// Target depth in mm over the window and its weight.
+    prior: Option<(Array2<f32>, f64)>,
 }
 
 /// Solves a window problem and places depth, confidence and normals in a `shape` grid.
@@ -571,6 +593,18 @@ fn solve_window(
             .collect()
     });
     let mut x = warm.clone().unwrap_or_else(|| vec![0.0; topology.len()]);
+    // Each node's prior equation (weight, value in the unknown's units).
+    let prior: Vec<(f64, f64)> = match &problem.prior {
+        Some((target, weight)) => topology
+            .cells
+            .iter()
+            .map(|&p| {
+                let u = grid.from_mm(f64::from(target[p]));
+                if u.is_finite() { (*weight, u) } else { (0.0, 0.0) }
+            })
+            .collect(),
+        None => Vec::new(),
+    };
     let bilateral = config.integrator == Integrator::Bilateral;
     let passes_allowed = match config.integrator {
         Integrator::Bilateral => config.bilateral.max_iterations,
@@ -579,6 +613,8 @@ fn solve_window(
     };
     let (mut iterations, mut passes) = (0, 0);
     let mut previous_energy: Option<f64> = None;
+    // Reweighting passes need solves only as exact as the weights are settled (inexact IRLS).
+    let mut solve_tolerance = config.tolerance;
     for pass in 0..passes_allowed {
         passes = pass + 1;
         let sides = if bilateral && (pass > 0 || warm.is_some()) {
@@ -593,8 +629,10 @@ fn solve_window(
         } else {
             bilateral::uniform(&confidence, &slopes, &estimated)
         };
-        let equations: EdgeEquations = bilateral::side_equations(&topology, &sides, &slopes, step);
-        iterations += equations.solve(&topology, &mut x, config.tolerance, config.max_iterations);
+        let mut equations: EdgeEquations =
+            bilateral::side_equations(&topology, &sides, &slopes, step);
+        equations.prior.clone_from(&prior);
+        iterations += equations.solve(&topology, &mut x, solve_tolerance, config.max_iterations);
         for ((k, plane), &line) in planes.iter().zip(&lines) {
             if let Some(s) = coverage::slopes_on_line(&topology, &x, *k, &sides[*k], step, line)
                 .and_then(|s| on_circle(plane, s))
@@ -605,12 +643,20 @@ fn solve_window(
         if passes_allowed == 1 {
             break;
         }
-        let e = bilateral::energy(&topology, &sides, &slopes, step, &x);
+        let e = bilateral::energy(&topology, &sides, &slopes, step, &x)
+            + prior
+                .iter()
+                .zip(&x)
+                .map(|((w, v), xk)| w * (xk - v).powi(2))
+                .sum::<f64>();
         let relative = previous_energy.map(|p| (p - e).abs() / p.max(f64::MIN_POSITIVE));
         if std::env::var("MEB_DEBUG").is_ok() {
             eprintln!("DEBUG pass {pass} cg {iterations} energy {e:.4e} rel {relative:?}");
         }
         previous_energy = Some(e);
+        if let Some(r) = relative {
+            solve_tolerance = (r * INEXACT_SOLVE).clamp(config.tolerance, LOOSEST_SOLVE);
+        }
         let tolerance = if bilateral {
             config.bilateral.tolerance
         } else {
@@ -641,7 +687,17 @@ fn solve_window(
             depth[p] = x[k];
         }
     }
-    anchor(&mut depth, &topology, &piece_of_node, pieces, config.anchor);
+    // Pieces with a prior already sit at their depth.
+    let held: Vec<bool> = {
+        let mut held = vec![false; pieces];
+        for (k, p) in prior.iter().enumerate() {
+            if p.0 > 0.0 {
+                held[piece_of_node[k] as usize] = true;
+            }
+        }
+        held
+    };
+    anchor(&mut depth, &topology, &piece_of_node, &held, config.anchor);
     // Parts: pieces further split where the bilateral integrator found a depth discontinuity
     // all the way across (their relative depth is unknown to the normals).
     let (part_of_node, parts) = if bilateral {
@@ -667,6 +723,16 @@ fn solve_window(
             pitch_mm: match grid {
                 DepthGrid::Orthographic { pitch_mm } => *pitch_mm,
                 DepthGrid::Perspective { .. } => f64::NAN,
+            },
+            perspective: match grid {
+                DepthGrid::Orthographic { .. } => None,
+                DepthGrid::Perspective {
+                    intrinsics,
+                    distance_mm,
+                } => Some(Projection::Perspective {
+                    intrinsics: *intrinsics,
+                    distance_mm: *distance_mm,
+                }),
             },
         },
         kept: Array2::from_elem(shape, false),
@@ -703,6 +769,12 @@ fn solve_window(
     }
     Ok(out)
 }
+
+/// Solve tolerance of a reweighting pass relative to the last pass's relative energy change.
+const INEXACT_SOLVE: f64 = 1e-2;
+
+/// Loosest relative residual of a reweighting pass's solve.
+const LOOSEST_SOLVE: f64 = 1e-4;
 
 /// A bilateral weight below which both sides of an edge have turned away from it.
 const DISCONTINUITY_WEIGHT: f64 = 0.05;
@@ -801,15 +873,16 @@ impl Window {
     }
 }
 
-/// Shifts each piece of `depth` by a constant according to `anchor`: its outline (nodes with a
-/// missing neighbour) or all of it gets mean zero.
+/// Shifts each piece of `depth` not `held` by a prior by a constant according to `anchor`: its
+/// outline (nodes with a missing neighbour) or all of it gets mean zero.
 fn anchor(
     depth: &mut Array2<f64>,
     topology: &Topology,
     piece: &[u32],
-    pieces: usize,
+    held: &[bool],
     anchor: DepthAnchor,
 ) {
+    let pieces = held.len();
     let mut sum = vec![0.0; pieces];
     let mut count = vec![0usize; pieces];
     for (k, &p) in topology.cells.iter().enumerate() {
@@ -821,7 +894,7 @@ fn anchor(
     }
     for (k, &p) in topology.cells.iter().enumerate() {
         let i = piece[k] as usize;
-        if count[i] > 0 {
+        if count[i] > 0 && !held[i] {
             depth[p] -= sum[i] / count[i] as f64;
         }
     }
@@ -949,6 +1022,7 @@ mod tests {
             field: &field,
             planes: &planes,
             fill: None,
+            prior: None,
         };
         let joined = integrate_surface(&evidence, &projection, &config, None).unwrap();
         assert_eq!(joined.pieces, 1);
@@ -985,6 +1059,7 @@ mod tests {
                 field: &field,
                 planes: &[],
                 fill: Some(&hole),
+                prior: None,
             },
             &Projection::Orthographic {
                 pitch_mm: 1.0,
@@ -1055,6 +1130,7 @@ mod tests {
             field: &field,
             planes: &[],
             fill: None,
+            prior: None,
         };
         let out = integrate_surface(&evidence, &camera.projection(), &config, None).unwrap();
         let e = rmse(&out.depth.depth_mm, &truth, &mask);

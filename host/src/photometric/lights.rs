@@ -4,7 +4,7 @@
 //! light geometry (three independent directions are needed).
 
 use super::PhotometricError;
-use crate::rig::Rig;
+use crate::rig::{Projection, Rig};
 use nalgebra::{DMatrix, Vector3};
 use ndarray::Array2;
 
@@ -21,6 +21,8 @@ pub enum Lights<'a> {
         depth_mm: Option<&'a Array2<f32>>,
         /// Factor applied to every vector (see [`Lights::near_field_scale`]).
         scale: f64,
+        /// Every point moved this far towards the camera (see [`moved_depth`]).
+        offset_mm: f64,
     },
 }
 
@@ -32,6 +34,25 @@ impl<'a> Lights<'a> {
             rig,
             depth_mm,
             scale: Self::near_field_scale(rig),
+            offset_mm: 0.0,
+        }
+    }
+
+    /// The same lights with every point moved `offset_mm` towards the camera.
+    pub fn moved(self, offset_mm: f64) -> Self {
+        match self {
+            Lights::NearField {
+                rig,
+                depth_mm,
+                scale,
+                ..
+            } => Lights::NearField {
+                rig,
+                depth_mm,
+                scale,
+                offset_mm,
+            },
+            distant => distant,
         }
     }
 }
@@ -74,11 +95,13 @@ impl Lights<'_> {
                 rig,
                 depth_mm,
                 scale,
+                offset_mm,
             } => {
                 let z = depth_mm
                     .and_then(|d| d.get((row, col)).copied())
                     .filter(|z| z.is_finite())
                     .map_or(0.0, f64::from);
+                let z = moved_depth(z, *offset_mm, &rig.camera.projection());
                 let point = rig.camera.ray(row as f64, col as f64).at(z);
                 for (slot, led) in out.iter_mut().zip(&rig.leds) {
                     *slot = led.light_vector_at(&point) * *scale;
@@ -131,6 +154,18 @@ impl Lights<'_> {
             }
         }
         Ok(())
+    }
+}
+
+/// Depth `z` moved `offset` mm towards the camera: a shift for an orthographic camera, a scale
+/// about the camera centre for a perspective one (the plane z = 0 moves by `offset`), so that
+/// a surface integrated from normals keeps its shape.
+pub fn moved_depth(z: f64, offset: f64, projection: &Projection) -> f64 {
+    match projection {
+        Projection::Orthographic { .. } => z + offset,
+        Projection::Perspective { distance_mm, .. } => {
+            distance_mm - (distance_mm - z) * (1.0 - offset / distance_mm)
+        }
     }
 }
 
