@@ -17,8 +17,7 @@
 
 use crate::demod::Decoded;
 use crate::integrate::{
-    Confidence, DepthPrior, IntegrateConfig, IntegrateError, Integration, SurfaceEvidence,
-    integrate_surface,
+    Confidence, IntegrateConfig, IntegrateError, Integration, SurfaceEvidence, integrate_surface,
 };
 use crate::photometric::lights::moved_depth;
 use crate::photometric::{
@@ -46,9 +45,6 @@ pub struct ReconstructConfig {
     pub light_model: LightModel,
     /// Half-width in mm of the search for the depth offset in near-field passes (0 = off).
     pub offset_search_mm: f64,
-    /// Weight of the coarse depth from near-field shading in the integration of the later
-    /// near-field passes (0 = off; see [`DepthPrior`]).
-    pub depth_prior_weight: f64,
 }
 
 impl Default for ReconstructConfig {
@@ -58,7 +54,6 @@ impl Default for ReconstructConfig {
             integrate: IntegrateConfig::default(),
             light_model: LightModel::default(),
             offset_search_mm: 60.0,
-            depth_prior_weight: 1e-3,
         }
     }
 }
@@ -188,7 +183,6 @@ pub fn reconstruct(
     );
     let mut object_mask = mask.cloned();
     let mut previous: Option<(PhotometricResult, Integration)> = None;
-    let mut prior: Option<Array2<f32>> = None;
     for pass in 0..passes {
         let start = Instant::now();
         let depth = previous.as_ref().map(|(_, i)| &i.depth.depth_mm);
@@ -210,10 +204,6 @@ pub fn reconstruct(
             field: &ps.field,
             planes: &ps.planes,
             fill: Some(&ps.fill),
-            prior: prior.as_ref().map(|target_mm| DepthPrior {
-                target_mm,
-                weight: config.depth_prior_weight,
-            }),
         };
         // Early passes only feed the light vectors of the next: a few reweightings suffice.
         let mut integrate_config = config.integrate.clone();
@@ -231,11 +221,6 @@ pub fn reconstruct(
             let start = Instant::now();
             place_parts(images, rig, noise, &ps, &mut integration, config);
             time(format!("depth offset search (pass {})", pass + 1), start);
-            if config.depth_prior_weight > 0.0 && pass + 1 < passes {
-                let start = Instant::now();
-                prior = Some(shading_depth(images, rig, noise, &ps, &integration, config));
-                time(format!("depth from shading (pass {})", pass + 1), start);
-            }
         }
         previous = Some((ps, integration));
     }
@@ -302,79 +287,6 @@ fn place_parts(
             );
         }
     }
-}
-
-/// Side of the square tiles of [`shading_depth`], pixels.
-const SHADING_TILE: usize = 32;
-
-/// Fewest pixels lit by four or more LEDs a tile needs for its own offset.
-const SHADING_TILE_PIXELS: usize = 150;
-
-/// Largest offset searched per tile, mm.
-const SHADING_TILE_RANGE_MM: f64 = 25.0;
-
-/// The depth the near-field shading alone suggests: in every square tile with enough pixels lit
-/// by four or more LEDs, the offset of the integrated depth that minimises their Lambertian
-/// misfit; tiles without one take their neighbours' (push–pull), and the offsets are
-/// interpolated bilinearly between tile centres. Where a part of the surface sits at the wrong
-/// depth (e.g. behind a discontinuity the normals cannot see, as an ear behind a head) its tiles
-/// say so, and the next integration, pulled towards this coarse depth, moves it.
-fn shading_depth(
-    images: &LedImages,
-    rig: &Rig,
-    noise: Option<&Array2<f32>>,
-    ps: &PhotometricResult,
-    integration: &Integration,
-    config: &ReconstructConfig,
-) -> Array2<f32> {
-    let depth = &integration.depth.depth_mm;
-    let (rows, cols) = depth.dim();
-    let (tile_rows, tile_cols) = (rows.div_ceil(SHADING_TILE), cols.div_ceil(SHADING_TILE));
-    let mut offsets = Array2::zeros((tile_rows, tile_cols));
-    let mut known = Array2::from_elem((tile_rows, tile_cols), false);
-    for tr in 0..tile_rows {
-        for tc in 0..tile_cols {
-            let pixels = constraining_pixels(ps, depth, |(r, c)| {
-                r / SHADING_TILE == tr && c / SHADING_TILE == tc
-            });
-            if pixels.len() < SHADING_TILE_PIXELS {
-                continue;
-            }
-            offsets[(tr, tc)] = best_offset(
-                images,
-                rig,
-                noise,
-                depth,
-                &pixels,
-                ps,
-                config,
-                SHADING_TILE_RANGE_MM,
-            );
-            known[(tr, tc)] = true;
-        }
-    }
-    let wanted = Array2::from_elem((tile_rows, tile_cols), true);
-    if known.iter().any(|&k| k) {
-        crate::integrate::coverage::inpaint(&mut offsets, &known, &wanted);
-    }
-    let projection = rig.camera.projection();
-    let half = SHADING_TILE as f64 / 2.0;
-    Array2::from_shape_fn((rows, cols), |(r, c)| {
-        let z = depth[(r, c)];
-        if !z.is_finite() {
-            return f32::NAN;
-        }
-        // Bilinear between tile centres, clamped at the border tiles.
-        let fr = ((r as f64 + 0.5 - half) / SHADING_TILE as f64).clamp(0.0, (tile_rows - 1) as f64);
-        let fc = ((c as f64 + 0.5 - half) / SHADING_TILE as f64).clamp(0.0, (tile_cols - 1) as f64);
-        let (r0, c0) = (fr.floor() as usize, fc.floor() as usize);
-        let (r1, c1) = ((r0 + 1).min(tile_rows - 1), (c0 + 1).min(tile_cols - 1));
-        let (ar, ac) = (fr - r0 as f64, fc - c0 as f64);
-        let top = offsets[(r0, c0)] * (1.0 - ac) + offsets[(r0, c1)] * ac;
-        let bottom = offsets[(r1, c0)] * (1.0 - ac) + offsets[(r1, c1)] * ac;
-        let offset = top * (1.0 - ar) + bottom * ar;
-        moved_depth(f64::from(z), offset, &projection) as f32
-    })
 }
 
 /// The pixels chosen by `inside` that constrain absolute depth: lit by more than three LEDs,

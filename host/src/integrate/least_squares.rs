@@ -127,9 +127,8 @@ impl Topology {
         (label, count as usize)
     }
 
-    /// The weighted Laplacian of edge weights `weight[k]` = (right, down) edges of node k, plus
-    /// `extra` on the diagonal (empty for none).
-    pub fn laplacian(&self, weight: &[[f64; 2]], extra: &[f64]) -> GridLaplacian {
+    /// The weighted Laplacian of edge weights `weight[k]` = (right, down) edges of node k.
+    pub fn laplacian(&self, weight: &[[f64; 2]]) -> GridLaplacian {
         let n = self.len();
         let mut weights = vec![[0.0; 4]; n];
         for (k, nb) in self.neighbours.iter().enumerate() {
@@ -143,8 +142,7 @@ impl Topology {
         }
         let diag = weights
             .iter()
-            .enumerate()
-            .map(|(k, w)| REGULARISATION + w.iter().sum::<f64>() + extra.get(k).unwrap_or(&0.0))
+            .map(|w| REGULARISATION + w.iter().sum::<f64>())
             .collect();
         GridLaplacian::new(
             self.shape,
@@ -156,16 +154,13 @@ impl Topology {
     }
 }
 
-/// The edge equations z_j − z_i = target with weight, per node for its right and down edges,
-/// and optional per-node equations z_k = value with weight (a depth prior).
+/// The edge equations z_j − z_i = target with weight, per node for its right and down edges.
 #[derive(Debug, Clone)]
 pub(crate) struct EdgeEquations {
     /// Weight of the right and down edge of each node (0 where there is none).
     pub weight: Vec<[f64; 2]>,
     /// Target difference z_j − z_i of the right and down edge.
     pub target: Vec<[f64; 2]>,
-    /// (weight, value) of each node's own equation; empty for none.
-    pub prior: Vec<(f64, f64)>,
 }
 
 impl EdgeEquations {
@@ -184,11 +179,7 @@ impl EdgeEquations {
                 target[k][1] = -0.5 * step * (sy[k] + sy[nb[1] as usize]);
             }
         }
-        Self {
-            weight,
-            target,
-            prior: Vec::new(),
-        }
+        Self { weight, target }
     }
 
     /// Solves the normal equations from the given `x` (warm start); returns CG iterations.
@@ -199,13 +190,9 @@ impl EdgeEquations {
         tolerance: f64,
         max_iterations: usize,
     ) -> usize {
-        let extra: Vec<f64> = self.prior.iter().map(|p| p.0).collect();
-        let lap = topology.laplacian(&self.weight, &extra);
-        // Right-hand side Dᵀ W t: edge k→j with z_j − z_k = t adds −w·t at k and +w·t at j;
-        // a node's own equation adds w·value.
-        let mut b: Vec<f64> = (0..topology.len())
-            .map(|k| self.prior.get(k).map_or(0.0, |p| p.0 * p.1))
-            .collect();
+        let lap = topology.laplacian(&self.weight);
+        // Right-hand side Dᵀ W t: edge k→j with z_j − z_k = t adds −w·t at k and +w·t at j.
+        let mut b = vec![0.0; topology.len()];
         for (k, nb) in topology.neighbours.iter().enumerate() {
             for d in 0..2 {
                 let j = nb[d];
@@ -322,7 +309,7 @@ mod tests {
     /// Straightforward reference: unpreconditioned CG on the same normal equations, to 1e-13.
     fn plain_cg(g: &SurfaceGradients, h: f64) -> Array2<f64> {
         let topology = Topology::new(&g.mask);
-        let lap = topology.laplacian(&vec![[1.0; 2]; topology.len()], &[]);
+        let lap = topology.laplacian(&vec![[1.0; 2]; topology.len()]);
         let n = lap.len();
         let mut b = vec![0.0; n];
         for (k, &(r, c)) in lap.cells.iter().enumerate() {
