@@ -780,7 +780,10 @@ fn raw_needs_a_valid_layout() {
     let path = tmp.path().join("frames.raw");
     std::fs::write(&path, pattern8(0)).unwrap();
     let error = open(&path, &options()).err().expect("an error");
-    assert!(error.to_string().contains("raw frames need their layout"), "{error}");
+    assert!(
+        error.to_string().contains("raw frames need their layout"),
+        "{error}"
+    );
     for layout in [
         RawLayout {
             width: 0,

@@ -344,7 +344,7 @@ fn build_scene(args: &CaptureArgs) -> Result<(Scene, serde_json::Value)> {
                     0.5 * (b - a).cross(&(c - a)).norm()
                 })
                 .sum();
-            if !(area > 0.0) {
+            if area.is_nan() || area <= 0.0 {
                 bail!(
                     "mesh {} has no surface: its {} triangles have zero total area",
                     path.display(),

@@ -93,14 +93,14 @@ pub fn check_camera_size(width: usize, height: usize, leds: usize) -> Result<(),
         )));
     }
     let needed = pixels.saturating_mul(bytes_per_pixel(leds)) as u64;
-    if let Some(available) = available_memory() {
-        if needed > available {
-            return Err(invalid(format!(
-                "{width}×{height} pixels need about {:.1} GB but {:.1} GB of memory is available",
-                needed as f64 / 1e9,
-                available as f64 / 1e9
-            )));
-        }
+    if let Some(available) = available_memory()
+        && needed > available
+    {
+        return Err(invalid(format!(
+            "{width}×{height} pixels need about {:.1} GB but {:.1} GB of memory is available",
+            needed as f64 / 1e9,
+            available as f64 / 1e9
+        )));
     }
     Ok(())
 }
