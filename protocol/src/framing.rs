@@ -1,4 +1,4 @@
-//! Framing: `COBS(postcard(Header) ‖ postcard(body) ‖ crc32_le(…)) 0x00` (issue 2 item 3).
+//! Framing: `COBS(postcard(Header) ‖ postcard(body) ‖ crc32_le(…)) 0x00`.
 //!
 //! Encoding uses postcard's own flavors (`CrcModifier` over `Cobs` over `Slice`); decoding
 //! undoes COBS in place (the `cobs` crate postcard depends on), checks the CRC-32 (ISO-HDLC,
@@ -280,7 +280,9 @@ impl<const N: usize> FrameReader<N> {
 mod tests {
     use super::*;
     use crate::config::{ChipRate, ConfigError, LuminaireConfig};
-    use crate::wire::{CommandError, ConfigSource, DeviceInfo, ProtocolError, SaveState, Status};
+    use crate::wire::{
+        CommandError, ConfigSource, DeviceInfo, OutputFault, ProtocolError, SaveState, Status,
+    };
 
     fn frame(seq: u32, request: &Request) -> ([u8; MAX_FRAME_LEN], usize) {
         let mut buf = [0u8; MAX_FRAME_LEN];
@@ -329,6 +331,7 @@ mod tests {
         };
         let status = Status {
             running: true,
+            output_fault: Some(OutputFault::DmaStopTimeout),
             config_source: ConfigSource::CorruptRecordDefaults,
             unsaved_changes: true,
             save: SaveState::Failed,
@@ -397,26 +400,30 @@ mod tests {
 
     #[test]
     fn version_and_body_errors_carry_the_seq() {
-        // Version 2, seq 5, Ping(1).
-        let mut raw = raw_frame(&[2, 5, 0, 1]);
+        // The next version, seq 5, Ping(1).
+        let next = (PROTOCOL_VERSION + 1) as u8;
+        let mut raw = raw_frame(&[next, 5, 0, 1]);
         assert_eq!(
             decode_request(&mut raw),
-            Err(FrameError::UnsupportedVersion { version: 2, seq: 5 })
+            Err(FrameError::UnsupportedVersion {
+                version: u16::from(next),
+                seq: 5
+            })
         );
-        // Version 1, seq 5, unknown command 99.
-        let mut raw = raw_frame(&[1, 5, 99]);
+        // This version, seq 5, unknown command 99.
+        let mut raw = raw_frame(&[PROTOCOL_VERSION as u8, 5, 99]);
         assert_eq!(
             decode_request(&mut raw),
             Err(FrameError::Malformed { seq: Some(5) })
         );
         // Trailing byte after a complete Ping.
-        let mut raw = raw_frame(&[1, 5, 0, 1, 0]);
+        let mut raw = raw_frame(&[PROTOCOL_VERSION as u8, 5, 0, 1, 0]);
         assert_eq!(
             decode_request(&mut raw),
             Err(FrameError::Malformed { seq: Some(5) })
         );
         // Header truncated.
-        let mut raw = raw_frame(&[1]);
+        let mut raw = raw_frame(&[PROTOCOL_VERSION as u8]);
         assert_eq!(
             decode_request(&mut raw),
             Err(FrameError::Malformed { seq: None })

@@ -11,6 +11,7 @@
 //! `no_std` and allocation-free; the `std` feature adds `std::error::Error` impls for the host,
 //! the `defmt` feature adds `defmt::Format` derives for the firmware's logs.
 #![cfg_attr(not(any(feature = "std", test)), no_std)]
+#![forbid(unsafe_code)]
 #![deny(missing_docs)]
 
 pub mod carriers;

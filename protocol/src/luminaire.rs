@@ -1,4 +1,4 @@
-//! The hardware-free luminaire state machine (issue 2 item 4) and the byte-level
+//! The hardware-free luminaire state machine and the byte-level
 //! [`Endpoint`] around it.
 //!
 //! [`Luminaire::handle`] maps a request to a response plus [`Effects`] the hardware layer must
@@ -19,8 +19,8 @@ use crate::framing::{
 };
 use crate::record::RecordError;
 use crate::wire::{
-    CommandError, ConfigSource, DeviceInfo, MAX_IDENTIFY_SECONDS, PROTOCOL_VERSION, ProtocolError,
-    Request, Response, SEQ_UNKNOWN, SaveOutcome, SaveState, Status,
+    CommandError, ConfigSource, DeviceInfo, MAX_IDENTIFY_SECONDS, OutputFault, PROTOCOL_VERSION,
+    ProtocolError, Request, Response, SEQ_UNKNOWN, SaveOutcome, SaveState, Status,
 };
 
 /// What the hardware must play: everything of a config except the running flag.
@@ -161,6 +161,7 @@ pub struct Luminaire {
     save: SaveState,
     saving: Option<LuminaireConfig>,
     identify_active: bool,
+    fault: Option<OutputFault>,
     counters: LinkCounters,
     last: Option<(u32, Request, Response)>,
 }
@@ -187,6 +188,7 @@ impl Luminaire {
             save: SaveState::Idle,
             saving: None,
             identify_active: false,
+            fault: None,
             counters: LinkCounters::default(),
             last: None,
         }
@@ -233,7 +235,8 @@ impl Luminaire {
     /// The `GetStatus` answer.
     pub fn status(&self) -> Status {
         Status {
-            running: self.config.running,
+            running: self.config.running && self.fault.is_none(),
+            output_fault: self.fault,
             config_source: self.source,
             unsaved_changes: self.stored != Some(self.config),
             save: self.save,
@@ -269,6 +272,7 @@ impl Luminaire {
             Request::SetConfig(new) => Response::SetConfig(match new.validate() {
                 Ok(()) => {
                     self.config = *new;
+                    self.fault = None;
                     push(&mut effects, Effect::ApplyOutput(OutputPlan::of(new)));
                     push(&mut effects, self.run_effect());
                     Ok(())
@@ -288,6 +292,7 @@ impl Luminaire {
             }),
             Request::Start(()) => {
                 self.config.running = true;
+                self.fault = None;
                 push(&mut effects, Effect::Start);
                 Response::Start(Ok(()))
             }
@@ -328,6 +333,12 @@ impl Luminaire {
             }
             Err(_) => self.save = SaveState::Failed,
         }
+    }
+
+    /// Reports that the hardware stopped the carriers on its own (see [`OutputFault`]); the
+    /// configuration is kept, `GetStatus` shows the fault until the next `Start` or `SetConfig`.
+    pub fn notify_output_fault(&mut self, fault: OutputFault) {
+        self.fault = Some(fault);
     }
 
     /// Reports that an identify blink ended.
@@ -606,6 +617,35 @@ mod tests {
         lum.notify_saved(Err(CommandError::StorageFailed));
         assert_eq!(lum.status().save, SaveState::Failed);
         assert!(lum.status().unsaved_changes);
+    }
+
+    #[test]
+    fn output_fault_is_reported_until_start_or_set_config() {
+        let mut lum = Luminaire::new(board(), RestoredConfig::Missing);
+        let before = lum.status();
+        assert_eq!(before.output_fault, None);
+        assert!(before.running);
+        lum.notify_output_fault(OutputFault::DmaTransferError);
+        let status = lum.status();
+        assert!(!status.running, "a faulted luminaire does not play");
+        assert_eq!(status.output_fault, Some(OutputFault::DmaTransferError));
+        assert_eq!(
+            status.unsaved_changes, before.unsaved_changes,
+            "a fault is not a configuration change"
+        );
+        assert!(lum.config().running, "the configuration still asks to play");
+        lum.handle(1, &Request::Stop(()));
+        assert_eq!(
+            lum.status().output_fault,
+            Some(OutputFault::DmaTransferError)
+        );
+        let (_, effects) = lum.handle(2, &Request::Start(()));
+        assert_eq!(effects.as_slice(), [Effect::Start]);
+        assert_eq!(lum.status().output_fault, None);
+        assert!(lum.status().running);
+        lum.notify_output_fault(OutputFault::DmaStopTimeout);
+        lum.handle(3, &Request::SetConfig(other_config()));
+        assert_eq!(lum.status().output_fault, None);
     }
 
     #[test]
