@@ -82,7 +82,7 @@ pub trait Bus {
     fn fence(&mut self);
 }
 
-/// Capacity of a [`Plan`]: the longest plan (halt with both banks re-initialised) has 45 steps.
+/// Capacity of a [`Plan`]: the longest plan (halt with both banks re-initialised) has 42 steps.
 pub const PLAN_CAPACITY: usize = 64;
 
 /// An ordered list of [`Step`]s.

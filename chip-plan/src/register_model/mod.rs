@@ -116,6 +116,9 @@ pub struct Chip {
     pub log: Vec<LogEntry>,
     /// Every access RM0383 forbids or the model does not cover.
     pub violations: Vec<String>,
+    /// For every write that switched a timer's trigger DMA requests off while one was latched:
+    /// the burst index at that moment (0: the burst had not begun, NDTR a multiple of 4).
+    pub requests_cut: Vec<u32>,
 }
 
 /// Which clock-enable/reset bit belongs to a timer.
@@ -202,6 +205,7 @@ impl Chip {
             last_outputs: [None; 2],
             log: Vec::new(),
             violations: Vec::new(),
+            requests_cut: Vec::new(),
         }
     }
 
@@ -213,11 +217,6 @@ impl Chip {
     /// Lets time pass without CPU activity.
     pub fn run_until(&mut self, t: u64) {
         self.advance_to(t);
-    }
-
-    /// The timer `id`.
-    pub fn timer(&self, id: TimerId) -> &Timer {
-        &self.timers[index(id)]
     }
 
     /// Reads a register or memory word the way a debugger does: no time passes and nothing
@@ -658,6 +657,12 @@ impl Chip {
         let value = match write {
             None => self.timers[i].read(offset, self.now, &mut violations),
             Some(value) => {
+                if offset == tim::DIER
+                    && value & tim::DIER_TDE == 0
+                    && let Some(index) = self.timers[i].pending_burst()
+                {
+                    self.requests_cut.push(index);
+                }
                 let before = self.timers[i].trigger_dma_request();
                 let (outcome, _) = self.timers[i].write(offset, value, self.now, &mut violations);
                 if !before && self.timers[i].trigger_dma_request() {
@@ -773,7 +778,7 @@ impl Chip {
         }
         let stream = &mut self.dma.streams[s];
         let bytes = stream.item_bytes();
-        if stream.par % bytes != 0 || stream.m0ar % bytes != 0 {
+        if !stream.par.is_multiple_of(bytes) || !stream.m0ar.is_multiple_of(bytes) {
             self.violations.push(format!(
                 "DMA1 stream {s} addresses not aligned to the item size"
             ));

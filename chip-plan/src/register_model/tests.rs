@@ -1,16 +1,24 @@
 //! The chip engine executed on the register model: for N = 1..8 LEDs, the chip rates 30, 240,
 //! 959.5, 960 and 4000 Hz and several brightness sets, the compare values each chip plays must
 //! be the chip table's on-mask × brightness for two whole code periods, after the first start,
-//! after stop → start and after a reload while running; and across the halt race.
+//! after stop → start and after a reload while running; and across the halt race. The same for
+//! the chip-interrupt fallback; then faults, the watchdog, and today's engine for comparison.
 
 use protocol::carriers::{ChipTable, MAX_LEDS};
 use protocol::timing::chip_timer_period;
+use protocol::wire::OutputFault;
 
-use super::Chip;
 use super::check::{check_all_off, check_playback};
 use super::legacy::LegacyEngine;
-use crate::plan::{FrameMemory, Mode};
-use crate::step::Bus;
+use super::{Chip, Timing};
+use crate::outputs::Bank;
+use crate::plan::{
+    ChipEngine, ChipError, ChipInterrupt, ChipInterruptSlot, FrameMemory, Loaded, Mode,
+    STREAM_STOP_POLLS, WATCHDOG_FEED, WATCHDOG_FEED_MS, WATCHDOG_MIN_TIMEOUT_MS, clock_plan,
+    halt_plan, start_plan, watchdog_plan, watchdog_setting,
+};
+use crate::regs::dma;
+use crate::step::{Bus, PLAN_CAPACITY, run};
 
 /// Timer clock of TIM2/TIM3/TIM5 on the Black Pill.
 const CLOCK: u32 = 96_000_000;
@@ -32,9 +40,12 @@ trait UnderTest: Sized {
     fn stop(&mut self, chip: &mut Chip);
 }
 
-impl UnderTest for LegacyEngine {
-    fn boot(chip: &mut Chip, _mode: Mode) -> Self {
-        LegacyEngine::new(chip, FRAMES)
+/// This crate's chip engine.
+struct Planned(ChipEngine);
+
+impl UnderTest for Planned {
+    fn boot(chip: &mut Chip, mode: Mode) -> Self {
+        Planned(ChipEngine::new(chip, CLOCK, FRAMES, mode).expect("boot"))
     }
     fn load(
         &mut self,
@@ -43,18 +54,74 @@ impl UnderTest for LegacyEngine {
         brightness: &[u16; MAX_LEDS],
         rate: u32,
     ) {
-        LegacyEngine::load(self, chip, table, brightness, rate);
+        self.0.load(chip, table, brightness, rate).expect("load");
     }
     fn start(&mut self, chip: &mut Chip) {
-        LegacyEngine::start(self, chip);
+        self.0.start(chip).expect("start");
     }
     fn stop(&mut self, chip: &mut Chip) {
-        LegacyEngine::halt(self, chip);
+        self.0.stop(chip).expect("stop");
+    }
+}
+
+/// The engine of today's main (see `legacy`), optionally with NDTR repaired.
+struct Todays(LegacyEngine);
+
+impl Todays {
+    fn boot_repaired(chip: &mut Chip) -> Self {
+        let mut engine = LegacyEngine::new(chip, FRAMES);
+        engine.ndtr_written = true;
+        Todays(engine)
+    }
+}
+
+impl UnderTest for Todays {
+    fn boot(chip: &mut Chip, _mode: Mode) -> Self {
+        Todays(LegacyEngine::new(chip, FRAMES))
+    }
+    fn load(
+        &mut self,
+        chip: &mut Chip,
+        table: &ChipTable,
+        brightness: &[u16; MAX_LEDS],
+        rate: u32,
+    ) {
+        self.0.load(chip, table, brightness, rate);
+    }
+    fn start(&mut self, chip: &mut Chip) {
+        self.0.start(chip);
+    }
+    fn stop(&mut self, chip: &mut Chip) {
+        self.0.halt(chip);
+    }
+}
+
+/// Today's engine with only the NDTR bug repaired.
+struct TodaysRepaired(Todays);
+
+impl UnderTest for TodaysRepaired {
+    fn boot(chip: &mut Chip, _mode: Mode) -> Self {
+        TodaysRepaired(Todays::boot_repaired(chip))
+    }
+    fn load(
+        &mut self,
+        chip: &mut Chip,
+        table: &ChipTable,
+        brightness: &[u16; MAX_LEDS],
+        rate: u32,
+    ) {
+        self.0.load(chip, table, brightness, rate);
+    }
+    fn start(&mut self, chip: &mut Chip) {
+        self.0.start(chip);
+    }
+    fn stop(&mut self, chip: &mut Chip) {
+        self.0.stop(chip);
     }
 }
 
 /// The engine the playback tests run.
-type Engine = LegacyEngine;
+type Engine = Planned;
 
 /// Brightness sets: full, graded, and a seeded pseudo-random one.
 fn brightness_sets() -> [[u16; MAX_LEDS]; 3] {
@@ -187,11 +254,18 @@ fn dma_chain_plays_the_chip_table_for_every_led_count_rate_and_brightness() {
     );
 }
 
-/// Stops the engine `offset` ticks before a chip boundary, starts it again and checks two code
-/// periods; `None` when it played right.
-fn halt_race<E: UnderTest>(mode: Mode, leds: u8, offset: u64) -> Option<String> {
+/// Stops the engine `offset` ticks after a chip boundary (negative: before it), starts it
+/// again and checks two code periods; returns the failure (if any) and the burst index of every
+/// trigger request the halt cut (see `Chip::requests_cut`).
+fn halt_race<E: UnderTest>(
+    mode: Mode,
+    timing: Timing,
+    leds: u8,
+    offset: i64,
+) -> (Option<String>, Vec<u32>) {
     let rate = 4_000_000;
     let mut chip = Chip::new();
+    chip.timing = timing;
     let mut engine = E::boot(&mut chip, mode);
     let table = ChipTable::new(leds).unwrap();
     let brightness = brightness_sets()[1];
@@ -200,7 +274,7 @@ fn halt_race<E: UnderTest>(mode: Mode, leds: u8, offset: u64) -> Option<String> 
     engine.start(&mut chip);
     chip.run_until(chip.now + 3 * ticks + ticks / 2);
     let boundary = last_boundary(&chip) + ticks;
-    chip.run_until(boundary - offset);
+    chip.run_until(boundary.saturating_add_signed(offset));
     engine.stop(&mut chip);
     chip.run_until(chip.now + ticks / 4);
     let from = chip.now;
@@ -213,23 +287,54 @@ fn halt_race<E: UnderTest>(mode: Mode, leds: u8, offset: u64) -> Option<String> 
         rate,
         "start after the halt race",
     );
-    match (result, chip.violations.is_empty()) {
+    let failure = match (result, chip.violations.is_empty()) {
         (Ok(()), true) => None,
         (Err(e), _) => Some(format!("offset {offset}: {e}")),
         (Ok(()), false) => Some(format!("offset {offset}: violations {:?}", chip.violations)),
+    };
+    (failure, chip.requests_cut)
+}
+
+/// Bus timings the halt race is swept under: the defaults, and a DMA slowed by bus contention
+/// (a request waits 48 ticks, an item takes 12), where a trigger can still be pending, nothing
+/// transferred, when the halt switches the requests off.
+fn race_timings() -> [Timing; 2] {
+    [
+        Timing::default(),
+        Timing {
+            dma_latency: 48,
+            dma_item: 12,
+            ..Timing::default()
+        },
+    ]
+}
+
+/// Halt instants swept: every 2 ticks from 400 ticks before a chip boundary to 200 after it,
+/// which covers the whole halt plan (42 steps of ~6 ticks) meeting the trigger and its 4-item
+/// burst, from either side.
+fn halt_race_sweep<E: UnderTest>(mode: Mode) -> (Vec<String>, Vec<u32>) {
+    let mut failures = Vec::new();
+    let mut cut = Vec::new();
+    for timing in race_timings() {
+        for leds in [4, 8] {
+            for offset in (-400..200).step_by(2) {
+                let (failure, requests_cut) = halt_race::<E>(mode, timing, leds, offset);
+                cut.extend(requests_cut);
+                if let Some(e) = failure {
+                    failures.push(format!(
+                        "N = {leds}, DMA latency {}, {e}",
+                        timing.dma_latency
+                    ));
+                }
+            }
+        }
     }
+    (failures, cut)
 }
 
 #[test]
 fn halt_race_never_moves_the_channels() {
-    let mut failures = Vec::new();
-    for leds in [4, 8] {
-        for offset in (0..400).step_by(2) {
-            if let Some(e) = halt_race::<Engine>(Mode::Dma, leds, offset) {
-                failures.push(format!("N = {leds}, {e}"));
-            }
-        }
-    }
+    let (failures, cut) = halt_race_sweep::<Engine>(Mode::Dma);
     for failure in failures.iter().take(8) {
         println!("{failure}");
     }
@@ -238,8 +343,231 @@ fn halt_race_never_moves_the_channels() {
         "{} halt instants break the next start",
         failures.len()
     );
+    // The sweep met both sides of the race: a trigger pending with nothing transferred yet
+    // (NDTR a multiple of 4) and a burst cut half-way.
+    assert!(
+        cut.contains(&0),
+        "no halt met a pending trigger at NDTR % 4 == 0: {cut:?}"
+    );
+    assert!(
+        cut.iter().any(|&i| i > 0),
+        "no halt met a burst half-way: {cut:?}"
+    );
 }
 
-/// Keeps `Bus` in use for the legacy engine's helper calls.
-#[allow(dead_code)]
-fn bus_is_object_safe(_: &mut dyn Bus) {}
+#[test]
+fn chip_interrupt_fallback_plays_the_chip_table_for_every_led_count_rate_and_brightness() {
+    let failures = sweep::<Engine>(Mode::ChipInterrupt);
+    for failure in failures.iter().take(12) {
+        println!("{failure}");
+    }
+    assert!(
+        failures.is_empty(),
+        "{} of 120 configurations play the wrong compare values",
+        failures.len()
+    );
+    let (failures, _) = halt_race_sweep::<Engine>(Mode::ChipInterrupt);
+    assert!(failures.is_empty(), "{failures:?}");
+}
+
+#[test]
+fn todays_main_plays_nothing() {
+    // Today's engine gives both streams NDTR = 0: no request is ever served.
+    let error = scenario::<Todays>(Mode::Dma, 4, 960_000, &[1000; MAX_LEDS]).unwrap_err();
+    println!("{error}");
+    assert!(
+        error.contains("chip 0 of 32")
+            && error.contains("plays [Some(0), Some(0), Some(0), Some(0)]"),
+        "{error}"
+    );
+}
+
+#[test]
+fn todays_halt_moves_the_channels_even_with_ndtr_written() {
+    // Repairing only the NDTR bug leaves the halt race: stopping the DMA mid-burst (or with a
+    // trigger pending) leaves the timers' DMA burst state where it was, and the next start
+    // plays the frames shifted.
+    scenario::<TodaysRepaired>(Mode::Dma, 4, 960_000, &[1000; MAX_LEDS])
+        .expect("with NDTR written, today's engine plays away from the race");
+    let (failures, _) = halt_race_sweep::<TodaysRepaired>(Mode::Dma);
+    println!(
+        "{} halt instants break the next start, e.g. {:?}",
+        failures.len(),
+        failures.first()
+    );
+    assert!(
+        !failures.is_empty(),
+        "the model does not show the halt race"
+    );
+}
+
+#[test]
+fn transfer_error_stops_the_carriers_and_is_reported() {
+    let mut chip = Chip::new();
+    let mut engine = ChipEngine::new(&mut chip, CLOCK, FRAMES, Mode::Dma).unwrap();
+    let table = ChipTable::new(8).unwrap();
+    engine
+        .load(&mut chip, &table, &[1000; MAX_LEDS], 960_000)
+        .unwrap();
+    engine.start(&mut chip).unwrap();
+    chip.run_until(chip.now + 5 * chip_ticks(960_000));
+    assert_eq!(
+        engine.poll_fault(&mut chip),
+        None,
+        "a healthy chain has no fault"
+    );
+    // A corrupted pointer: TIM5's frames now answer with a bus error.
+    chip.unmap(FRAMES.tim5..FRAMES.tim5 + Bank::Tim5.frame_buffer_bytes());
+    chip.run_until(chip.now + 3 * chip_ticks(960_000));
+    let stream = Bank::Tim5.stream();
+    assert_ne!(
+        chip.peek(stream.isr()) & stream.flags(dma::TEIF),
+        0,
+        "TEIF of stream 1"
+    );
+    assert_eq!(
+        chip.peek(stream.cr()) & dma::CR_EN,
+        0,
+        "the error disabled the stream"
+    );
+    assert_eq!(
+        engine.poll_fault(&mut chip),
+        Some(OutputFault::DmaTransferError)
+    );
+    assert!(!engine.is_running());
+    chip.run_until(chip.now + PWM_PERIOD);
+    check_all_off(&chip.log, chip.now).unwrap();
+    assert_eq!(engine.poll_fault(&mut chip), None, "reported once");
+    assert!(chip.violations.is_empty(), "{:?}", chip.violations);
+}
+
+/// The model with one stream whose EN never reads 0 (a hung transfer).
+struct HungStream<'a>(&'a mut Chip, u32);
+
+impl Bus for HungStream<'_> {
+    fn read(&mut self, addr: u32) -> u32 {
+        let value = self.0.read(addr);
+        if addr == self.1 {
+            value | dma::CR_EN
+        } else {
+            value
+        }
+    }
+    fn write(&mut self, addr: u32, value: u32) {
+        self.0.write(addr, value);
+    }
+    fn read16(&mut self, addr: u32) -> u16 {
+        self.0.read16(addr)
+    }
+    fn write16(&mut self, addr: u32, value: u16) {
+        self.0.write16(addr, value);
+    }
+    fn fence(&mut self) {
+        self.0.fence();
+    }
+}
+
+impl ChipInterruptSlot for HungStream<'_> {
+    fn set_chip_interrupt(&mut self, interrupt: Option<ChipInterrupt>) {
+        self.0.set_chip_interrupt(interrupt);
+    }
+}
+
+#[test]
+fn a_stream_that_never_stops_is_an_error_and_the_outputs_still_go_off() {
+    let mut chip = Chip::new();
+    let mut engine = ChipEngine::new(&mut chip, CLOCK, FRAMES, Mode::Dma).unwrap();
+    let table = ChipTable::new(4).unwrap();
+    engine
+        .load(&mut chip, &table, &[1000; MAX_LEDS], 960_000)
+        .unwrap();
+    engine.start(&mut chip).unwrap();
+    chip.run_until(chip.now + 3 * chip_ticks(960_000));
+    let started = chip.now;
+    let hung_cr = Bank::Tim3.stream().cr();
+    let error = engine
+        .stop(&mut HungStream(&mut chip, hung_cr))
+        .unwrap_err();
+    assert_eq!(error.fault(), Some(OutputFault::DmaStopTimeout));
+    // Bounded: STREAM_STOP_POLLS reads of a few ticks each, not forever.
+    let spent = chip.now - started;
+    assert!(spent < 10 * u64::from(STREAM_STOP_POLLS), "{spent} ticks");
+    chip.run_until(chip.now + PWM_PERIOD);
+    check_all_off(&chip.log, chip.now).unwrap();
+    // A reload over the hung stream reports it and starts nothing.
+    engine.start(&mut chip).unwrap();
+    let reload = engine.load(
+        &mut HungStream(&mut chip, hung_cr),
+        &table,
+        &[500; MAX_LEDS],
+        960_000,
+    );
+    assert!(
+        matches!(reload, Err(ChipError::StreamStuck(_))),
+        "{reload:?}"
+    );
+    assert!(!engine.is_running());
+    chip.run_until(chip.now + PWM_PERIOD);
+    check_all_off(&chip.log, chip.now).unwrap();
+}
+
+#[test]
+fn watchdog_outlasts_the_longest_flash_erase_at_any_lsi_frequency() {
+    let mut chip = Chip::new();
+    let setting = watchdog_setting(WATCHDOG_MIN_TIMEOUT_MS);
+    run(watchdog_plan(setting).steps(), &mut chip).unwrap();
+    run(&[WATCHDOG_FEED], &mut chip).unwrap();
+    assert!(chip.iwdg.running && chip.iwdg.feeds == 1);
+    assert!(chip.watchdog_frozen_in_debug());
+    let (slowest, typical, fastest) = crate::regs::iwdg::LSI_HZ;
+    let shortest = chip.watchdog_timeout_ms(fastest);
+    println!(
+        "IWDG PR {} RLR {}: {} ms at 47 kHz, {} ms at 32 kHz, {} ms at 17 kHz",
+        setting.prescaler_code,
+        setting.reload,
+        shortest,
+        chip.watchdog_timeout_ms(typical),
+        chip.watchdog_timeout_ms(slowest)
+    );
+    // A 2 s sector erase plus a feeding period, with the LSI at its fastest.
+    assert!(
+        shortest >= 2_000 + u64::from(WATCHDOG_FEED_MS),
+        "{shortest} ms"
+    );
+    assert_eq!(shortest, setting.timeout_ms(fastest));
+    // Still a reset within ~15 s at the slowest LSI, not minutes.
+    assert!(chip.watchdog_timeout_ms(slowest) <= 16_000);
+    assert!(chip.violations.is_empty(), "{:?}", chip.violations);
+}
+
+#[test]
+fn plans_fit_their_capacity() {
+    let loaded = Loaded {
+        chips: 512,
+        period: chip_timer_period(CLOCK, 30_000, 32).unwrap(),
+        rate_microhertz: 0,
+        error_ppb: 0,
+        bank_chips: [32, 512],
+    };
+    let lengths = [
+        clock_plan().steps().len(),
+        halt_plan().steps().len(),
+        start_plan(&loaded, &FRAMES, Mode::Dma).steps().len(),
+        start_plan(&loaded, &FRAMES, Mode::ChipInterrupt)
+            .steps()
+            .len(),
+        watchdog_plan(watchdog_setting(WATCHDOG_MIN_TIMEOUT_MS))
+            .steps()
+            .len(),
+    ];
+    println!("plan lengths: {lengths:?}");
+    assert_eq!(
+        lengths[1], 42,
+        "the halt plan, the longest, as documented at PLAN_CAPACITY"
+    );
+    assert!(
+        lengths
+            .iter()
+            .all(|&n| n > 0 && n <= lengths[1] && n <= PLAN_CAPACITY)
+    );
+}

@@ -268,6 +268,11 @@ impl Timer {
         outcome
     }
 
+    /// The burst index while a trigger DMA request is latched (0: nothing transferred yet).
+    pub fn pending_burst(&self) -> Option<u32> {
+        self.trigger_request.then_some(self.dma_index)
+    }
+
     /// Whether the timer asserts its trigger DMA request line.
     pub fn trigger_dma_request(&self) -> bool {
         self.trigger_request && self.dier & tim::DIER_TDE != 0
