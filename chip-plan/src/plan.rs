@@ -296,7 +296,7 @@ impl ChipInterrupt {
     /// to the next chip.
     pub fn next_plan(&mut self) -> Plan {
         let mut plan = Plan::new();
-        plan.write(TIM2.reg(tim::SR), 0);
+        plan.push(CHIP_INTERRUPT_ACK);
         for (i, bank) in BANKS.into_iter().enumerate() {
             let chips = u32::from(self.bank_chips[i].max(1));
             let chip = (self.next_chip % chips) as usize;
@@ -312,6 +312,13 @@ impl ChipInterrupt {
         plan
     }
 }
+
+/// Clears TIM2's update flag: the first step of every chip interrupt, and all a handler does
+/// when no [`ChipInterrupt`] is installed.
+pub const CHIP_INTERRUPT_ACK: Step = Step::Write {
+    addr: TIM2.base + tim::SR,
+    value: 0,
+};
 
 /// Where the chip interrupt's state lives while the carriers play in [`Mode::ChipInterrupt`]:
 /// the board's interrupt handler, or the host model.
