@@ -7,8 +7,11 @@
 //! and the host's virtual luminaire (`meb device emulate`) both run exactly this code through
 //! [`Endpoint`], so the emulator answers byte for byte like the hardware.
 //!
-//! A request carrying the same sequence number and body as the previous one is a retry: the
-//! cached response is returned and no effects are repeated.
+//! A state-changing request carrying the same sequence number and body as the previous one is
+//! a retry: the cached response is returned and no effects are repeated. Read-only requests
+//! (`Ping`, `GetInfo`, `GetConfig`, `GetStatus`) have no effects to repeat and are always
+//! answered afresh, so a new session that happens to reuse a sequence number never reads a stale
+//! status.
 
 use heapless::{String, Vec};
 
@@ -252,6 +255,16 @@ impl Luminaire {
     /// Handles one decoded request with sequence number `seq`.
     pub fn handle(&mut self, seq: u32, request: &Request) -> (Response, Effects) {
         self.counters.frames_ok = self.counters.frames_ok.wrapping_add(1);
+        let read_only = matches!(
+            request,
+            Request::Ping(_)
+                | Request::GetInfo(())
+                | Request::GetConfig(())
+                | Request::GetStatus(())
+        );
+        if read_only {
+            return self.execute(request);
+        }
         if let Some((last_seq, last_request, last_response)) = &self.last
             && *last_seq == seq
             && last_request == request
@@ -584,6 +597,27 @@ mod tests {
         let (_, effects) = lum.handle(9, &Request::Stop(()));
         assert_eq!(effects.as_slice(), [Effect::Stop]);
         assert!(!lum.config().running);
+    }
+
+    #[test]
+    fn read_only_requests_are_answered_afresh_even_with_a_repeated_sequence_number() {
+        let mut lum = Luminaire::new(board(), RestoredConfig::Missing);
+        let (first, _) = lum.handle(1, &Request::GetStatus(()));
+        lum.notify_output_fault(OutputFault::DmaTransferError);
+        // Another session starting at sequence number 1 again.
+        let (second, _) = lum.handle(1, &Request::GetStatus(()));
+        assert_ne!(first, second, "a stale status from the retry cache");
+        let Response::GetStatus(status) = second else {
+            panic!("not a status");
+        };
+        assert_eq!(status.output_fault, Some(OutputFault::DmaTransferError));
+        // A state-changing retry is still answered from the cache, effects not repeated,
+        // even with read-only requests in between.
+        let (_, effects) = lum.handle(7, &Request::Stop(()));
+        assert_eq!(effects.as_slice(), [Effect::Stop]);
+        lum.handle(8, &Request::GetConfig(()));
+        let (_, effects) = lum.handle(7, &Request::Stop(()));
+        assert!(effects.is_empty());
     }
 
     #[test]

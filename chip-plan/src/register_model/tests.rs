@@ -27,7 +27,7 @@ const FRAMES: FrameMemory = FrameMemory {
     tim3: 0x2000_4000,
     tim5: 0x2000_8000,
 };
-/// Chip rates of the issue, in millihertz.
+/// Chip rates under test (30 Hz to the 4 kHz maximum, a fractional rate), in millihertz.
 const RATES: [u32; 5] = [30_000, 240_000, 959_500, 960_000, 4_000_000];
 /// One PWM period in ticks.
 const PWM_PERIOD: u64 = 1000;
