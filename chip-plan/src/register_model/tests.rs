@@ -571,3 +571,89 @@ fn plans_fit_their_capacity() {
             .all(|&n| n > 0 && n <= lengths[1] && n <= PLAN_CAPACITY)
     );
 }
+
+/// The register values the first-flash bring-up (firmware/README.md) tells a user to expect
+/// with the factory default (4 LEDs, 960 Hz, full brightness), read from the model the way
+/// `probe-rs read` reads the board: mid-chip, a few chips apart. The README must carry exactly
+/// this table.
+#[test]
+fn bring_up_values_in_the_firmware_readme_are_the_models() {
+    use crate::regs::{TIM3, TIM5, tim};
+    let mut chip = Chip::new();
+    let mut engine = ChipEngine::new(&mut chip, CLOCK, FRAMES, Mode::Dma).unwrap();
+    let table = ChipTable::new(4).unwrap();
+    engine
+        .load(&mut chip, &table, &[1000; MAX_LEDS], 960_000)
+        .unwrap();
+    engine.start(&mut chip).unwrap();
+    let ticks = chip_ticks(960_000);
+    let start = last_boundary(&chip);
+    let (s4, s1) = (Bank::Tim3.stream(), Bank::Tim5.stream());
+    let mut rows = vec![
+        "| chip | S4 NDTR | S1 NDTR | TIM3 SR.TIF | TIM3 CCR1–4 | TIM5 CCR1–4 |".to_string(),
+        "|------|---------|---------|-------------|-------------|-------------|".to_string(),
+    ];
+    for k in [1u64, 2, 3, 4, 8] {
+        chip.run_until(start + 6 + k * ticks + ticks / 2);
+        let ccrs = |chip: &mut Chip, timer: crate::regs::GpTimer| {
+            (1..=4)
+                .map(|c| chip.peek(timer.ccr(c)).to_string())
+                .collect::<Vec<_>>()
+                .join(" ")
+        };
+        let tif = chip.peek(TIM3.reg(tim::SR)) & tim::SR_TIF != 0;
+        let row = format!(
+            "| {k} | {} | {} | {} | {} | {} |",
+            chip.peek(s4.ndtr()),
+            chip.peek(s1.ndtr()),
+            u8::from(tif),
+            ccrs(&mut chip, TIM3),
+            ccrs(&mut chip, TIM5)
+        );
+        rows.push(row);
+    }
+    let expected_static = [
+        format!("S4CR = {:#010x}", chip.peek(s4.cr())),
+        format!("S1CR = {:#010x}", chip.peek(s1.cr())),
+        format!("TIM3 DCR = {:#06x}", chip.peek(TIM3.reg(tim::DCR))),
+        format!("TIM3 SMCR = {:#06x}", chip.peek(TIM3.reg(tim::SMCR))),
+        format!("TIM5 SMCR = {:#06x}", chip.peek(TIM5.reg(tim::SMCR))),
+    ];
+    let table_text = rows.join("\n");
+    println!("{table_text}\n{}", expected_static.join("\n"));
+    let readme = std::fs::read_to_string(concat!(
+        env!("CARGO_MANIFEST_DIR"),
+        "/../firmware/README.md"
+    ))
+    .unwrap();
+    for line in rows.iter().chain(&expected_static) {
+        assert!(
+            readme.contains(line.as_str()),
+            "firmware/README.md lacks `{line}`"
+        );
+    }
+}
+
+#[test]
+fn led_8_on_pa0_stays_off_with_seven_leds_or_fewer() {
+    // PA0 is also the KEY button: below 8 LEDs its compare value must be 0 in every frame.
+    let led8 = crate::outputs::LED_OUTPUTS[7];
+    assert_eq!((led8.bank, led8.pin), (Bank::Tim5, "PA0"));
+    for leds in 1..=8u8 {
+        let mut chip = Chip::new();
+        let mut engine = ChipEngine::new(&mut chip, CLOCK, FRAMES, Mode::Dma).unwrap();
+        let table = ChipTable::new(leds).unwrap();
+        let loaded = engine
+            .load(&mut chip, &table, &[1000; MAX_LEDS], 960_000)
+            .unwrap();
+        let slot = usize::from(led8.channel - 1);
+        let values: Vec<u32> = (0..usize::from(loaded.chips_of(Bank::Tim5)))
+            .map(|c| chip.peek(FRAMES.value(Bank::Tim5, c, slot)))
+            .collect();
+        if leds < 8 {
+            assert!(values.iter().all(|&v| v == 0), "N = {leds}: {values:?}");
+        } else {
+            assert!(values.contains(&1000), "N = 8 plays LED 8");
+        }
+    }
+}
