@@ -64,20 +64,14 @@ impl UnderTest for Planned {
     }
 }
 
-/// The engine of today's main (see `legacy`), optionally with NDTR repaired.
-struct Todays(LegacyEngine);
+/// The engine of today's main (see `legacy`); `NDTR_WRITTEN` repairs only its NDTR bug.
+struct Todays<const NDTR_WRITTEN: bool>(LegacyEngine);
 
-impl Todays {
-    fn boot_repaired(chip: &mut Chip) -> Self {
-        let mut engine = LegacyEngine::new(chip, FRAMES);
-        engine.ndtr_written = true;
-        Todays(engine)
-    }
-}
-
-impl UnderTest for Todays {
+impl<const NDTR_WRITTEN: bool> UnderTest for Todays<NDTR_WRITTEN> {
     fn boot(chip: &mut Chip, _mode: Mode) -> Self {
-        Todays(LegacyEngine::new(chip, FRAMES))
+        let mut engine = LegacyEngine::new(chip, FRAMES);
+        engine.ndtr_written = NDTR_WRITTEN;
+        Todays(engine)
     }
     fn load(
         &mut self,
@@ -93,30 +87,6 @@ impl UnderTest for Todays {
     }
     fn stop(&mut self, chip: &mut Chip) {
         self.0.halt(chip);
-    }
-}
-
-/// Today's engine with only the NDTR bug repaired.
-struct TodaysRepaired(Todays);
-
-impl UnderTest for TodaysRepaired {
-    fn boot(chip: &mut Chip, _mode: Mode) -> Self {
-        TodaysRepaired(Todays::boot_repaired(chip))
-    }
-    fn load(
-        &mut self,
-        chip: &mut Chip,
-        table: &ChipTable,
-        brightness: &[u16; MAX_LEDS],
-        rate: u32,
-    ) {
-        self.0.load(chip, table, brightness, rate);
-    }
-    fn start(&mut self, chip: &mut Chip) {
-        self.0.start(chip);
-    }
-    fn stop(&mut self, chip: &mut Chip) {
-        self.0.stop(chip);
     }
 }
 
@@ -241,17 +211,26 @@ fn sweep<E: UnderTest>(mode: Mode) -> Vec<String> {
     failures
 }
 
-#[test]
-fn dma_chain_plays_the_chip_table_for_every_led_count_rate_and_brightness() {
-    let failures = sweep::<Engine>(Mode::Dma);
+/// Fails, listing the first of `failures`, unless there are none.
+fn assert_no_failures(failures: &[String], what: &str) {
     for failure in failures.iter().take(12) {
         println!("{failure}");
     }
-    assert!(
-        failures.is_empty(),
-        "{} of 120 configurations play the wrong compare values",
-        failures.len()
+    assert!(failures.is_empty(), "{} {what}", failures.len());
+}
+
+/// Runs [`sweep`] in `mode`: all 120 configurations must play right.
+fn assert_every_configuration_plays(mode: Mode) {
+    let failures = sweep::<Engine>(mode);
+    assert_no_failures(
+        &failures,
+        "of 120 configurations play the wrong compare values",
     );
+}
+
+#[test]
+fn dma_chain_plays_the_chip_table_for_every_led_count_rate_and_brightness() {
+    assert_every_configuration_plays(Mode::Dma);
 }
 
 /// Stops the engine `offset` ticks after a chip boundary (negative: before it), starts it
@@ -335,14 +314,7 @@ fn halt_race_sweep<E: UnderTest>(mode: Mode) -> (Vec<String>, Vec<u32>) {
 #[test]
 fn halt_race_never_moves_the_channels() {
     let (failures, cut) = halt_race_sweep::<Engine>(Mode::Dma);
-    for failure in failures.iter().take(8) {
-        println!("{failure}");
-    }
-    assert!(
-        failures.is_empty(),
-        "{} halt instants break the next start",
-        failures.len()
-    );
+    assert_no_failures(&failures, "halt instants break the next start");
     // The sweep met both sides of the race: a trigger pending with nothing transferred yet
     // (NDTR a multiple of 4) and a burst cut half-way.
     assert!(
@@ -357,23 +329,15 @@ fn halt_race_never_moves_the_channels() {
 
 #[test]
 fn chip_interrupt_fallback_plays_the_chip_table_for_every_led_count_rate_and_brightness() {
-    let failures = sweep::<Engine>(Mode::ChipInterrupt);
-    for failure in failures.iter().take(12) {
-        println!("{failure}");
-    }
-    assert!(
-        failures.is_empty(),
-        "{} of 120 configurations play the wrong compare values",
-        failures.len()
-    );
+    assert_every_configuration_plays(Mode::ChipInterrupt);
     let (failures, _) = halt_race_sweep::<Engine>(Mode::ChipInterrupt);
-    assert!(failures.is_empty(), "{failures:?}");
+    assert_no_failures(&failures, "halt instants break the next start");
 }
 
 #[test]
 fn todays_main_plays_nothing() {
     // Today's engine gives both streams NDTR = 0: no request is ever served.
-    let error = scenario::<Todays>(Mode::Dma, 4, 960_000, &[1000; MAX_LEDS]).unwrap_err();
+    let error = scenario::<Todays<false>>(Mode::Dma, 4, 960_000, &[1000; MAX_LEDS]).unwrap_err();
     println!("{error}");
     assert!(
         error.contains("chip 0 of 32")
@@ -387,9 +351,9 @@ fn todays_halt_moves_the_channels_even_with_ndtr_written() {
     // Repairing only the NDTR bug leaves the halt race: stopping the DMA mid-burst (or with a
     // trigger pending) leaves the timers' DMA burst state where it was, and the next start
     // plays the frames shifted.
-    scenario::<TodaysRepaired>(Mode::Dma, 4, 960_000, &[1000; MAX_LEDS])
+    scenario::<Todays<true>>(Mode::Dma, 4, 960_000, &[1000; MAX_LEDS])
         .expect("with NDTR written, today's engine plays away from the race");
-    let (failures, _) = halt_race_sweep::<TodaysRepaired>(Mode::Dma);
+    let (failures, _) = halt_race_sweep::<Todays<true>>(Mode::Dma);
     println!(
         "{} halt instants break the next start, e.g. {:?}",
         failures.len(),
@@ -401,16 +365,22 @@ fn todays_halt_moves_the_channels_even_with_ndtr_written() {
     );
 }
 
-#[test]
-fn transfer_error_stops_the_carriers_and_is_reported() {
+/// A chip with the engine playing `leds` LEDs at 960 Hz, full brightness, `chips` chips in.
+fn playing(leds: u8, chips: u64) -> (Chip, ChipEngine, ChipTable) {
     let mut chip = Chip::new();
     let mut engine = ChipEngine::new(&mut chip, CLOCK, FRAMES, Mode::Dma).unwrap();
-    let table = ChipTable::new(8).unwrap();
+    let table = ChipTable::new(leds).unwrap();
     engine
         .load(&mut chip, &table, &[1000; MAX_LEDS], 960_000)
         .unwrap();
     engine.start(&mut chip).unwrap();
-    chip.run_until(chip.now + 5 * chip_ticks(960_000));
+    chip.run_until(chip.now + chips * chip_ticks(960_000));
+    (chip, engine, table)
+}
+
+#[test]
+fn transfer_error_stops_the_carriers_and_is_reported() {
+    let (mut chip, mut engine, _) = playing(8, 5);
     assert_eq!(
         engine.poll_fault(&mut chip),
         None,
@@ -475,14 +445,7 @@ impl ChipInterruptSlot for HungStream<'_> {
 
 #[test]
 fn a_stream_that_never_stops_is_an_error_and_the_outputs_still_go_off() {
-    let mut chip = Chip::new();
-    let mut engine = ChipEngine::new(&mut chip, CLOCK, FRAMES, Mode::Dma).unwrap();
-    let table = ChipTable::new(4).unwrap();
-    engine
-        .load(&mut chip, &table, &[1000; MAX_LEDS], 960_000)
-        .unwrap();
-    engine.start(&mut chip).unwrap();
-    chip.run_until(chip.now + 3 * chip_ticks(960_000));
+    let (mut chip, mut engine, table) = playing(4, 3);
     let started = chip.now;
     let hung_cr = Bank::Tim3.stream().cr();
     let error = engine
