@@ -348,11 +348,13 @@ mod tests {
         for tri in &tilted_square() {
             rasterise_triangle(&camera, tri, |h| {
                 let point = h.ray.at(h.z);
-                let on_plane = h.weights[0] * tri[0] + h.weights[1] * tri[1] + h.weights[2] * tri[2];
+                let on_plane =
+                    h.weights[0] * tri[0] + h.weights[1] * tri[1] + h.weights[2] * tri[2];
                 assert!((point - on_plane).norm() < 1e-9);
                 let (r, c) = camera.project(&point).unwrap();
                 assert!(
-                    (r - (h.pixel / 20) as f64).abs() < 1e-9 && (c - (h.pixel % 20) as f64).abs() < 1e-9
+                    (r - (h.pixel / 20) as f64).abs() < 1e-9
+                        && (c - (h.pixel % 20) as f64).abs() < 1e-9
                 );
                 count += 1;
             });

@@ -111,7 +111,10 @@ mod tests {
         let holes = enclosed_holes(&mask, 100);
         assert_eq!(holes.iter().filter(|&&h| h).count(), 9);
         assert!(holes[(3, 3)] && !holes[(0, 0)] && !holes[(7, 0)]);
-        assert!(!enclosed_holes(&mask, 8).iter().any(|&h| h), "hole larger than the limit");
+        assert!(
+            !enclosed_holes(&mask, 8).iter().any(|&h| h),
+            "hole larger than the limit"
+        );
         let mut kept = mask.clone();
         remove_small(&mut kept, 3);
         assert_eq!(kept.iter().filter(|&&m| m).count(), 16);

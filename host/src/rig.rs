@@ -210,6 +210,32 @@ impl Intrinsics {
 }
 
 impl Projection {
+    /// The projection of every `step`-th row and column (pixel (r, c) of the result is pixel
+    /// (r·step, c·step) here): focal lengths and principal point divided by `step`, or the
+    /// pitch multiplied by it.
+    pub fn every(&self, step: usize) -> Self {
+        let k = step.max(1) as f64;
+        match *self {
+            Projection::Orthographic { pitch_mm, size } => Projection::Orthographic {
+                pitch_mm: pitch_mm * k,
+                size: (size.0.div_ceil(step.max(1)), size.1.div_ceil(step.max(1))),
+            },
+            Projection::Perspective {
+                intrinsics,
+                distance_mm,
+            } => Projection::Perspective {
+                intrinsics: Intrinsics {
+                    fx: intrinsics.fx / k,
+                    fy: intrinsics.fy / k,
+                    cx: intrinsics.cx / k,
+                    cy: intrinsics.cy / k,
+                    ..intrinsics
+                },
+                distance_mm,
+            },
+        }
+    }
+
     /// The ray of the (continuous) pixel position (row, col).
     pub fn ray(&self, row: f64, col: f64) -> PixelRay {
         match *self {
@@ -702,6 +728,18 @@ mod tests {
         assert!(cam.project(&Vector3::new(0.0, 0.0, 400.0)).is_none());
     }
 
+    /// Every third pixel of a distorted camera sees along the ray of its full-grid pixel.
+    #[test]
+    fn sub_sampled_projection_keeps_each_pixels_ray() {
+        let full = perspective().projection();
+        let coarse = full.every(3);
+        for (row, col) in [(0.0, 0.0), (4.0, 7.0), (15.0, 20.0)] {
+            let (a, b) = (coarse.ray(row, col), full.ray(3.0 * row, 3.0 * col));
+            let (pa, pb) = (a.at(10.0), b.at(10.0));
+            assert!((pa - pb).norm() < 1e-9, "{pa} vs {pb}");
+        }
+    }
+
     #[test]
     fn distortion_jacobian_matches_finite_differences() {
         let k = perspective().intrinsics.unwrap();
@@ -746,7 +784,10 @@ mod tests {
         assert_eq!(Rig::from_toml_str(&rig.to_toml_string(), "x").unwrap(), rig);
         let with_fov = text.replace("fps = 960.0", "fps = 960.0\nfov_deg = 40.0");
         let err = Rig::from_toml_str(&with_fov, "x").unwrap_err().to_string();
-        assert!(err.contains("camera.intrinsics") && err.contains("fov_deg"), "{err}");
+        assert!(
+            err.contains("camera.intrinsics") && err.contains("fov_deg"),
+            "{err}"
+        );
         let folded = text.replace("k1 = -0.1", "k1 = -4.0");
         let err = Rig::from_toml_str(&folded, "x").unwrap_err().to_string();
         assert!(err.contains("camera.intrinsics.k1"), "{err}");

@@ -184,8 +184,16 @@ fn perspective_sphere_reconstructs_in_metric_depth() {
     );
     assert!(e.rmse_mm < 0.1, "RMSE {}", e.rmse_mm);
     assert!(e.reconstructed_fraction > 0.98);
-    assert!(e.offset_mm.abs() < 1.0, "absolute depth off by {} mm", e.offset_mm);
-    assert!(w.rmse_mm > 3.0 * e.rmse_mm, "orthographic reading {} mm", w.rmse_mm);
+    assert!(
+        e.offset_mm.abs() < 1.0,
+        "absolute depth off by {} mm",
+        e.offset_mm
+    );
+    assert!(
+        w.rmse_mm > 3.0 * e.rmse_mm,
+        "orthographic reading {} mm",
+        w.rmse_mm
+    );
 }
 
 /// Two spheres 50 mm apart in depth: each is a separate piece of the mask, placed at its own
@@ -216,6 +224,11 @@ fn separate_objects_are_placed_at_their_own_depth() {
             e.offset_mm
         );
         assert!(e.rmse_mm < 0.2, "RMSE {}", e.rmse_mm);
-        assert!(e.offset_mm.abs() < 2.0, "sphere {} off by {} mm", i + 1, e.offset_mm);
+        assert!(
+            e.offset_mm.abs() < 2.0,
+            "sphere {} off by {} mm",
+            i + 1,
+            e.offset_mm
+        );
     }
 }

@@ -17,6 +17,15 @@ use common::{OUT_OF_PLANE_LEDS, rig_toml, run_ok};
 /// The thesis camera's grid pitch: 2·420·tan(21.5°)/1280 mm.
 const THESIS_PITCH_MM: f64 = 0.258_49;
 
+/// Depth RMSE bound of the blobby shape, mm.
+const BLOBBY_MAX_RMSE_MM: f64 = 1.0;
+
+/// Depth RMSE bound of the two-object scene, mm.
+const MULTI_MAX_RMSE_MM: f64 = 2.0;
+
+/// Depth RMSE bound of the sphere seen by a pinhole camera with distortion, mm.
+const PERSPECTIVE_MAX_RMSE_MM: f64 = 0.25;
+
 /// A temporary folder holding a rig and its captures.
 struct Bench {
     tmp: tempfile::TempDir,
@@ -148,6 +157,47 @@ fn suzanne_head_meets_its_target() {
     );
     assert!(coverage >= 0.90, "coverage {coverage}");
     assert!(rmse <= 5.0, "RMSE {rmse} mm");
+    check_confidence(&bench.path("rec"));
+    // Least squares smooths across the brow, nose and ears: the bilateral default is better.
+    let seconds = bench.reconstruct("head", "ls", &["--integrator", "least-squares"]);
+    let (ls_coverage, ls_rmse) = bench.accuracy("head", "ls");
+    println!(
+        "Suzanne 90 mm, least squares: {:.2} %, RMSE {ls_rmse:.3} mm, {seconds:.1} s",
+        100.0 * ls_coverage
+    );
+    assert!(
+        rmse < ls_rmse,
+        "bilateral {rmse} mm vs least squares {ls_rmse} mm"
+    );
+}
+
+/// `confidence.npy` marks every reconstructed pixel (and only those) as measured, two-LED or
+/// filled, there are two-LED pixels on a head with cast shadows, and the report and its
+/// preview say the same.
+fn check_confidence(out: &Path) {
+    let depth: Array2<f32> = ndarray_npy::read_npy(out.join("depth.npy")).unwrap();
+    let confidence: Array2<u8> = ndarray_npy::read_npy(out.join("confidence.npy")).unwrap();
+    assert_eq!(confidence.dim(), depth.dim());
+    let mut counts = [0usize; 4];
+    for (k, z) in confidence.iter().zip(&depth) {
+        assert!(*k <= 3, "confidence code {k}");
+        assert_eq!(*k > 0, z.is_finite(), "confidence {k} where depth is {z}");
+        counts[*k as usize] += 1;
+    }
+    println!(
+        "confidence: {} measured, {} two-LED, {} filled",
+        counts[3], counts[2], counts[1]
+    );
+    assert!(counts[2] > 0, "no pixel lit by two LEDs");
+    let report: meb::export::report::Report =
+        serde_json::from_str(&std::fs::read_to_string(out.join("report.json")).unwrap()).unwrap();
+    let c = report.confidence.expect("confidence counts in the report");
+    assert_eq!(
+        [c.filled, c.two_leds, c.measured],
+        [counts[1], counts[2], counts[3]]
+    );
+    assert!(report.files.iter().any(|f| f == "confidence.png"));
+    assert!(out.join("confidence.png").is_file());
 }
 
 /// The simulator's seeded blobby shape (thesis Ch. 7) and its two-object scene (a sphere in
@@ -156,10 +206,7 @@ fn suzanne_head_meets_its_target() {
 #[test]
 fn blobby_and_multi_scenes_reconstruct() {
     let bench = Bench::new(&rig_toml(352, 224, 0.4, &OUT_OF_PLANE_LEDS));
-    bench.simulate(
-        "blob",
-        &["--scene", "blobby", "--size-mm", "70"],
-    );
+    bench.simulate("blob", &["--scene", "blobby", "--size-mm", "70"]);
     bench.simulate("multi", &["--scene", "multi"]);
     for (name, max_rmse) in [("blob", BLOBBY_MAX_RMSE_MM), ("multi", MULTI_MAX_RMSE_MM)] {
         let out = format!("{name}-rec");
@@ -200,7 +247,10 @@ fn perspective_rig_end_to_end() {
     let depth: Array2<f32> = ndarray_npy::read_npy(bench.path("rec/depth.npy")).unwrap();
     assert_eq!(count, depth.iter().filter(|z| z.is_finite()).count());
     // Camera coordinates: 420 mm minus the sphere's heights (0 to 24 mm).
-    assert!(z_range.0 > 390.0 && z_range.1 < 425.0, "PLY z range {z_range:?}");
+    assert!(
+        z_range.0 > 390.0 && z_range.1 < 425.0,
+        "PLY z range {z_range:?}"
+    );
 }
 
 /// Vertex count and z range of a binary little-endian PLY with float x, y, z first.

@@ -3,6 +3,7 @@
 use anyhow::Result;
 use clap::Args;
 use meb::export::files::read_float;
+use meb::export::report::Summary;
 use meb::integrate::{IntegrateConfig, Integrator, integrate_normals};
 use meb::timing::StageTiming;
 use meb::types::NormalField;
@@ -26,8 +27,11 @@ pub struct IntegrateArgs {
     pub out: PathBuf,
     #[arg(long, help = super::common::FORCE_HELP)]
     pub force: bool,
+    /// Also write the surface in these formats (comma-separated): obj, stl.
+    #[arg(long, value_enum, value_delimiter = ',')]
+    pub mesh: Vec<super::common::MeshFormat>,
     /// Integrator.
-    #[arg(long, value_enum, default_value = "least-squares")]
+    #[arg(long, value_enum, default_value = "bilateral")]
     pub integrator: IntegratorArg,
     /// Fast Marching λ per pixel².
     #[arg(long, default_value_t = 0.06)]
@@ -37,7 +41,9 @@ pub struct IntegrateArgs {
 /// Integrator choice on the command line.
 #[derive(clap::ValueEnum, Clone, Copy, Debug)]
 pub enum IntegratorArg {
-    /// Masked least squares (default).
+    /// Bilateral normal integration: keeps depth discontinuities (default).
+    Bilateral,
+    /// Masked least squares.
     LeastSquares,
     /// The thesis' Fast Marching.
     FastMarching,
@@ -46,6 +52,7 @@ pub enum IntegratorArg {
 impl From<IntegratorArg> for Integrator {
     fn from(a: IntegratorArg) -> Self {
         match a {
+            IntegratorArg::Bilateral => Integrator::Bilateral,
             IntegratorArg::LeastSquares => Integrator::LeastSquares,
             IntegratorArg::FastMarching => Integrator::FastMarching,
         }
@@ -76,12 +83,13 @@ pub fn run(args: &IntegrateArgs) -> Result<()> {
     let start = Instant::now();
     let out = integrate_normals(&field, args.pitch, &config, None)?;
     let timings = vec![StageTiming::since("integration", start)];
-    let mut summary = serde_json::Map::new();
-    summary.insert(
-        "integrator".into(),
-        serde_json::to_value(config.integrator)?,
-    );
-    summary.insert("kept_fraction".into(), out.kept_fraction.into());
+    let summary = Summary {
+        input: Some(args.normals.display().to_string()),
+        integrator: Some(super::common::integrator_name(config.integrator)),
+        object_pixels: Some(field.mask.iter().filter(|&&m| m).count()),
+        kept_fraction: Some(out.kept_fraction),
+        ..Summary::default()
+    };
     super::common::write_outputs(
         folder.path(),
         "meb integrate",
@@ -90,9 +98,10 @@ pub fn run(args: &IntegrateArgs) -> Result<()> {
         &out.depth,
         None,
         None,
+        Some(&out.confidence),
         &timings,
         summary,
-        vec![],
+        super::common::mesh_extensions(&args.mesh),
     )?;
     let written = super::common::commit(folder)?;
     println!(

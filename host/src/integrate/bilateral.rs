@@ -160,7 +160,8 @@ pub(crate) fn side_equations(
                 0 => (slopes[k].0, slopes[j].0),
                 _ => (-slopes[k].1, -slopes[j].1),
             };
-            let floor = WEIGHT_FLOOR * (sides[k].iter().sum::<f64>() + sides[j].iter().sum::<f64>());
+            let floor =
+                WEIGHT_FLOOR * (sides[k].iter().sum::<f64>() + sides[j].iter().sum::<f64>());
             let total = wk + wj;
             weight[k][d] = total.max(floor).max(f64::MIN_POSITIVE);
             target[k][d] = if total > 0.0 {

@@ -44,10 +44,7 @@ impl NormalPlane {
 /// few Gauss–Seidel sweeps of the Laplace equation over the filled pixels.
 pub(crate) fn inpaint(values: &mut Array2<f64>, known: &Array2<bool>, wanted: &Array2<bool>) {
     // Pull: levels of (value, weight) with weight in [0, 1].
-    let mut levels = vec![(
-        values.clone(),
-        known.mapv(|k| if k { 1.0 } else { 0.0 }),
-    )];
+    let mut levels = vec![(values.clone(), known.mapv(|k| if k { 1.0 } else { 0.0 }))];
     loop {
         let (v, w) = &levels[levels.len() - 1];
         let (rows, cols) = v.dim();
@@ -92,7 +89,11 @@ pub(crate) fn inpaint(values: &mut Array2<f64>, known: &Array2<bool>, wanted: &A
         .map(|(p, _)| p)
         .collect();
     for &p in &free {
-        values[p] = if filled[p].is_finite() { filled[p] } else { 0.0 };
+        values[p] = if filled[p].is_finite() {
+            filled[p]
+        } else {
+            0.0
+        };
     }
     for _ in 0..SMOOTHING_SWEEPS {
         for &p in &free {
@@ -139,7 +140,14 @@ pub(crate) fn slopes_on_line(
             w += wd;
             sum += wd * delta;
         }
-        (w * step * step, if w > 0.0 { sign * sum / (w * step) } else { 0.0 })
+        (
+            w * step * step,
+            if w > 0.0 {
+                sign * sum / (w * step)
+            } else {
+                0.0
+            },
+        )
     };
     let (wx, sx) = mean(0, 2, 1.0);
     let (wy, sy) = mean(1, 3, -1.0);
@@ -183,7 +191,8 @@ mod tests {
     fn inpainting_fills_a_hole_in_a_linear_ramp_exactly_enough() {
         let shape = (20, 24);
         let ramp = Array2::from_shape_fn(shape, |(r, c)| 0.1 * c as f64 - 0.05 * r as f64);
-        let hole = Array2::from_shape_fn(shape, |(r, c)| (6..12).contains(&r) && (8..16).contains(&c));
+        let hole =
+            Array2::from_shape_fn(shape, |(r, c)| (6..12).contains(&r) && (8..16).contains(&c));
         let known = hole.mapv(|h| !h);
         let mut values = ramp.mapv(|v| v);
         values.zip_mut_with(&hole, |v, &h| {

@@ -83,11 +83,7 @@ fn march(
     lambda: f64,
     state: &mut MarchState,
 ) -> usize {
-    let MarchState {
-        w,
-        accepted,
-        depth,
-    } = state;
+    let MarchState { w, accepted, depth } = state;
     let mask = &gradients.mask;
     let (rows, cols) = mask.dim();
     // Grid coordinates in pixels: x = column, y = −row (y up).
@@ -250,7 +246,8 @@ mod tests {
         };
         let (depth, count) = integrate(&g, 1.0, 0.06).unwrap();
         assert_eq!(count, rows * cols);
-        let truth = |r: usize, c: usize| 0.02 * ((c as f64 - 20.0).powi(2) + (20.0 - r as f64).powi(2));
+        let truth =
+            |r: usize, c: usize| 0.02 * ((c as f64 - 20.0).powi(2) + (20.0 - r as f64).powi(2));
         let rmse = rmse_after_offset(&depth, truth);
         // First-order Fast Marching from a zero-slope start: measured 0.392 px (2.5 % of 16 px).
         assert!(rmse < 0.44, "rmse {rmse} px on a 16 px range");
@@ -260,7 +257,9 @@ mod tests {
     #[test]
     fn marches_every_piece() {
         let (rows, cols) = (20usize, 40usize);
-        let mask = Array2::from_shape_fn((rows, cols), |(r, c)| (2..18).contains(&r) && (c < 15 || c > 24));
+        let mask = Array2::from_shape_fn((rows, cols), |(r, c)| {
+            (2..18).contains(&r) && (c < 15 || c > 24)
+        });
         let g = SurfaceGradients {
             dzdx: Array2::from_shape_fn((rows, cols), |(_, c)| if c < 15 { 0.1 } else { -0.2 }),
             dzdy: Array2::zeros((rows, cols)),

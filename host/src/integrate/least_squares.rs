@@ -232,8 +232,7 @@ pub fn integrate(
                 .map_or(0.0, f64::from)
         })
         .collect();
-    let iterations =
-        equations.solve(&topology, &mut x, config.tolerance, config.max_iterations);
+    let iterations = equations.solve(&topology, &mut x, config.tolerance, config.max_iterations);
     let mut depth = Array2::from_elem(gradients.mask.dim(), f64::NAN);
     for (k, &p) in topology.cells.iter().enumerate() {
         depth[p] = x[k];
@@ -244,7 +243,6 @@ pub fn integrate(
 /// Multigrid-preconditioned conjugate gradients on `lap` x = b from the given x; returns
 /// iterations.
 pub(crate) fn conjugate_gradients(
-
     lap: &GridLaplacian,
     b: &[f64],
     x: &mut [f64],

@@ -455,9 +455,7 @@ pub fn integrate_gradients(
                 Confidence::None
             }
         }),
-        slopes: Array2::from_shape_fn(cropped.mask.dim(), |p| {
-            (cropped.dzdx[p], cropped.dzdy[p])
-        }),
+        slopes: Array2::from_shape_fn(cropped.mask.dim(), |p| (cropped.dzdx[p], cropped.dzdy[p])),
         planes: Vec::new(),
         origin: (window.rows.start, window.cols.start),
         grid: DepthGrid::Orthographic { pitch_mm },
@@ -660,7 +658,13 @@ fn solve_window(
     } else {
         (piece_of_node.clone(), pieces)
     };
-    let depth_mm = depth.mapv(|u| if u.is_finite() { grid.to_mm(u) } else { f64::NAN });
+    let depth_mm = depth.mapv(|u| {
+        if u.is_finite() {
+            grid.to_mm(u)
+        } else {
+            f64::NAN
+        }
+    });
     let valid = depth_mm.mapv(f64::is_finite);
     let (kept, kept_fraction) = filter_artefacts(&depth_mm, &valid, &config.filter);
     let mut out = Integration {
@@ -692,7 +696,11 @@ fn solve_window(
         confidence: Array2::from_elem(shape, Confidence::None),
         completed_normals: Array3::from_elem((shape.0, shape.1, 3), f32::NAN),
     };
-    if let DepthGrid::Perspective { distance_mm, intrinsics } = grid {
+    if let DepthGrid::Perspective {
+        distance_mm,
+        intrinsics,
+    } = grid
+    {
         out.depth.pitch_mm = distance_mm / intrinsics.fx;
     }
     for (k, &(r, c)) in topology.cells.iter().enumerate() {
@@ -980,7 +988,10 @@ mod tests {
         let e_all = rmse(&joined.depth.depth_mm, &truth, &everywhere);
         let e_band = rmse(&joined.depth.depth_mm, &truth, &in_band);
         // The rim (slopes up to 20) dominates `all`; measured 0.36 px and 0.028 px.
-        assert!(e_all < 0.45 && e_band < 0.05, "all {e_all} px, band {e_band} px");
+        assert!(
+            e_all < 0.45 && e_band < 0.05,
+            "all {e_all} px, band {e_band} px"
+        );
         let apart = integrate_normals(&field, 1.0, &config, None).unwrap();
         assert_eq!(apart.pieces, 2);
     }
@@ -1016,7 +1027,10 @@ mod tests {
         )
         .unwrap();
         assert_eq!(out.pieces, 1);
-        assert!(hole.indexed_iter().all(|(p, &h)| !h || out.confidence[p] == Confidence::Filled));
+        assert!(
+            hole.indexed_iter()
+                .all(|(p, &h)| !h || out.confidence[p] == Confidence::Filled)
+        );
         let e = rmse(&out.depth.depth_mm, &truth, &hole);
         assert!(e < 0.05, "hole rmse {e}");
     }
@@ -1098,7 +1112,13 @@ mod tests {
         };
         let err = integrate_normals(&field, 1.0, &IntegrateConfig::default(), None).unwrap_err();
         assert!(
-            matches!(err, IntegrateError::NoUsableNormals { zero: 30, facing_away: 0 }),
+            matches!(
+                err,
+                IntegrateError::NoUsableNormals {
+                    zero: 30,
+                    facing_away: 0
+                }
+            ),
             "{err}"
         );
         for lambda in [f64::NAN, -0.06, 0.0, f64::INFINITY] {

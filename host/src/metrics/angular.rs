@@ -97,14 +97,15 @@ pub fn normals_from_depth_seen_by(depth: &Array2<f32>, projection: &Projection) 
         z.is_finite()
             .then(|| projection.ray(r as f64, c as f64).at(f64::from(z)))
     };
-    let diff = |minus: Option<Vector3<f64>>, centre: Vector3<f64>, plus: Option<Vector3<f64>>| {
-        match (minus, plus) {
+    let diff =
+        |minus: Option<Vector3<f64>>, centre: Vector3<f64>, plus: Option<Vector3<f64>>| match (
+            minus, plus,
+        ) {
             (Some(m), Some(p)) => Some((p - m) / 2.0),
             (None, Some(p)) => Some(p - centre),
             (Some(m), None) => Some(centre - m),
             (None, None) => None,
-        }
-    };
+        };
     let mut out = Array3::from_elem((rows, cols, 3), f32::NAN);
     for r in 0..rows as isize {
         for c in 0..cols as isize {

@@ -32,7 +32,10 @@ pub fn render_mesh_depth(triangles: &[[Vector3<f64>; 3]], camera: &Camera) -> Me
     let mut depth = Array2::from_elem((rows, cols), f32::NAN);
     let mut normals = Array3::from_elem((rows, cols, 3), f32::NAN);
     for tri in triangles {
-        let Some(n) = (tri[1] - tri[0]).cross(&(tri[2] - tri[0])).try_normalize(0.0) else {
+        let Some(n) = (tri[1] - tri[0])
+            .cross(&(tri[2] - tri[0]))
+            .try_normalize(0.0)
+        else {
             continue;
         };
         rasterise_triangle(camera, tri, |hit| {

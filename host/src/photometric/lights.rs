@@ -114,7 +114,9 @@ impl Lights<'_> {
     pub fn view_at(&self, row: usize, col: usize) -> Vector3<f64> {
         match self {
             Lights::Distant(_) => Vector3::z(),
-            Lights::NearField { rig, .. } => rig.camera.ray(row as f64, col as f64).towards_camera(),
+            Lights::NearField { rig, .. } => {
+                rig.camera.ray(row as f64, col as f64).towards_camera()
+            }
         }
     }
 
@@ -175,7 +177,9 @@ pub(crate) fn light_rank(lights: &Lights) -> usize {
     if v.is_empty() {
         return 0;
     }
-    let m = DMatrix::from_fn(v.len(), 3, |i, j| v[i][j] / v[i].norm().max(f64::MIN_POSITIVE));
+    let m = DMatrix::from_fn(v.len(), 3, |i, j| {
+        v[i][j] / v[i].norm().max(f64::MIN_POSITIVE)
+    });
     let singular = m.singular_values();
     let largest = singular.max();
     singular.iter().filter(|&&s| s > 1e-6 * largest).count()
@@ -194,7 +198,11 @@ pub(crate) fn describe_geometry(lights: &Lights) -> String {
         for j in i + 1..v.len() {
             let (a, b) = (v[i].normalize(), v[j].normalize());
             if a.cross(&b).norm() < 1e-6 {
-                let how = if a.dot(&b) > 0.0 { "parallel (duplicated?)" } else { "opposite" };
+                let how = if a.dot(&b) > 0.0 {
+                    "parallel (duplicated?)"
+                } else {
+                    "opposite"
+                };
                 parts.push(format!("LEDs {} and {} are {how}", i + 1, j + 1));
             }
         }

@@ -65,7 +65,12 @@ mod tests {
         let gains = led_noise_gains(&LedImages { images }, Some(&sigma));
         assert!((gains[0] - 1.0).abs() < 0.08, "{gains:?}");
         assert!((gains[1] - 3.0).abs() < 0.25, "{gains:?}");
-        let none = led_noise_gains(&LedImages { images: vec![Array2::zeros(shape)] }, None);
+        let none = led_noise_gains(
+            &LedImages {
+                images: vec![Array2::zeros(shape)],
+            },
+            None,
+        );
         assert_eq!(none, vec![1.0]);
     }
 }

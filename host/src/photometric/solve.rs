@@ -242,7 +242,9 @@ fn members(bits: usize) -> impl Iterator<Item = usize> {
 fn normal_matrix(l: &[Vector3<f64>], weights: &[f64], bits: usize) -> Matrix3<f64> {
     members(bits)
         .filter(|&i| i < l.len())
-        .fold(Matrix3::zeros(), |m, i| m + l[i] * l[i].transpose() * weights[i])
+        .fold(Matrix3::zeros(), |m, i| {
+            m + l[i] * l[i].transpose() * weights[i]
+        })
 }
 
 /// The circle of normals of a pixel lit by the two LEDs in `bits` (module docs).
@@ -300,10 +302,19 @@ pub fn estimate_normals(
     let gains = led_noise_gains(images, noise);
     let solver = PixelSolver::new(lights, config, gains.clone(), noise.is_some());
     let solved = solve_all(images, lights, mask, noise, &solver);
-    let region = object_region(images, &solved.albedo, &solved.outcome, mask, noise, &config.mask);
-    let usable = region.object.iter().zip(solved.outcome.iter()).any(|(&o, out)| {
-        o && matches!(out, Outcome::Solved(..) | Outcome::TwoLeds(..))
-    });
+    let region = object_region(
+        images,
+        &solved.albedo,
+        &solved.outcome,
+        mask,
+        noise,
+        &config.mask,
+    );
+    let usable = region
+        .object
+        .iter()
+        .zip(solved.outcome.iter())
+        .any(|(&o, out)| o && matches!(out, Outcome::Solved(..) | Outcome::TwoLeds(..)));
     if !usable {
         return Err(diagnose(&solved.outcome, lights, mask.is_some(), config));
     }
@@ -632,7 +643,10 @@ mod tests {
         assert_eq!(res.planes.len(), 20);
         assert_eq!(res.lit_count[(2, 2)], 2);
         let plane = res.planes[7];
-        assert!(plane.across.normalize().dot(&n).abs() < 1e-6, "n is on the circle");
+        assert!(
+            plane.across.normalize().dot(&n).abs() < 1e-6,
+            "n is on the circle"
+        );
         assert!(plane.towards.dot(&n) > 0.0);
     }
 
@@ -726,20 +740,38 @@ mod tests {
             Vector3::new(0.2, 0.0, 0.98),
             Vector3::new(-0.3, 0.0, 0.95),
         ];
-        let err = estimate_normals(&render(n, 1.0, &coplanar), &Lights::Distant(coplanar), None, None, &cfg)
-            .unwrap_err();
+        let err = estimate_normals(
+            &render(n, 1.0, &coplanar),
+            &Lights::Distant(coplanar),
+            None,
+            None,
+            &cfg,
+        )
+        .unwrap_err();
         assert!(matches!(err, PhotometricError::SingularLights(_)), "{err}");
         assert!(err.to_string().contains("plane"), "{err}");
         // Two pairs of duplicated LEDs: rank 2 as well, and the pairs are named.
         let l = lights();
         let duplicated = vec![l[0], l[0], l[2], l[2]];
-        let err = estimate_normals(&render(n, 1.0, &duplicated), &Lights::Distant(duplicated), None, None, &cfg)
-            .unwrap_err();
+        let err = estimate_normals(
+            &render(n, 1.0, &duplicated),
+            &Lights::Distant(duplicated),
+            None,
+            None,
+            &cfg,
+        )
+        .unwrap_err();
         assert!(err.to_string().contains("LEDs 1 and 2"), "{err}");
         // Lights given with negative intensities: the images cannot be explained.
         let flipped: Vec<Vector3<f64>> = l.iter().map(|v| -v).collect();
-        let err = estimate_normals(&render(n, 1.0, &l), &Lights::Distant(flipped), Some(&all()), None, &cfg)
-            .unwrap_err();
+        let err = estimate_normals(
+            &render(n, 1.0, &l),
+            &Lights::Distant(flipped),
+            Some(&all()),
+            None,
+            &cfg,
+        )
+        .unwrap_err();
         assert!(matches!(err, PhotometricError::Unsolvable(_)), "{err}");
         assert!(err.to_string().contains("negative intensities"), "{err}");
     }

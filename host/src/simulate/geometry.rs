@@ -112,7 +112,11 @@ impl SurfaceMap {
             }
             // Turned towards the camera along this pixel's ray.
             let towards = hit.ray.slope;
-            let face = if face.dot(&towards) < 0.0 { -face } else { face };
+            let face = if face.dot(&towards) < 0.0 {
+                -face
+            } else {
+                face
+            };
             let w = hit.weights;
             let normal = match vertex_normals {
                 Some(ns) => {

@@ -193,7 +193,11 @@ impl<'a> HeightField<'a> {
                 return false; // the segment passes behind the camera
             };
             let speed = (ahead.0 - here.0).hypot(ahead.1 - here.1) / probe;
-            s += if speed > 0.0 { (0.5 / speed).max(1e-6) } else { 1.0 };
+            s += if speed > 0.0 {
+                (0.5 / speed).max(1e-6)
+            } else {
+                1.0
+            };
             if s >= 1.0 {
                 return false;
             }
