@@ -169,6 +169,10 @@ fn bench(c: &mut Criterion) {
         integrator: Integrator::LeastSquares,
         ..IntegrateConfig::default()
     };
+    let bilateral = IntegrateConfig {
+        integrator: Integrator::Bilateral,
+        ..IntegrateConfig::default()
+    };
     let mut group = c.benchmark_group("ps+integration 1280x720 sphere");
     group.sample_size(10);
     group.bench_function("meb", |b| {
@@ -203,11 +207,7 @@ fn bench(c: &mut Criterion) {
         b.iter(|| black_box(integrate_normals(&ps.field, pitch, &least_squares, None).unwrap()))
     });
     stages.bench_function("bilateral integration", |b| {
-        b.iter(|| {
-            black_box(
-                integrate_normals(&ps.field, pitch, &IntegrateConfig::default(), None).unwrap(),
-            )
-        })
+        b.iter(|| black_box(integrate_normals(&ps.field, pitch, &bilateral, None).unwrap()))
     });
     // With the pixels lit by two LEDs (circles) and the holes.
     let evidence = SurfaceEvidence {
@@ -217,12 +217,7 @@ fn bench(c: &mut Criterion) {
     };
     let projection = rig.camera.projection();
     stages.bench_function("bilateral integration with two-LED pixels", |b| {
-        b.iter(|| {
-            black_box(
-                integrate_surface(&evidence, &projection, &IntegrateConfig::default(), None)
-                    .unwrap(),
-            )
-        })
+        b.iter(|| black_box(integrate_surface(&evidence, &projection, &bilateral, None).unwrap()))
     });
     stages.finish();
 }

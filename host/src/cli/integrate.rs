@@ -31,7 +31,7 @@ pub struct IntegrateArgs {
     #[arg(long, value_enum, value_delimiter = ',')]
     pub mesh: Vec<super::common::MeshFormat>,
     /// Integrator.
-    #[arg(long, value_enum, default_value = "bilateral")]
+    #[arg(long, value_enum, default_value = "least-squares")]
     pub integrator: IntegratorArg,
     /// Fast Marching λ per pixel².
     #[arg(long, default_value_t = 0.06)]
@@ -41,10 +41,10 @@ pub struct IntegrateArgs {
 /// Integrator choice on the command line.
 #[derive(clap::ValueEnum, Clone, Copy, Debug)]
 pub enum IntegratorArg {
-    /// Bilateral normal integration: keeps depth discontinuities (default).
-    Bilateral,
-    /// Masked least squares.
+    /// Masked least squares (default).
     LeastSquares,
+    /// Bilateral normal integration: keeps depth discontinuities.
+    Bilateral,
     /// The thesis' Fast Marching.
     FastMarching,
 }

@@ -38,7 +38,7 @@ pub struct ReconstructArgs {
     #[arg(long, value_enum, value_delimiter = ',')]
     mesh: Vec<super::common::MeshFormat>,
     /// Normal integrator.
-    #[arg(long, value_enum, default_value = "bilateral")]
+    #[arg(long, value_enum, default_value = "least-squares")]
     integrator: IntegratorArg,
     /// Object mask image (non-zero = object), same size as the images; found automatically
     /// when absent.

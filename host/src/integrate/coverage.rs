@@ -155,7 +155,7 @@ pub(crate) fn slopes_on_line(
     let floor = 1e-9 * (wx + wy).max(f64::MIN_POSITIVE);
     let (wx, wy) = (wx.max(floor), wy.max(floor));
     let denominator = a * a / wx + b * b / wy;
-    if !(denominator > 0.0) || !denominator.is_finite() {
+    if !denominator.is_finite() || denominator <= 0.0 {
         return None;
     }
     let lambda = (a * sx + b * sy - c) / denominator;

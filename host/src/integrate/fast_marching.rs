@@ -258,7 +258,7 @@ mod tests {
     fn marches_every_piece() {
         let (rows, cols) = (20usize, 40usize);
         let mask = Array2::from_shape_fn((rows, cols), |(r, c)| {
-            (2..18).contains(&r) && (c < 15 || c > 24)
+            (2..18).contains(&r) && !(15..=24).contains(&c)
         });
         let g = SurfaceGradients {
             dzdx: Array2::from_shape_fn((rows, cols), |(_, c)| if c < 15 { 0.1 } else { -0.2 }),

@@ -134,7 +134,7 @@ impl DepthGrid {
     }
 
     /// Depth z in mm of the unknown's value `u`.
-    pub fn to_mm(&self, u: f64) -> f64 {
+    pub fn depth_mm(&self, u: f64) -> f64 {
         match self {
             DepthGrid::Orthographic { .. } => u,
             DepthGrid::Perspective {
@@ -145,7 +145,7 @@ impl DepthGrid {
     }
 
     /// The unknown's value of depth z in mm (NaN at or behind a perspective camera).
-    pub fn from_mm(&self, z: f64) -> f64 {
+    pub fn unknown_of(&self, z: f64) -> f64 {
         match self {
             DepthGrid::Orthographic { .. } => z,
             DepthGrid::Perspective {
@@ -200,7 +200,7 @@ mod tests {
         let zhat = |row: f64, col: f64| {
             let ray = camera.ray(row, col);
             let z = n.dot(&(point_on_plane - ray.base)) / n.dot(&ray.slope);
-            grid.from_mm(z)
+            grid.unknown_of(z)
         };
         for (row, col) in [(5usize, 7usize), (30, 40), (55, 75)] {
             let (sx, sy) = grid.slopes(row, col, &n).unwrap();
@@ -214,8 +214,8 @@ mod tests {
             assert!((back - n).norm() < 1e-9, "{back} vs {n}");
         }
         let z = 12.5;
-        assert!((grid.to_mm(grid.from_mm(z)) - z).abs() < 1e-9);
-        assert!(grid.from_mm(400.0).is_nan());
+        assert!((grid.depth_mm(grid.unknown_of(z)) - z).abs() < 1e-9);
+        assert!(grid.unknown_of(400.0).is_nan());
     }
 
     #[test]

@@ -132,8 +132,7 @@ impl Topology {
         let n = self.len();
         let mut weights = vec![[0.0; 4]; n];
         for (k, nb) in self.neighbours.iter().enumerate() {
-            for d in 0..2 {
-                let j = nb[d];
+            for (d, &j) in nb.iter().take(2).enumerate() {
                 if j != NONE {
                     weights[k][d] = weight[k][d];
                     weights[j as usize][d + 2] = weight[k][d];
@@ -194,8 +193,7 @@ impl EdgeEquations {
         // Right-hand side Dᵀ W t: edge k→j with z_j − z_k = t adds −w·t at k and +w·t at j.
         let mut b = vec![0.0; topology.len()];
         for (k, nb) in topology.neighbours.iter().enumerate() {
-            for d in 0..2 {
-                let j = nb[d];
+            for (d, &j) in nb.iter().take(2).enumerate() {
                 if j != NONE {
                     let wt = self.weight[k][d] * self.target[k][d];
                     b[k] -= wt;

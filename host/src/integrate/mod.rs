@@ -5,9 +5,9 @@
 //! for a perspective one (Quéau, Durou & Aujol, "Normal integration: a survey", 2018). Three
 //! integrators work on arbitrary masks:
 //!
-//! - bilateral normal integration (Cao et al., ECCV 2022; [`bilateral`]), the default: weighted
-//!   least squares whose weights let depth jump where the surface is discontinuous;
-//! - masked least squares (the Poisson equation on the mask; [`least_squares`]);
+//! - masked least squares (the Poisson equation on the mask; [`least_squares`]), the default;
+//! - bilateral normal integration (Cao et al., ECCV 2022; [`bilateral`]): weighted least
+//!   squares whose weights let depth jump where the surface is discontinuous;
 //! - the thesis' Fast Marching integrator on W = z + λf ([`fast_marching`]).
 //!
 //! The least-squares solves use conjugate gradients with an aggregation-multigrid preconditioner
@@ -44,10 +44,12 @@ use thiserror::Error;
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default, serde::Serialize, serde::Deserialize)]
 #[serde(rename_all = "kebab-case")]
 pub enum Integrator {
-    /// Bilateral normal integration: discontinuity-preserving weighted least squares.
-    #[default]
+    /// Bilateral normal integration: discontinuity-preserving weighted least squares. Better
+    /// across depth discontinuities (Suzanne 6.7 mm vs 8.0 mm), slightly worse on smooth
+    /// surfaces (vase NRMSE 0.35 % vs 0.15 %), so not the default.
     Bilateral,
-    /// Masked least squares (Poisson) with a preconditioned conjugate-gradient solver.
+    /// Masked least squares (Poisson) with a preconditioned conjugate-gradient solver (default).
+    #[default]
     LeastSquares,
     /// The thesis' Fast Marching integrator (W = z + λf).
     FastMarching,
@@ -563,7 +565,7 @@ fn solve_window(
             .cells
             .iter()
             .map(|&(r, c)| {
-                let u = grid.from_mm(f64::from(d[(r + r0, c + c0)]));
+                let u = grid.unknown_of(f64::from(d[(r + r0, c + c0)]));
                 if u.is_finite() { u } else { 0.0 }
             })
             .collect()
@@ -660,7 +662,7 @@ fn solve_window(
     };
     let depth_mm = depth.mapv(|u| {
         if u.is_finite() {
-            grid.to_mm(u)
+            grid.depth_mm(u)
         } else {
             f64::NAN
         }
@@ -1022,7 +1024,10 @@ mod tests {
                 pitch_mm: 1.0,
                 size: (cols, rows),
             },
-            &IntegrateConfig::default(),
+            &IntegrateConfig {
+                integrator: Integrator::Bilateral,
+                ..IntegrateConfig::default()
+            },
             None,
         )
         .unwrap();
@@ -1092,12 +1097,27 @@ mod tests {
             fill: None,
         };
         let out = integrate_surface(&evidence, &camera.projection(), &config, None).unwrap();
-        let e = rmse(&out.depth.depth_mm, &truth, &mask);
+        // Log depth fixes the distance D − z only up to a scale (the near-field stage chooses
+        // it): compare after the best scale, s = Σab / Σa² for a = D − z_got, b = D − z_true.
+        let d = camera.distance_mm;
+        let (mut ab, mut aa) = (0.0, 0.0);
+        for (p, &m) in mask.indexed_iter() {
+            let z = f64::from(out.depth.depth_mm[p]);
+            if m && z.is_finite() {
+                ab += (d - z) * (d - truth[p]);
+                aa += (d - z) * (d - z);
+            }
+        }
+        let scale = ab / aa;
+        let scaled = out
+            .depth
+            .depth_mm
+            .mapv(|z| (d - scale * (d - f64::from(z))) as f32);
+        let e = rmse(&scaled, &truth, &mask);
         let ortho = integrate_normals(&field, camera.pitch_mm(), &config, None).unwrap();
         let e_ortho = rmse(&ortho.depth.depth_mm, &truth, &mask);
-        // Measured 0.16 mm: the trapezoidal rule on slopes up to 3 at 0.33 mm per pixel.
         assert!(
-            e < 0.2 && e_ortho > 3.0 * e,
+            e < 0.05 && e_ortho > 1.5 * e,
             "perspective {e} mm, orthographic reading {e_ortho} mm"
         );
     }
