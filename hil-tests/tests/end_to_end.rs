@@ -8,14 +8,12 @@
 use std::sync::Arc;
 
 use hil_tests::client;
-use meb::demo::{
-    decoded_reconstruct_config, expose_without_clipping, level_noise, usable_led_images,
-};
 use meb::demod::{DecodeConfig, Linearize, decode};
 use meb::device::{EmulatorOptions, TimelineWaveform, VirtualLuminaire};
 use meb::metrics::depth::compare_depth;
-use meb::reconstruct::reconstruct;
+use meb::reconstruct::{ReconstructConfig, from_decoded};
 use meb::rig::Rig;
+use meb::simulate::exposure::expose_without_clipping;
 use meb::simulate::{
     NoiseModel, Scene, SceneObject, Shape, SimConfig, SimulatedCapture, ToneCurve,
 };
@@ -82,19 +80,13 @@ fn configured_luminaire_to_depth_map_meets_the_target() {
     };
     let decoded = decode(&mut capture, &decode_config, &mut |_, _| {}).unwrap();
 
-    // 4. Near-field photometric stereo ↔ integration (the `meb reconstruct` stage).
+    // 4. Near-field photometric stereo ↔ integration: the path `meb reconstruct` takes.
     assert!(
         !decoded.saturated.iter().any(|&s| s),
         "the capture must not clip"
     );
-    let reconstruction = reconstruct(
-        &usable_led_images(&decoded),
-        &rig,
-        None,
-        Some(&level_noise(&decoded)),
-        &decoded_reconstruct_config(),
-    )
-    .unwrap();
+    let reconstruction =
+        from_decoded(&decoded, &rig, None, &ReconstructConfig::decoded_capture()).unwrap();
     let errors = compare_depth(
         &reconstruction.integration.depth.depth_mm,
         &truth.depth_mm,

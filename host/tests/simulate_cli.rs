@@ -261,7 +261,10 @@ fn bad_inputs_fail_clearly() {
     std::fs::write(taken.join("keep.txt"), "x").unwrap();
     let taken = taken.display().to_string();
     let err = run_err(&["simulate", "--rig", &rig, "--frames", "1", "--out", &taken]);
-    assert!(err.contains("already exists"), "{err}");
+    assert!(
+        err.contains("not an earlier `meb simulate` output") && err.contains("--force"),
+        "{err}"
+    );
     run_ok(&[
         "simulate", "--rig", &rig, "--frames", "1", "--out", &taken, "--force",
     ]);

@@ -20,7 +20,7 @@ use protocol::config::ChipRate;
 use protocol::luminaire::OutputPlan;
 use serde::{Deserialize, Serialize};
 
-use crate::simulate::LedWaveform;
+use crate::led_waveform::LedWaveform;
 
 /// `format` tag of a timeline file.
 pub const TIMELINE_FORMAT: &str = "meb-luminaire-timeline";

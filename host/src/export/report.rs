@@ -1,12 +1,13 @@
 //! Writes a reconstruction's full output folder: arrays, previews, surface mesh(es), and the
 //! report as JSON (every metric, per-stage timing) and as one self-contained HTML page.
 
-use super::images::{depth_map, error_map, grey_map, mask_image, normal_map, png_bytes};
+use super::ExportError;
+use super::files::preview::{depth_map, error_map, grey_map, mask_image, normal_map, png_bytes};
+use super::files::{FilesError, write_npy};
 use super::mesh::SurfaceMesh;
 use super::render::{VIEWS, render_surface};
-use super::{ExportError, write_atomic, write_npy};
 use crate::metrics::{AngularErrors, DepthErrors};
-use crate::reconstruct::StageTiming;
+use crate::timing::StageTiming;
 use crate::types::{DepthMap, NormalField};
 use base64::Engine;
 use serde_json::{Value, json};
@@ -46,18 +47,17 @@ pub struct WrittenReport {
     pub value: Value,
 }
 
-/// Writes the output folder `dir` (created if missing).
+/// Writes the reconstruction's files into the existing folder `dir` (normally an
+/// [`OutputFolder`](super::files::OutputFolder) being written).
 pub fn write_report(dir: &Path, inputs: &ReportInputs) -> Result<WrittenReport, ExportError> {
-    let io = |e: std::io::Error| ExportError::Write {
-        path: dir.to_path_buf(),
-        reason: e.to_string(),
+    let write = |path: &Path, bytes: &[u8]| {
+        std::fs::write(path, bytes).map_err(|e| FilesError::write(path, e))
     };
     if !inputs.depth.depth_mm.iter().any(|z| z.is_finite()) {
         return Err(ExportError::Empty(
             "the depth map has no reconstructed pixel".into(),
         ));
     }
-    std::fs::create_dir_all(dir).map_err(io)?;
     write_npy(&dir.join("normals.npy"), &inputs.normals.normals)?;
     write_npy(&dir.join("albedo.npy"), &inputs.normals.albedo)?;
     write_npy(&dir.join("depth.npy"), &inputs.depth.depth_mm)?;
@@ -110,7 +110,7 @@ pub fn write_report(dir: &Path, inputs: &ReportInputs) -> Result<WrittenReport, 
         ));
     }
     for (_, name, bytes) in &previews {
-        write_atomic(&dir.join(name), bytes)?;
+        write(&dir.join(name), bytes)?;
     }
     let mesh = SurfaceMesh::from_depth(inputs.depth);
     mesh.write(&dir.join("surface.ply"))?;
@@ -132,13 +132,13 @@ pub fn write_report(dir: &Path, inputs: &ReportInputs) -> Result<WrittenReport, 
         "files": previews.iter().map(|(_, n, _)| n.clone()).collect::<Vec<_>>(),
     });
     let json_path = dir.join("report.json");
-    let text = serde_json::to_string_pretty(&value).map_err(|e| ExportError::Write {
+    let text = serde_json::to_string_pretty(&value).map_err(|e| FilesError::Encode {
         path: json_path.clone(),
-        reason: e.to_string(),
+        source: Box::new(e),
     })?;
-    write_atomic(&json_path, text.as_bytes())?;
+    write(&json_path, text.as_bytes())?;
     let html_path = dir.join("report.html");
-    write_atomic(&html_path, html_page(inputs, &value, &previews).as_bytes())?;
+    write(&html_path, html_page(inputs, &value, &previews).as_bytes())?;
     Ok(WrittenReport {
         json: json_path,
         html: html_path,

@@ -6,12 +6,14 @@
 //! each row's exposure window ([`waveform`], SPEC §2–§3) before sensor noise, tone curve and
 //! quantisation ([`sensor`]). [`SimulatedCapture`] renders frames on demand as a
 //! [`FrameSource`](crate::capture::FrameSource); [`output`] writes them and the truth to disk;
-//! [`dataset`] builds the thesis' Ch. 7 data set (SPEC §10).
+//! [`dataset`] builds the thesis' Ch. 7 data set (SPEC §10); [`exposure`] picks a gain that
+//! does not clip, as an auto-exposed camera would.
 //!
 //! This module never uses `demod`, `photometric` or `integrate` code.
 
 pub mod capture;
 pub mod dataset;
+pub mod exposure;
 pub mod geometry;
 pub mod lighting;
 pub mod mesh;
@@ -49,16 +51,11 @@ pub enum SimulateError {
         reason: String,
     },
     /// Writing the output failed.
-    #[error("cannot write {path}: {reason}")]
-    Write {
-        /// The file or directory.
-        path: std::path::PathBuf,
-        /// The underlying error.
-        reason: String,
-    },
-    /// The output directory exists and is not empty.
-    #[error("output {0} already exists and is not empty (choose another --out or pass --force)")]
-    OutputExists(std::path::PathBuf),
+    #[error(transparent)]
+    Files(#[from] crate::export::files::FilesError),
+    /// Rendering a frame failed.
+    #[error(transparent)]
+    Frames(#[from] crate::capture::CaptureError),
     /// The `ffmpeg` program could not be run.
     #[error("cannot run ffmpeg for MP4 output ({0}); install FFmpeg or use --format png/y4m")]
     Ffmpeg(String),
