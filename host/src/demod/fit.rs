@@ -400,14 +400,8 @@ impl Fitter<'_> {
         if groups.len() < 2 {
             return None;
         }
-        let problem = Projection {
-            waves: self.waves,
-            groups: &groups,
-            frames: self.frames,
-        };
-        let mut residual = Vec::new();
-        problem.residuals(&global.params, &mut residual);
-        let base: f64 = residual.iter().map(|r| r * r).sum();
+        // The band-wise optimum without a line delay: what λ has to improve on.
+        let base = self.solve(&groups, &global.params, &self.freedom(false)).cost;
         // Each band's own shifts (timing held), and their trend across the bands.
         let mut shifts_only = self.freedom(false);
         shifts_only.free[RATE] = false;
