@@ -72,10 +72,6 @@ pub struct DecodeOptions {
     /// Decode even when the video shows a different LED count than --leds.
     #[arg(long)]
     no_led_check: bool,
-    /// Keep a result the quality verdict finds implausible (the verdict is recorded as
-    /// overridden in decode.json); `meb reconstruct` of such a folder needs --force too.
-    #[arg(long)]
-    force: bool,
 }
 
 /// Parses "W x H + X + Y".
@@ -91,8 +87,9 @@ fn parse_roi(text: &str) -> Result<Roi> {
     })
 }
 
-/// Builds the decoder settings; `default_leds` applies when --leds is absent.
-fn config(args: &DecodeOptions, default_leds: usize) -> Result<DecodeConfig> {
+/// Builds the decoder settings; `default_leds` applies when --leds is absent, `force` keeps
+/// a result the quality verdict finds implausible (recorded as overridden).
+fn config(args: &DecodeOptions, default_leds: usize, force: bool) -> Result<DecodeConfig> {
     let leds = match args.leds.as_deref() {
         None => LedCount::Fixed(default_leds),
         Some("auto") => LedCount::Auto,
@@ -124,7 +121,7 @@ fn config(args: &DecodeOptions, default_leds: usize) -> Result<DecodeConfig> {
         exposure: args.exposure,
         line_time_s: args.line_time_us.map(|us| us * 1e-6),
         check_led_count: !args.no_led_check,
-        on_implausible: if args.force {
+        on_implausible: if force {
             OnImplausible::Keep
         } else {
             OnImplausible::Refuse
@@ -147,13 +144,14 @@ fn parse_raw(text: &str) -> Result<RawLayout> {
 }
 
 /// Opens and decodes `input` with `options`, showing a progress bar; `default_leds` applies
-/// when --leds is absent.
+/// when --leds is absent, `force` keeps a result the verdict finds implausible.
 pub fn decode_capture(
     input: &Path,
     options: &DecodeOptions,
     default_leds: usize,
+    force: bool,
 ) -> Result<Decoded> {
-    let config = config(options, default_leds)?;
+    let config = config(options, default_leds, force)?;
     let open_options = OpenOptions {
         fps: options.fps,
         raw: options.raw.as_deref().map(parse_raw).transpose()?,
@@ -227,15 +225,11 @@ pub fn check_folder_verdict(report: &DecodeReport, folder: &Path, force: bool) -
     bail!("{} {what}; use --force to reconstruct from it anyway", folder.display())
 }
 
-/// Whether `--force` was given.
-pub fn forced(options: &DecodeOptions) -> bool {
-    options.force
-}
 
 /// Runs `meb decode`.
 pub fn run(args: &DecodeArgs) -> Result<()> {
     let folder = super::common::output_folder(&args.out, "decode", args.force)?;
-    let decoded = decode_capture(&args.input, &args.options, 4)?;
+    let decoded = decode_capture(&args.input, &args.options, 4, args.force)?;
     write_decode_dir(folder.path(), &decoded)?;
     let out = super::common::commit(folder)?;
     let report = &decoded.report;
