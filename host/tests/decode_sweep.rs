@@ -261,6 +261,7 @@ fn quantile(sorted: &[f64], q: f64) -> f64 {
 
 #[test]
 fn every_capture_is_decoded_within_tolerance_or_refused() {
+    let started = std::time::Instant::now();
     let cases: Vec<Case> = (0..CAPTURES).map(Case::new).collect();
     let outcomes: Vec<(Case, Outcome)> = cases
         .into_par_iter()
@@ -295,9 +296,10 @@ fn every_capture_is_decoded_within_tolerance_or_refused() {
     versus_oracle.sort_by(f64::total_cmp);
     let decoded = outcomes.len() - refused.len();
     eprintln!(
-        "sweep: {decoded}/{} decoded, {} refused; |gain − 1| over {} LED gains: median {:.4} %, \
-         90 % {:.4} %, 99 % {:.4} %, max {:.4} %; |gain − oracle gain|: median {:.4} %, 99 % {:.4} %, \
-         max {:.4} %",
+        "sweep ({:.0} s): {decoded}/{} decoded, {} refused; |gain − 1| over {} LED gains: median \
+         {:.4} %, 90 % {:.4} %, 99 % {:.4} %, max {:.4} %; |gain − oracle gain|: median {:.4} %, \
+         99 % {:.4} %, max {:.4} %",
+        started.elapsed().as_secs_f64(),
         outcomes.len(),
         refused.len(),
         errors.len(),

@@ -39,8 +39,8 @@ const LINE_DELAY: usize = 2;
 const SHIFTS: usize = 3;
 /// Shortest exposure the fit allows, frame periods.
 const MIN_EXPOSURE: f64 = 0.02;
-/// Largest |λ| the fit allows, frame periods per row (a whole frame over 100 rows).
-const MAX_LINE_DELAY: f64 = 0.01;
+/// Largest readout time of the region the fit allows, frame periods: |λ|·height.
+const MAX_READOUT: f64 = 1.5;
 /// Largest number of row bands of the rolling-shutter test.
 const TEST_BANDS: usize = 8;
 /// Fewest rows per band of the rolling-shutter test.
@@ -53,8 +53,12 @@ const RAMP_SIGNIFICANCE: f64 = 25.0;
 const RAMP_EXPOSURES: [f64; 3] = [1.0, 0.5, 0.25];
 /// Shift grid step, chips, of the re-search of each LED's shift.
 const BACKFIT_STEP: f64 = 0.25;
+/// Half-width, chips, of that re-search around the current shift.
+const BACKFIT_REACH: f64 = 2.0;
 /// Sweeps over the LEDs of that re-search.
 const BACKFIT_SWEEPS: usize = 2;
+/// Exposures the row-wise refinement starts from besides the band-wise fit's.
+const ROW_EXPOSURES: [f64; 1] = [1.0];
 /// A sample row takes part in the row-wise fit when its leading singular value² exceeds the
 /// noise-only edge (√pixels + √F)²·σ² by this factor.
 const ROW_SIGNAL_FACTOR: f64 = 1.5;
@@ -152,6 +156,10 @@ pub struct TimingFit {
     pub gain_uncertainty: Vec<f64>,
     /// Noise variance of one pixel sample, fraction² of full scale (σ²_G / pixels).
     pub pixel_noise: f64,
+    /// The fitted rate ratio sits at the edge of the searched range.
+    pub rate_at_limit: bool,
+    /// The fitted line delay sits at the largest one searched.
+    pub line_delay_at_limit: bool,
 }
 
 /// A compressed block of sample data sharing one set of templates.
@@ -212,6 +220,7 @@ pub fn fit_timing(
     let fitter = Fitter {
         waves: &waves,
         frames,
+        height,
         limits,
     };
     let global = fitter.global(space);
@@ -221,12 +230,12 @@ pub fn fit_timing(
             (fitter.rows(sample, pixel_noise, &start, false), true)
         }
         Some(_) => (global, false),
-        None => match fitter.band_fit(sample, &global, height, pixel_noise) {
+        None => match fitter.band_fit(sample, &global, pixel_noise) {
             Some(banded) => (fitter.rows(sample, pixel_noise, &banded.params, true), true),
             None => (global, false),
         },
     };
-    finish(sample, &waves, solution, rolling, pixel_noise)
+    fitter.finish(sample, solution, rolling, pixel_noise)
 }
 
 /// Refines an earlier fit of more LEDs (the LED-count check's) for the first `leds` of them,
@@ -235,6 +244,7 @@ pub fn refit_timing(
     sample: &PixelSample,
     space: &SignalSpace,
     leds: usize,
+    height: usize,
     limits: &FitLimits,
     previous: &TimingFit,
 ) -> TimingFit {
@@ -244,6 +254,7 @@ pub fn refit_timing(
     let fitter = Fitter {
         waves: &waves,
         frames,
+        height,
         limits,
     };
     let mut start = previous.model.params();
@@ -253,34 +264,7 @@ pub fn refit_timing(
     } else {
         fitter.solve(&global_groups(space, frames), &start, &fitter.freedom(false))
     };
-    finish(sample, &waves, solution, previous.rolling, pixel_noise)
-}
-
-/// The orientation, gain uncertainty and packaging of a solution.
-fn finish(
-    sample: &PixelSample,
-    waves: &[ReceivedWaveform],
-    solution: Solution,
-    rolling: bool,
-    pixel_noise: f64,
-) -> TimingFit {
-    let mut model = TimingModel::from_params(&solution.params);
-    orient(sample, waves, &mut model);
-    let reference = if rolling { mean_row(sample) } else { 0.0 };
-    let gain_uncertainty = gain_uncertainty(
-        waves,
-        &model,
-        &solution,
-        reference,
-        sample.frames(),
-        pixel_noise,
-    );
-    TimingFit {
-        model,
-        rolling,
-        gain_uncertainty,
-        pixel_noise,
-    }
+    fitter.finish(sample, solution, previous.rolling, pixel_noise)
 }
 
 /// The global-shutter data: the signal eigenvectors scaled by √eigenvalue.
@@ -296,10 +280,45 @@ fn global_groups(space: &SignalSpace, frames: usize) -> [FitGroup; 1] {
 struct Fitter<'a> {
     waves: &'a [ReceivedWaveform],
     frames: usize,
+    height: usize,
     limits: &'a FitLimits,
 }
 
 impl Fitter<'_> {
+    /// The orientation, gain uncertainty, limit checks and packaging of a solution.
+    fn finish(
+        &self,
+        sample: &PixelSample,
+        solution: Solution,
+        rolling: bool,
+        pixel_noise: f64,
+    ) -> TimingFit {
+        let mut model = TimingModel::from_params(&solution.params);
+        orient(sample, self.waves, &mut model);
+        let reference = if rolling { mean_row(sample) } else { 0.0 };
+        let gain_uncertainty = gain_uncertainty(
+            self.waves,
+            &model,
+            &solution,
+            reference,
+            self.frames,
+            pixel_noise,
+        );
+        let rate_at_limit = self.limits.rate_ratio.is_none()
+            && (model.timing.rate_ratio - 1.0).abs() > self.limits.max_rate_mismatch;
+        let line_delay_at_limit = rolling
+            && self.limits.line_delay.is_none()
+            && model.line_delay.abs() * self.height as f64 >= MAX_READOUT * (1.0 - 1e-6);
+        TimingFit {
+            model,
+            rolling,
+            gain_uncertainty,
+            pixel_noise,
+            rate_at_limit,
+            line_delay_at_limit,
+        }
+    }
+
     /// Which parameters move: ρ and e unless given, λ when `line_delay`, every shift.
     fn freedom(&self, line_delay: bool) -> Freedom {
         let mismatch = self.limits.max_rate_mismatch + 1.0 / self.frames.max(1) as f64;
@@ -311,7 +330,10 @@ impl Fitter<'_> {
         let mut bounds = vec![
             (1.0 - mismatch, 1.0 + mismatch),
             (MIN_EXPOSURE, 1.0),
-            (-MAX_LINE_DELAY, MAX_LINE_DELAY),
+            {
+                let most = MAX_READOUT / self.height.max(1) as f64;
+                (-most, most)
+            },
         ];
         for _ in self.waves {
             free.push(true);
@@ -381,9 +403,9 @@ impl Fitter<'_> {
         &self,
         sample: &PixelSample,
         global: &Solution,
-        height: usize,
         pixel_noise: f64,
     ) -> Option<Solution> {
+        let height = self.height;
         let bands = (height / ROWS_PER_TEST_BAND).clamp(1, TEST_BANDS);
         if bands < 2 {
             return None;
@@ -432,30 +454,31 @@ impl Fitter<'_> {
         let delay = chips_per_row / global.params[RATE];
         let freedom = self.freedom(true);
         let mut best: Option<Solution> = None;
-        for exposure in self.exposures(global.params[EXPOSURE]) {
+        for exposure in self.exposures(global.params[EXPOSURE], &RAMP_EXPOSURES) {
             let mut start = self.pivot(&global.params, delay, centre);
             start[EXPOSURE] = exposure;
-            let first = self.solve(&groups, &start, &freedom);
-            let searched = self.backfit(&groups, first.params);
-            let solution = self.solve(&groups, &searched, &freedom);
+            let solution = self.solve(&groups, &start, &freedom);
             if best.as_ref().is_none_or(|b| solution.cost < b.cost) {
                 best = Some(solution);
             }
         }
-        let best = best?;
+        let first = best?;
+        let searched = self.backfit(&groups, first.params.clone());
+        let second = self.solve(&groups, &searched, &freedom);
+        let best = if second.cost < first.cost { second } else { first };
         let ramp = TimingModel::from_params(&best.params).ramp_chips(height).abs();
         (ramp >= MIN_RAMP_CHIPS && base - best.cost > RAMP_SIGNIFICANCE * pixel_noise)
             .then_some(best)
     }
 
-    /// The exposures to start a refinement from: `fitted` and the spread ones (only the
-    /// known exposure when it is given).
-    fn exposures(&self, fitted: f64) -> Vec<f64> {
+    /// The exposures to start a refinement from: `fitted` and `spread` (only the known
+    /// exposure when it is given).
+    fn exposures(&self, fitted: f64, spread: &[f64]) -> Vec<f64> {
         if self.limits.exposure.is_some() {
             return vec![fitted];
         }
         let mut exposures = vec![fitted];
-        for e in RAMP_EXPOSURES {
+        for &e in spread {
             if exposures.iter().all(|x| (x - e).abs() > 0.05) {
                 exposures.push(e);
             }
@@ -474,10 +497,12 @@ impl Fitter<'_> {
         let mut residual = Vec::new();
         for _ in 0..BACKFIT_SWEEPS {
             for (i, wave) in self.waves.iter().enumerate() {
-                let steps = (wave.period() as f64 / 2.0 / BACKFIT_STEP).round() as usize;
-                let mut best = (f64::INFINITY, params[SHIFTS + i]);
-                for k in 0..steps {
-                    params[SHIFTS + i] = k as f64 * BACKFIT_STEP;
+                let reach = (wave.period() as f64 / 4.0).min(BACKFIT_REACH);
+                let steps = (reach / BACKFIT_STEP).round() as i64;
+                let centre = params[SHIFTS + i];
+                let mut best = (f64::INFINITY, centre);
+                for k in -steps..steps {
+                    params[SHIFTS + i] = centre + k as f64 * BACKFIT_STEP;
                     problem.residuals(&params, &mut residual);
                     let cost: f64 = residual.iter().map(|r| r * r).sum();
                     if cost < best.0 {
@@ -502,7 +527,7 @@ impl Fitter<'_> {
         let groups = row_groups(sample, self.waves.len(), pixel_noise);
         let freedom = self.freedom(fit_delay);
         let mut best: Option<Solution> = None;
-        for exposure in self.exposures(start[EXPOSURE]) {
+        for exposure in self.exposures(start[EXPOSURE], &ROW_EXPOSURES) {
             let mut params = start.to_vec();
             params[EXPOSURE] = exposure;
             let solution = self.solve(&groups, &params, &freedom);

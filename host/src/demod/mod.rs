@@ -268,11 +268,10 @@ fn validate(config: &DecodeConfig, format: &FrameFormat) -> Result<Roi, DemodErr
         return invalid(format!("exposure {e} is outside (0, 1]"));
     }
     if let Some(t) = config.line_time_s
-        && !(t.is_finite() && t.abs() * format.fps <= 0.01)
+        && !(t.is_finite() && t.abs() * format.fps < 1.0)
     {
         return invalid(format!(
-            "line time {t} s is not a plausible rolling-shutter line time at {} fps \
-             (at most 1 % of a frame period per row)",
+            "line time {t} s is not shorter than a frame period at {} fps",
             format.fps
         ));
     }
@@ -486,15 +485,14 @@ impl WindowDecoder {
                 &window.sample,
                 &space,
                 leds,
+                height,
                 &self.fit_limits,
                 previous,
             ),
             _ => fit_timing(&window.sample, &space, leds, height, &self.fit_limits),
         };
         let quality = quality::measure(&window.sample, &space, &fit, &waves);
-        let rate_at_limit = self.fit_limits.rate_ratio.is_none()
-            && (fit.model.timing.rate_ratio - 1.0).abs() > self.fit_limits.max_rate_mismatch;
-        let verdict = quality::judge(&quality.leds, rate_at_limit);
+        let verdict = quality::judge(&quality.leds, &fit);
         let bands = if fit.rolling {
             let ramp = fit.model.ramp_chips(height).abs();
             ((ramp / BAND_PHASE_STEP).ceil() as usize).clamp(1, height)

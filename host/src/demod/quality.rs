@@ -207,9 +207,8 @@ pub fn measure(
     }
 }
 
-/// The verdict for one window's LED qualities; `rate_at_limit` when the fitted rate ratio sits
-/// at the edge of the searched range.
-pub fn judge(quality: &[LedQuality], rate_at_limit: bool) -> Verdict {
+/// The verdict for one window's LED qualities and timing fit.
+pub fn judge(quality: &[LedQuality], fit: &TimingFit) -> Verdict {
     let mut problems = Vec::new();
     let mut advice = Vec::new();
     let mut advise = |text: &str| {
@@ -247,9 +246,17 @@ pub fn judge(quality: &[LedQuality], rate_at_limit: bool) -> Verdict {
             advise("decode more frames, expose brighter or with less noise, or give the exposure");
         }
     }
-    if rate_at_limit {
+    if fit.rate_at_limit {
         problems.push("the rate ratio sits at the edge of the searched range".into());
         advise("widen the rate-ratio search or give the chip rate");
+    }
+    if fit.line_delay_at_limit {
+        problems.push(
+            "the rolling-shutter line delay sits at the largest one searched (a readout of \
+             1.5 frame periods over the region)"
+                .into(),
+        );
+        advise("give the rolling-shutter line time");
     }
     Verdict::from_findings(problems, advice)
 }
