@@ -22,7 +22,7 @@
 //! half-period shift negates a carrier, SPEC §2).
 
 use super::basis::TemplateBasis;
-use super::levenberg::{Freedom, Residuals, Solution, minimise};
+use super::levenberg::{Freedom, Residuals, Solution, minimise, minimise_within};
 use super::sample::PixelSample;
 use super::seed::{Start, starts};
 use super::spectrum::SignalSpace;
@@ -49,6 +49,12 @@ const ROWS_PER_TEST_BAND: usize = 8;
 const MIN_RAMP_CHIPS: f64 = 0.01;
 /// A line delay is kept when it lowers the band-wise cost by this many noise variances.
 const RAMP_SIGNIFICANCE: f64 = 25.0;
+/// The rows agree (no rolling-shutter search) when letting each band's shifts move lowers
+/// the band-wise cost by less than this many noise variances per shift and the bands' shift
+/// trend stays below [`MIN_RAMP_CHIPS`].
+const AGREEMENT: f64 = 4.0;
+/// Least-squares steps of each band's own shifts in that test.
+const SCREEN_ITERATIONS: usize = 4;
 /// Exposures tried as starting points of the band-wise and row-wise refinements.
 const RAMP_EXPOSURES: [f64; 3] = [1.0, 0.5, 0.25];
 /// Shift grid step, chips, of the re-search of each LED's shift.
@@ -422,16 +428,26 @@ impl Fitter<'_> {
         if groups.len() < 2 {
             return None;
         }
-        // The band-wise optimum without a line delay: what λ has to improve on.
-        let base = self.solve(&groups, &global.params, &self.freedom(false)).cost;
-        // Each band's own shifts (timing held), and their trend across the bands.
+        // Each band's own shifts (timing held, a few steps), and their trend across the bands.
         let mut shifts_only = self.freedom(false);
         shifts_only.free[RATE] = false;
         shifts_only.free[EXPOSURE] = false;
         let (mut sxy, mut sxx, mut sw, mut swx) = (0.0, 0.0, 0.0, 0.0);
         let mut trend = Vec::new();
+        let mut gained = 0.0;
+        let mut residual = Vec::new();
         for group in &groups {
-            let solution = self.solve(std::slice::from_ref(group), &global.params, &shifts_only);
+            let single = std::slice::from_ref(group);
+            let problem = Projection {
+                waves: self.waves,
+                groups: single,
+                frames: self.frames,
+            };
+            problem.residuals(&global.params, &mut residual);
+            let before: f64 = residual.iter().map(|r| r * r).sum();
+            let solution =
+                minimise_within(&problem, &global.params, &shifts_only, SCREEN_ITERATIONS);
+            gained += before - solution.cost;
             let weight = group.data.norm_squared();
             for (i, wave) in self.waves.iter().enumerate() {
                 let half = wave.period() as f64 / 2.0;
@@ -451,7 +467,15 @@ impl Fitter<'_> {
             sxx += w * (row - centre) * (row - centre);
         }
         let chips_per_row = if sxx > 0.0 { sxy / sxx } else { 0.0 };
+        let shifts = (groups.len() * self.waves.len()) as f64;
+        if gained < AGREEMENT * shifts * pixel_noise
+            && (chips_per_row * height as f64).abs() < MIN_RAMP_CHIPS
+        {
+            return None;
+        }
         let delay = chips_per_row / global.params[RATE];
+        // The band-wise optimum without a line delay: what λ has to improve on.
+        let base = self.solve(&groups, &global.params, &self.freedom(false)).cost;
         let freedom = self.freedom(true);
         let mut best: Option<Solution> = None;
         for exposure in self.exposures(global.params[EXPOSURE], &RAMP_EXPOSURES) {

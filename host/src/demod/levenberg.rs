@@ -48,6 +48,16 @@ pub struct Solution {
 
 /// Minimises the sum of squared residuals from `start`.
 pub fn minimise(problem: &impl Residuals, start: &[f64], freedom: &Freedom) -> Solution {
+    minimise_within(problem, start, freedom, MAX_ITERATIONS)
+}
+
+/// [`minimise`] with at most `iterations` accepted steps.
+pub fn minimise_within(
+    problem: &impl Residuals,
+    start: &[f64],
+    freedom: &Freedom,
+    iterations: usize,
+) -> Solution {
     let free: Vec<usize> = (0..start.len())
         .filter(|&k| freedom.free.get(k).copied().unwrap_or(false))
         .collect();
@@ -64,7 +74,7 @@ pub fn minimise(problem: &impl Residuals, start: &[f64], freedom: &Freedom) -> S
     let mut jacobian = jacobian(problem, &params, &residual, &free);
     let mut damping = INITIAL_DAMPING;
     let mut trial = Vec::new();
-    for _ in 0..MAX_ITERATIONS {
+    for _ in 0..iterations {
         if free.is_empty() {
             break;
         }

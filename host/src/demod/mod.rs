@@ -426,7 +426,7 @@ impl WindowDecoder {
             self.roi.height,
             &self.fit_limits,
         );
-        let quality = quality::measure(&window.sample, &space, &fit, &waves);
+        let quality = quality::measure(&window.sample, &window.gram, &space, &fit, &waves);
         let strongest = quality.levels.iter().cloned().fold(0.0, f64::max);
         let present: Vec<bool> = quality
             .leds
@@ -491,7 +491,7 @@ impl WindowDecoder {
             ),
             _ => fit_timing(&window.sample, &space, leds, height, &self.fit_limits),
         };
-        let quality = quality::measure(&window.sample, &space, &fit, &waves);
+        let quality = quality::measure(&window.sample, &window.gram, &space, &fit, &waves);
         let verdict = quality::judge(&quality.leds, &fit);
         let bands = if fit.rolling {
             let ramp = fit.model.ramp_chips(height).abs();

@@ -21,6 +21,7 @@ use super::fit::TimingFit;
 use super::sample::PixelSample;
 use super::spectrum::SignalSpace;
 use super::waveform::ReceivedWaveform;
+use nalgebra::{DMatrix, DVector};
 use serde::{Deserialize, Serialize};
 
 /// Below this signal-to-noise an LED's image is noise.
@@ -122,9 +123,11 @@ pub struct FitQuality {
     pub residual_rms: f64,
 }
 
-/// Measures each LED's quality (module docs).
+/// Measures each LED's quality (module docs); `gram` is the sample's Gram matrix (used when
+/// every row shares one set of templates).
 pub fn measure(
     sample: &PixelSample,
+    gram: &DMatrix<f64>,
     space: &SignalSpace,
     fit: &TimingFit,
     waves: &[ReceivedWaveform],
@@ -135,63 +138,32 @@ pub fn measure(
         .iter()
         .map(|w| led_subspace(w, model.timing.rate_ratio, frames))
         .collect();
-    let mut signal = vec![0.0; waves.len()];
-    let mut unexplained = vec![0.0; waves.len()];
-    let mut expected = vec![0.0; waves.len()];
-    let groups = if fit.rolling {
-        sample.row_runs()
+    let mut sums = Sums::new(waves.len());
+    if fit.rolling {
+        for run in sample.row_runs() {
+            let row = sample.rows()[run.start] as f64;
+            let parts = Parts::new(model, waves, &subspaces, row, frames);
+            let pixels: Vec<&[f64]> = run.clone().map(|p| sample.pixel(p)).collect();
+            parts.add_pixels(&pixels, fit.pixel_noise, &mut sums);
+        }
     } else {
-        vec![0..sample.len()]
-    };
-    let mut residual = vec![0.0; frames];
-    let mut level_sums = vec![0.0; waves.len()];
-    let mut residual_energy = 0.0;
-    let mut projections = vec![0.0; waves.len() + 1];
-    let mut coefficients = vec![0.0; waves.len() + 1];
-    for run in groups {
-        let row = if fit.rolling {
-            sample.rows()[run.start] as f64
-        } else {
-            0.0
-        };
-        let columns = model.columns(waves, row, frames);
-        let basis = model.basis(waves, row, frames);
-        let unique: Vec<Vec<f64>> = (0..waves.len())
-            .map(|i| unique_direction(&columns, i + 1))
-            .collect();
-        let left: Vec<Vec<Vec<f64>>> = subspaces
-            .iter()
-            .map(|s| orthonormal_complement(s, &basis.rows))
-            .collect();
-        for p in run.clone() {
-            let x = sample.pixel(p);
-            residual.copy_from_slice(x);
-            for (q, b) in basis.rows.iter().zip(projections.iter_mut()) {
-                *b = dot(q, x);
-                residual.iter_mut().zip(q).for_each(|(r, v)| *r -= *b * v);
-            }
-            basis.coefficients(&projections, &mut coefficients);
-            level_sums
+        let parts = Parts::new(model, waves, &subspaces, 0.0, frames);
+        let mut total = vec![0.0; frames];
+        for p in 0..sample.len() {
+            total
                 .iter_mut()
-                .zip(&coefficients[1..])
-                .for_each(|(s, c)| *s += c);
-            residual_energy += dot(&residual, &residual);
-            for i in 0..waves.len() {
-                signal[i] += dot(&unique[i], x).powi(2);
-                unexplained[i] += left[i].iter().map(|b| dot(b, &residual).powi(2)).sum::<f64>();
-            }
+                .zip(sample.pixel(p))
+                .for_each(|(t, x)| *t += x);
         }
-        for (e, l) in expected.iter_mut().zip(&left) {
-            *e += l.len() as f64 * run.len() as f64 * fit.pixel_noise;
-        }
+        parts.add_gram(gram, &total, sample.len(), fit.pixel_noise, &mut sums);
     }
     let noise = space.noise.max(f64::MIN_POSITIVE);
     let pixels = sample.len().max(1) as f64;
     let dof = frames.saturating_sub(waves.len() + 1).max(1) as f64;
     let leds = (0..waves.len())
         .map(|i| {
-            let s = signal[i] - noise;
-            let u = unexplained[i] - expected[i];
+            let s = sums.signal[i] - noise;
+            let u = sums.unexplained[i] - sums.expected[i];
             LedQuality {
                 signal_to_noise: s / noise,
                 unexplained: u / noise,
@@ -202,8 +174,123 @@ pub fn measure(
         .collect();
     FitQuality {
         leds,
-        levels: level_sums.iter().map(|s| s / pixels).collect(),
-        residual_rms: (residual_energy / (pixels * dof)).sqrt(),
+        levels: sums.levels.iter().map(|s| s / pixels).collect(),
+        residual_rms: (sums.residual.max(0.0) / (pixels * dof)).sqrt(),
+    }
+}
+
+/// Running sums of [`measure`].
+struct Sums {
+    signal: Vec<f64>,
+    unexplained: Vec<f64>,
+    expected: Vec<f64>,
+    levels: Vec<f64>,
+    residual: f64,
+}
+
+impl Sums {
+    fn new(leds: usize) -> Self {
+        Self {
+            signal: vec![0.0; leds],
+            unexplained: vec![0.0; leds],
+            expected: vec![0.0; leds],
+            levels: vec![0.0; leds],
+            residual: 0.0,
+        }
+    }
+}
+
+/// The directions [`measure`] projects on for one set of templates.
+struct Parts {
+    basis: super::basis::TemplateBasis,
+    /// Per LED: the unit part of its template no other template explains.
+    unique: Vec<Vec<f64>>,
+    /// Per LED: its subspace orthogonal to the templates.
+    left: Vec<Vec<Vec<f64>>>,
+}
+
+impl Parts {
+    fn new(
+        model: &super::fit::TimingModel,
+        waves: &[ReceivedWaveform],
+        subspaces: &[Vec<Vec<f64>>],
+        row: f64,
+        frames: usize,
+    ) -> Self {
+        let columns = model.columns(waves, row, frames);
+        let basis = model.basis(waves, row, frames);
+        let unique = (0..waves.len())
+            .map(|i| unique_direction(&columns, i + 1))
+            .collect();
+        let left = subspaces
+            .iter()
+            .map(|s| orthonormal_complement(s, &basis.rows))
+            .collect();
+        Self {
+            basis,
+            unique,
+            left,
+        }
+    }
+
+    /// Adds pixels one by one.
+    fn add_pixels(&self, pixels: &[&[f64]], pixel_noise: f64, sums: &mut Sums) {
+        let k = self.basis.columns;
+        let mut projections = vec![0.0; k];
+        let mut coefficients = vec![0.0; k];
+        let mut residual = Vec::new();
+        for x in pixels {
+            residual.clear();
+            residual.extend_from_slice(x);
+            for (q, b) in self.basis.rows.iter().zip(projections.iter_mut()) {
+                *b = dot(q, x);
+                residual.iter_mut().zip(q).for_each(|(r, v)| *r -= *b * v);
+            }
+            self.basis.coefficients(&projections, &mut coefficients);
+            sums.levels
+                .iter_mut()
+                .zip(&coefficients[1..])
+                .for_each(|(s, c)| *s += c);
+            sums.residual += dot(&residual, &residual);
+            for (i, (u, left)) in self.unique.iter().zip(&self.left).enumerate() {
+                sums.signal[i] += dot(u, x).powi(2);
+                // A left direction is orthogonal to the templates: bᵀr = bᵀx.
+                sums.unexplained[i] += left.iter().map(|b| dot(b, x).powi(2)).sum::<f64>();
+            }
+        }
+        for (e, l) in sums.expected.iter_mut().zip(&self.left) {
+            *e += l.len() as f64 * pixels.len() as f64 * pixel_noise;
+        }
+    }
+
+    /// Adds `pixels` pixels at once from their Gram matrix and summed values.
+    fn add_gram(
+        &self,
+        gram: &DMatrix<f64>,
+        total: &[f64],
+        pixels: usize,
+        pixel_noise: f64,
+        sums: &mut Sums,
+    ) {
+        let energy = |v: &[f64]| {
+            let v = DVector::from_column_slice(v);
+            (v.transpose() * gram * &v)[(0, 0)]
+        };
+        let k = self.basis.columns;
+        let projections: Vec<f64> = self.basis.rows.iter().map(|q| dot(q, total)).collect();
+        let mut coefficients = vec![0.0; k];
+        self.basis.coefficients(&projections, &mut coefficients);
+        sums.levels
+            .iter_mut()
+            .zip(&coefficients[1..])
+            .for_each(|(s, c)| *s += c);
+        let explained: f64 = self.basis.rows.iter().map(|q| energy(q)).sum();
+        sums.residual += gram.trace() - explained;
+        for (i, (u, left)) in self.unique.iter().zip(&self.left).enumerate() {
+            sums.signal[i] += energy(u);
+            sums.unexplained[i] += left.iter().map(|b| energy(b)).sum::<f64>();
+            sums.expected[i] += left.len() as f64 * pixels as f64 * pixel_noise;
+        }
     }
 }
 

@@ -176,21 +176,19 @@ fn row_candidates(
 ) -> Vec<Candidate> {
     let range = row * width..(row + 1) * width;
     let mut sums = RowSums::new(width);
-    match map {
-        CodeMap::Linear { .. } => {
-            for frame in frames {
-                match frame {
-                    Samples::U8(s) => sums.add_codes(s.get(range.clone()).unwrap_or(&[])),
-                    Samples::U16(s) => sums.add_codes(s.get(range.clone()).unwrap_or(&[])),
-                }
+    for frame in frames {
+        match (frame, map) {
+            (Samples::U8(s), CodeMap::Linear { .. }) => {
+                sums.add_codes(s.get(range.clone()).unwrap_or(&[]))
             }
-        }
-        CodeMap::Table(table) => {
-            for frame in frames {
-                match frame {
-                    Samples::U8(s) => sums.add_table(s.get(range.clone()).unwrap_or(&[]), table),
-                    Samples::U16(s) => sums.add_table(s.get(range.clone()).unwrap_or(&[]), table),
-                }
+            (Samples::U16(s), CodeMap::Linear { .. }) => {
+                sums.add_codes(s.get(range.clone()).unwrap_or(&[]))
+            }
+            (Samples::U8(s), CodeMap::Table(t)) => {
+                sums.add_table(s.get(range.clone()).unwrap_or(&[]), t)
+            }
+            (Samples::U16(s), CodeMap::Table(t)) => {
+                sums.add_table(s.get(range.clone()).unwrap_or(&[]), t)
             }
         }
     }
@@ -198,28 +196,34 @@ fn row_candidates(
     (0..width)
         .filter(|&col| !limits.classify(sums.max_code[col]).0)
         .map(|col| {
-            let mean = sums.sum[col] / n;
+            let (sum, squares) = sums.moments(col);
+            let mean = sum / n;
             Candidate {
                 row,
                 col,
-                variance: (sums.squares[col] / n - mean * mean).max(0.0),
+                variance: (squares / n - mean * mean).max(0.0),
             }
         })
         .collect()
 }
 
-/// Per-pixel running sums of one row.
+/// Per-pixel running sums of one row: exact integer sums of the codes for a linear map (the
+/// loop vectorises), floating-point sums of the looked-up values otherwise.
 struct RowSums {
-    sum: Vec<f64>,
-    squares: Vec<f64>,
+    code_sum: Vec<u64>,
+    code_squares: Vec<u64>,
+    value_sum: Vec<f64>,
+    value_squares: Vec<f64>,
     max_code: Vec<u16>,
 }
 
 impl RowSums {
     fn new(width: usize) -> Self {
         Self {
-            sum: vec![0.0; width],
-            squares: vec![0.0; width],
+            code_sum: vec![0; width],
+            code_squares: vec![0; width],
+            value_sum: vec![0.0; width],
+            value_squares: vec![0.0; width],
             max_code: vec![0; width],
         }
     }
@@ -227,14 +231,14 @@ impl RowSums {
     /// Adds one frame's codes (linear map: the codes themselves).
     fn add_codes<T: Copy + Into<u16>>(&mut self, codes: &[T]) {
         for (((s, q), m), &c) in self
-            .sum
+            .code_sum
             .iter_mut()
-            .zip(self.squares.iter_mut())
+            .zip(self.code_squares.iter_mut())
             .zip(self.max_code.iter_mut())
             .zip(codes)
         {
             let code: u16 = c.into();
-            let v = f64::from(code);
+            let v = u64::from(code);
             *s += v;
             *q += v * v;
             *m = (*m).max(code);
@@ -244,9 +248,9 @@ impl RowSums {
     /// Adds one frame's codes through a look-up table.
     fn add_table<T: Copy + Into<u16>>(&mut self, codes: &[T], table: &[f32]) {
         for (((s, q), m), &c) in self
-            .sum
+            .value_sum
             .iter_mut()
-            .zip(self.squares.iter_mut())
+            .zip(self.value_squares.iter_mut())
             .zip(self.max_code.iter_mut())
             .zip(codes)
         {
@@ -256,5 +260,13 @@ impl RowSums {
             *q += v * v;
             *m = (*m).max(code);
         }
+    }
+
+    /// (Σ value, Σ value²) of column `col`, whichever sums were used.
+    fn moments(&self, col: usize) -> (f64, f64) {
+        (
+            self.code_sum[col] as f64 + self.value_sum[col],
+            self.code_squares[col] as f64 + self.value_squares[col],
+        )
     }
 }
