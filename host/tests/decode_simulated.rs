@@ -267,7 +267,8 @@ fn three_percent_rate_offset_decodes_every_seed() {
             seed,
             ..SimConfig::default()
         };
-        let (decoded, gains) = decode_default(&mut sphere_capture(thesis_rig(), config), &four_leds());
+        let (decoded, gains) =
+            decode_default(&mut sphere_capture(thesis_rig(), config), &four_leds());
         let report = &decoded.report;
         eprintln!(
             "seed {seed}: rate {:.5} exposure {:.3} noise {:.4} gains {gains:.4?}",
@@ -277,7 +278,11 @@ fn three_percent_rate_offset_decodes_every_seed() {
         assert!((report.exposure - 0.9).abs() < 0.02, "{report:?}");
         assert!(report.median_noise < 0.006, "{report:?}");
         for (i, g) in gains.iter().enumerate() {
-            assert!((g - 1.0).abs() < 0.01, "seed {seed} LED {}: gain {g}", i + 1);
+            assert!(
+                (g - 1.0).abs() < 0.01,
+                "seed {seed} LED {}: gain {g}",
+                i + 1
+            );
         }
     }
 }
@@ -293,7 +298,10 @@ fn rate_offset_with_given_phases_keeps_all_four_leds() {
         ..SimConfig::default()
     };
     let (decoded, gains) = decode_default(&mut sphere_capture(thesis_rig(), config), &four_leds());
-    eprintln!("given phases: {:?} gains {gains:.4?}", decoded.report.per_led);
+    eprintln!(
+        "given phases: {:?} gains {gains:.4?}",
+        decoded.report.per_led
+    );
     assert_eq!(decoded.report.detected_leds, Some(4));
     for (i, g) in gains.iter().enumerate() {
         assert!((g - 1.0).abs() < 0.01, "LED {}: gain {g}", i + 1);
@@ -312,7 +320,11 @@ fn short_exposures_at_the_chip_rate_keep_gains_within_one_percent() {
         let (_, gains) = decode_default(&mut sphere_capture(thesis_rig(), config), &four_leds());
         eprintln!("exposure {exposure}: gains {gains:.4?}");
         for (i, g) in gains.iter().enumerate() {
-            assert!((g - 1.0).abs() < 0.01, "exposure {exposure} LED {}: gain {g}", i + 1);
+            assert!(
+                (g - 1.0).abs() < 0.01,
+                "exposure {exposure} LED {}: gain {g}",
+                i + 1
+            );
         }
     }
 }
@@ -344,12 +356,116 @@ fn small_object_in_a_wide_dark_view_is_found() {
     // 1–2 % of the frame. Used to fail with "the video shows 3 modulated LED(s)" and "no
     // MEB-FDMA modulation found".
     for pitch in [0.85, 1.0] {
-        let rig = Rig::from_toml_str(&rig_toml(640, 480, pitch, &OUT_OF_PLANE_LEDS), "wide").unwrap();
+        let rig =
+            Rig::from_toml_str(&rig_toml(640, 480, pitch, &OUT_OF_PLANE_LEDS), "wide").unwrap();
         let (decoded, gains) =
             decode_default(&mut sphere_capture(rig, SimConfig::default()), &four_leds());
-        eprintln!("pitch {pitch}: gains {gains:.4?} {:?}", decoded.report.verdict);
+        eprintln!(
+            "pitch {pitch}: gains {gains:.4?} {:?}",
+            decoded.report.verdict
+        );
         for (i, g) in gains.iter().enumerate() {
-            assert!((g - 1.0).abs() < 0.01, "pitch {pitch} LED {}: gain {g}", i + 1);
+            assert!(
+                (g - 1.0).abs() < 0.01,
+                "pitch {pitch} LED {}: gain {g}",
+                i + 1
+            );
         }
     }
+}
+
+#[test]
+fn implausible_decode_is_refused_unless_forced_and_reconstruct_checks_the_verdict() {
+    // A capture at the chip rate (ρ = 1) decoded with a wrong known rate ratio (1.03, a drift
+    // of 1.9 chips over the 64 frames): the templates cannot explain the modulation, so the
+    // verdict must refuse the result.
+    let tmp = tempfile::tempdir().unwrap();
+    let p = |name: &str| tmp.path().join(name).to_str().unwrap().to_string();
+    std::fs::write(p("rig.toml"), rig_toml(96, 54, 0.6, &OUT_OF_PLANE_LEDS)).unwrap();
+    common::run_ok(&[
+        "simulate",
+        "--rig",
+        &p("rig.toml"),
+        "--frames",
+        "64",
+        "--noise",
+        "0.005",
+        "--format",
+        "y4m",
+        "--bit-depth",
+        "16",
+        "--out",
+        &p("sim"),
+    ]);
+    let capture = tmp.path().join("sim/capture.y4m");
+    let decode = |out: &str, force: bool| {
+        let mut args = vec![
+            "decode".to_string(),
+            capture.to_str().unwrap().to_string(),
+            "--rate-ratio".into(),
+            "1.03".into(),
+            // The wrong rate also miscounts the LEDs; the verdict is what is tested here.
+            "--no-led-check".into(),
+            "--out".into(),
+            p(out),
+        ];
+        if force {
+            args.push("--force".into());
+        }
+        meb(&args.iter().map(String::as_str).collect::<Vec<_>>())
+    };
+    let refused = decode("dec", false);
+    let text = String::from_utf8_lossy(&refused.stderr);
+    assert!(
+        !refused.status.success(),
+        "wrong rate ratio decoded with exit 0"
+    );
+    assert!(
+        text.contains("unexplained") && text.contains("--force"),
+        "{text}"
+    );
+    assert!(
+        !tmp.path().join("dec").exists(),
+        "a refused decode left a folder"
+    );
+
+    let forced = decode("dec", true);
+    let text = String::from_utf8_lossy(&forced.stderr);
+    assert!(forced.status.success(), "{text}");
+    assert!(text.contains("warning"), "{text}");
+    let report: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(tmp.path().join("dec/decode.json")).unwrap())
+            .unwrap();
+    assert_eq!(report["verdict"]["status"], "overridden", "{report}");
+    assert!(
+        report["verdict"]["problems"]
+            .as_array()
+            .is_some_and(|p| !p.is_empty())
+    );
+
+    let reconstruct = |force: bool| {
+        let (dec, rig, rec) = (p("dec"), p("rig.toml"), p("rec"));
+        let mut args = vec!["reconstruct", &dec, "--rig", &rig, "--out", &rec];
+        if force {
+            args.push("--force");
+        }
+        meb(&args)
+    };
+    let refused = reconstruct(false);
+    let text = String::from_utf8_lossy(&refused.stderr);
+    assert!(
+        !refused.status.success(),
+        "reconstruct used an overridden decode without --force"
+    );
+    assert!(
+        text.contains("implausible") && text.contains("--force"),
+        "{text}"
+    );
+    assert!(!tmp.path().join("rec").exists());
+    // With --force the verdict no longer stops it (the reconstruction's own checks may still
+    // refuse these amplitudes, which are wrong).
+    let forced = reconstruct(true);
+    let text = String::from_utf8_lossy(&forced.stderr);
+    assert!(text.contains("using it anyway (--force)"), "{text}");
+    assert!(!text.contains("use --force"), "{text}");
 }

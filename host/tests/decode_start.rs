@@ -32,8 +32,8 @@ fn frames(dir: &Path) -> Vec<Vec<u8>> {
         seed: 4,
         ..SimConfig::default()
     };
-    let capture = SimulatedCapture::new(rig, Scene::single(SceneObject::sphere(40.0)), config)
-        .unwrap();
+    let capture =
+        SimulatedCapture::new(rig, Scene::single(SceneObject::sphere(40.0)), config).unwrap();
     (0..FRAMES)
         .map(|j| match capture.render_frame(j).samples {
             Samples::U8(v) => v,
@@ -159,7 +159,10 @@ fn raw_start_is_counted_once() {
     let tmp = tempfile::tempdir().unwrap();
     let path = tmp.path().join("capture.raw");
     std::fs::write(&path, frames(tmp.path()).concat()).unwrap();
-    check_reader(&path, &["--raw", &format!("{WIDTH}x{HEIGHT}x8"), "--fps", "960"]);
+    check_reader(
+        &path,
+        &["--raw", &format!("{WIDTH}x{HEIGHT}x8"), "--fps", "960"],
+    );
 }
 
 #[test]

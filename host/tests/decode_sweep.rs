@@ -16,7 +16,9 @@
 
 use meb::capture::memory::MemorySource;
 use meb::capture::{Frame, FrameFormat, FrameSource, Samples};
-use meb::demod::{DecodeConfig, DemodError, LedCount, Linearize, OnImplausible, VerdictStatus, decode};
+use meb::demod::{
+    DecodeConfig, DemodError, LedCount, Linearize, OnImplausible, VerdictStatus, decode,
+};
 use meb::rig::Rig;
 use meb::simulate::capture::{SimConfig, SimulatedCapture};
 use meb::simulate::scene::{GroundPlane, Scene, SceneObject};
@@ -96,8 +98,8 @@ impl Case {
 
     /// The simulated capture (pitch 1 mm, so the sphere's diameter sets the cover).
     fn capture(&self) -> SimulatedCapture {
-        let rig = Rig::from_toml_str(&rig_toml(WIDTH, HEIGHT, 1.0, &LEDS[..self.leds]), "sweep")
-            .unwrap();
+        let rig =
+            Rig::from_toml_str(&rig_toml(WIDTH, HEIGHT, 1.0, &LEDS[..self.leds]), "sweep").unwrap();
         let diameter = 2.0 * (self.cover * (WIDTH * HEIGHT) as f64 / std::f64::consts::PI).sqrt();
         let mut scene = Scene::single(SceneObject::sphere(diameter));
         if let Some(albedo) = self.ground_albedo {
@@ -134,7 +136,11 @@ impl Case {
     }
 
     fn tolerance(&self) -> f64 {
-        if self.ramp_chips.is_some() { 0.02 } else { 0.01 }
+        if self.ramp_chips.is_some() {
+            0.02
+        } else {
+            0.01
+        }
     }
 }
 
@@ -163,7 +169,12 @@ fn linear(tone: ToneCurve, code: f64) -> f64 {
 }
 
 /// Per LED: the oracle's gain and its standard error over `lit` pixels (see module docs).
-fn oracle(case: &Case, capture: &SimulatedCapture, frames: &[Frame], keep: &[bool]) -> Vec<(f64, f64)> {
+fn oracle(
+    case: &Case,
+    capture: &SimulatedCapture,
+    frames: &[Frame],
+    keep: &[bool],
+) -> Vec<(f64, f64)> {
     let info = capture.info();
     let table = ChipTable::new(case.leds as u8).unwrap();
     let waveform = CarrierWaveform::new(table, &info.chip_rates_hz, &info.phases_chips).unwrap();
@@ -242,7 +253,11 @@ fn run(case: &Case) -> Outcome {
         .map(|i| {
             let top = truth.images[i].iter().copied().fold(0.0f32, f32::max);
             let (mut dt, mut tt) = (0.0, 0.0);
-            for ((d, t), k) in decoded.leds.images[i].iter().zip(&truth.images[i]).zip(&keep) {
+            for ((d, t), k) in decoded.leds.images[i]
+                .iter()
+                .zip(&truth.images[i])
+                .zip(&keep)
+            {
                 if *k && *t > 0.1 * top {
                     dt += f64::from(*d) * f64::from(*t);
                     tt += f64::from(*t) * f64::from(*t);
@@ -289,7 +304,9 @@ fn every_capture_is_decoded_within_tolerance_or_refused() {
                     }
                 }
             }
-            Outcome::Refused(reason) => refused.push(format!("capture {}: {reason} {case:?}", case.index)),
+            Outcome::Refused(reason) => {
+                refused.push(format!("capture {}: {reason} {case:?}", case.index))
+            }
         }
     }
     errors.sort_by(f64::total_cmp);

@@ -7,8 +7,8 @@ use meb::capture::raw::RawLayout;
 use meb::capture::{OpenOptions, open};
 use meb::demod::output::write_decode_dir;
 use meb::demod::{
-    DecodeConfig, DecodeReport, Decoded, DemodError, Estimator, LedCount, Linearize,
-    OnImplausible, Roi, VerdictStatus, decode,
+    DecodeConfig, DecodeReport, Decoded, DemodError, Estimator, LedCount, Linearize, OnImplausible,
+    Roi, VerdictStatus, decode,
 };
 use std::path::{Path, PathBuf};
 
@@ -219,12 +219,17 @@ pub fn check_folder_verdict(report: &DecodeReport, folder: &Path, force: bool) -
         ),
     };
     if force {
-        eprintln!("warning: {} {what}; using it anyway (--force)", folder.display());
+        eprintln!(
+            "warning: {} {what}; using it anyway (--force)",
+            folder.display()
+        );
         return Ok(());
     }
-    bail!("{} {what}; use --force to reconstruct from it anyway", folder.display())
+    bail!(
+        "{} {what}; use --force to reconstruct from it anyway",
+        folder.display()
+    )
 }
-
 
 /// Runs `meb decode`.
 pub fn run(args: &DecodeArgs) -> Result<()> {

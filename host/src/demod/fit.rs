@@ -268,7 +268,11 @@ pub fn refit_timing(
     let solution = if previous.rolling {
         fitter.rows(sample, pixel_noise, &start, limits.line_delay.is_none())
     } else {
-        fitter.solve(&global_groups(space, frames), &start, &fitter.freedom(false))
+        fitter.solve(
+            &global_groups(space, frames),
+            &start,
+            &fitter.freedom(false),
+        )
     };
     fitter.finish(sample, solution, previous.rolling, pixel_noise)
 }
@@ -333,14 +337,10 @@ impl Fitter<'_> {
             self.limits.exposure.is_none(),
             line_delay,
         ];
-        let mut bounds = vec![
-            (1.0 - mismatch, 1.0 + mismatch),
-            (MIN_EXPOSURE, 1.0),
-            {
-                let most = MAX_READOUT / self.height.max(1) as f64;
-                (-most, most)
-            },
-        ];
+        let mut bounds = vec![(1.0 - mismatch, 1.0 + mismatch), (MIN_EXPOSURE, 1.0), {
+            let most = MAX_READOUT / self.height.max(1) as f64;
+            (-most, most)
+        }];
         for _ in self.waves {
             free.push(true);
             bounds.push((f64::NEG_INFINITY, f64::INFINITY));
@@ -475,7 +475,9 @@ impl Fitter<'_> {
         }
         let delay = chips_per_row / global.params[RATE];
         // The band-wise optimum without a line delay: what λ has to improve on.
-        let base = self.solve(&groups, &global.params, &self.freedom(false)).cost;
+        let base = self
+            .solve(&groups, &global.params, &self.freedom(false))
+            .cost;
         let freedom = self.freedom(true);
         let mut best: Option<Solution> = None;
         for exposure in self.exposures(global.params[EXPOSURE], &RAMP_EXPOSURES) {
@@ -489,8 +491,14 @@ impl Fitter<'_> {
         let first = best?;
         let searched = self.backfit(&groups, first.params.clone());
         let second = self.solve(&groups, &searched, &freedom);
-        let best = if second.cost < first.cost { second } else { first };
-        let ramp = TimingModel::from_params(&best.params).ramp_chips(height).abs();
+        let best = if second.cost < first.cost {
+            second
+        } else {
+            first
+        };
+        let ramp = TimingModel::from_params(&best.params)
+            .ramp_chips(height)
+            .abs();
         (ramp >= MIN_RAMP_CHIPS && base - best.cost > RAMP_SIGNIFICANCE * pixel_noise)
             .then_some(best)
     }

@@ -192,6 +192,9 @@ mod tests {
         };
         let solution = minimise(&problem, &[1.0, 0.7], &fixed);
         assert_eq!(solution.params[1], 0.7);
-        assert!(solution.params[0] <= 2.0 && solution.params[0] > 1.9, "{solution:?}");
+        assert!(
+            solution.params[0] <= 2.0 && solution.params[0] > 1.9,
+            "{solution:?}"
+        );
     }
 }

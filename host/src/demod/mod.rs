@@ -171,7 +171,10 @@ pub fn decode(
 }
 
 /// The stream's format with the configured frame-rate override.
-fn stream_format(source: &dyn FrameSource, config: &DecodeConfig) -> Result<FrameFormat, DemodError> {
+fn stream_format(
+    source: &dyn FrameSource,
+    config: &DecodeConfig,
+) -> Result<FrameFormat, DemodError> {
     let mut format = source.format().clone();
     if let Some(fps) = config.fps {
         if !(fps.is_finite() && fps > 0.0) {
@@ -211,7 +214,12 @@ struct WindowPlan {
 impl WindowPlan {
     /// Windows for `config` over a stream of `remaining` frames (after the start), within the
     /// memory budget.
-    fn new(config: &DecodeConfig, format: &FrameFormat, roi: Roi, remaining: Option<usize>) -> Self {
+    fn new(
+        config: &DecodeConfig,
+        format: &FrameFormat,
+        roi: Roi,
+        remaining: Option<usize>,
+    ) -> Self {
         let total = match (config.frames, remaining) {
             (Some(f), Some(h)) => Some(f.min(h)),
             (Some(f), None) => Some(f),

@@ -167,7 +167,11 @@ pub fn measure(
             LedQuality {
                 signal_to_noise: s / noise,
                 unexplained: u / noise,
-                unexplained_fraction: if s > 0.0 { u.max(0.0) / s } else { f64::INFINITY },
+                unexplained_fraction: if s > 0.0 {
+                    u.max(0.0) / s
+                } else {
+                    f64::INFINITY
+                },
                 gain_uncertainty: fit.gain_uncertainty.get(i).copied().unwrap_or(0.0),
             }
         })
@@ -305,7 +309,7 @@ pub fn judge(quality: &[LedQuality], fit: &TimingFit) -> Verdict {
     };
     for (i, q) in quality.iter().enumerate() {
         let led = i + 1;
-        if !(q.signal_to_noise >= MIN_SIGNAL_TO_NOISE) {
+        if q.signal_to_noise.is_nan() || q.signal_to_noise < MIN_SIGNAL_TO_NOISE {
             problems.push(format!(
                 "LED {led} shows no modulation above noise (signal-to-noise {:.2})",
                 q.signal_to_noise
@@ -418,7 +422,10 @@ fn led_subspace(wave: &ReceivedWaveform, rate: f64, frames: usize) -> Vec<Vec<f6
                 im += s * angle.sin();
             }
             let x = std::f64::consts::PI * m as f64 / period as f64;
-            ((re * re + im * im).sqrt() / period as f64 * (x.sin() / x).abs(), m)
+            (
+                (re * re + im * im).sqrt() / period as f64 * (x.sin() / x).abs(),
+                m,
+            )
         })
         .collect();
     strengths.sort_by(|a, b| b.0.total_cmp(&a.0));

@@ -128,11 +128,7 @@ impl PixelSample {
     /// Pixels `range` as a matrix (pixels × frames).
     pub fn matrix(&self, range: std::ops::Range<usize>) -> DMatrix<f64> {
         let f = self.frames;
-        DMatrix::from_row_slice(
-            range.len(),
-            f,
-            &self.values[range.start * f..range.end * f],
-        )
+        DMatrix::from_row_slice(range.len(), f, &self.values[range.start * f..range.end * f])
     }
 
     /// Index ranges of pixels sharing a row, in row order.

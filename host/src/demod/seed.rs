@@ -66,7 +66,13 @@ impl Scorer<'_> {
         let captured: f64 = self
             .space
             .column_iter()
-            .map(|v| v.iter().zip(template.iter()).map(|(a, b)| a * b).sum::<f64>().powi(2))
+            .map(|v| {
+                v.iter()
+                    .zip(template.iter())
+                    .map(|(a, b)| a * b)
+                    .sum::<f64>()
+                    .powi(2)
+            })
             .sum();
         captured / energy
     }
@@ -215,7 +221,13 @@ fn scan_rate(scorer: &Scorer<'_>, frames: usize, max_mismatch: f64) -> f64 {
         })
         .reduce(
             || (f64::NEG_INFINITY, 1.0),
-            |a, b| if b.0 > a.0 || (b.0 == a.0 && b.1 < a.1) { b } else { a },
+            |a, b| {
+                if b.0 > a.0 || (b.0 == a.0 && b.1 < a.1) {
+                    b
+                } else {
+                    a
+                }
+            },
         );
     golden_max(best.1 - step, best.1 + step, |rate| at(rate, SHIFT_STEP)).0
 }

@@ -99,12 +99,14 @@ mod tests {
     fn finds_a_planted_subspace_and_the_noise_level() {
         // G = 50·v1v1ᵀ + 20·v2v2ᵀ + 0.5·(I − 11ᵀ/F) on F = 40.
         let f = 40;
-        let v1 = DMatrix::from_fn(f, 1, |j, _| ((j as f64) * 0.7).sin());
+        // v1, v2 centred (orthogonal to the constant), so they are exact eigenvectors.
+        let ones = DMatrix::from_element(f, 1, 1.0 / (f as f64).sqrt());
+        let centre = |v: DMatrix<f64>| &v - &ones * (ones.transpose() * &v)[(0, 0)];
+        let v1 = centre(DMatrix::from_fn(f, 1, |j, _| ((j as f64) * 0.7).sin()));
         let v1 = &v1 / v1.norm();
-        let v2 = DMatrix::from_fn(f, 1, |j, _| ((j as f64) * 1.9).cos());
+        let v2 = centre(DMatrix::from_fn(f, 1, |j, _| ((j as f64) * 1.9).cos()));
         let v2 = &v2 - &v1 * (v1.transpose() * &v2)[(0, 0)];
         let v2 = &v2 / v2.norm();
-        let ones = DMatrix::from_element(f, 1, 1.0 / (f as f64).sqrt());
         let gram = &v1 * v1.transpose() * 50.0
             + &v2 * v2.transpose() * 20.0
             + (DMatrix::identity(f, f) - &ones * ones.transpose()) * 0.5;

@@ -48,7 +48,11 @@ fn waveform_estimator_gain_within_one_percent_and_less_noisy_than_thesis() {
         // model's residual on the sample is the added noise (σ = 1 %), and the verdict agrees.
         let residual = waveform.report.fit_residual;
         assert!((residual - 0.01).abs() < 0.0015, "{:?}", waveform.report);
-        assert!(waveform.report.verdict.is_plausible(), "{:?}", waveform.report.verdict);
+        assert!(
+            waveform.report.verdict.is_plausible(),
+            "{:?}",
+            waveform.report.verdict
+        );
     }
 }
 

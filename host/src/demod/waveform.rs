@@ -54,7 +54,10 @@ impl ReceivedWaveform {
 
     /// The carrier s_i (±1) at chip `m` of its period.
     pub fn chip(&self, m: usize) -> f64 {
-        self.chips.get(m % self.chips.len().max(1)).copied().unwrap_or(0.0)
+        self.chips
+            .get(m % self.chips.len().max(1))
+            .copied()
+            .unwrap_or(0.0)
     }
 
     /// Chip index (within one period) and fraction of the chip at chip time `t`: the floor
