@@ -128,6 +128,13 @@ pub fn decode(
     let format = stream_format(source, config)?;
     let decoder = WindowDecoder::new(&format, config)?;
     skip_start(source, config.start)?;
+    if config.start > 0 && source.frame_count_hint() == Some(0) {
+        // The start skipped exactly every frame.
+        return Err(DemodError::StartBeyondEnd {
+            start: config.start,
+            available: config.start,
+        });
+    }
     let plan = WindowPlan::new(config, &format, decoder.roi, source.frame_count_hint());
     let mut state = Accumulated::default();
     let mut read = 0usize;
@@ -152,6 +159,13 @@ pub fn decode(
             }
         };
         if got < 1usize << (leds + 1) {
+            if state.windows == 0 && got == 0 && config.start > 0 {
+                // The start skipped exactly every frame.
+                return Err(DemodError::StartBeyondEnd {
+                    start: config.start,
+                    available: config.start,
+                });
+            }
             if state.windows == 0 {
                 return Err(DemodError::TooFewFrames {
                     got,
@@ -678,6 +692,7 @@ fn finish(
         state.fits.iter().map(f).sum::<f64>() / windows
     };
     let rate_ratio = mean(&|(fit, _, _)| fit.model.timing.rate_ratio);
+    let line_delay = mean(&|(fit, _, _)| fit.model.line_delay);
     let report = DecodeReport {
         estimator: config.estimator,
         leds,
@@ -690,7 +705,12 @@ fn finish(
         fps: format.fps,
         chip_rate_hz: rate_ratio * format.fps,
         exposure: mean(&|(fit, _, _)| fit.model.timing.exposure),
-        line_time_us: mean(&|(fit, _, _)| fit.model.line_delay) / format.fps * 1e6,
+        line_time_us: if format.fps > 0.0 {
+            line_delay / format.fps * 1e6
+        } else {
+            0.0
+        },
+        line_delay_frames: line_delay,
         row_bands: state.fits.iter().map(|(_, _, b)| *b).max().unwrap_or(1),
         fit_residual: mean(&|(_, quality, _)| quality.residual_rms),
         median_noise,

@@ -46,9 +46,13 @@ pub struct DecodeReport {
     /// Estimated exposure as a fraction of the frame period (at a rate ratio of exactly 1 any
     /// exposure up to one frame gives the same waveforms, so it is not identifiable there).
     pub exposure: f64,
-    /// Rolling-shutter line time in microseconds (fitted or given; 0 for a global shutter).
+    /// Rolling-shutter line time in microseconds (fitted or given; 0 for a global shutter or
+    /// when the frame rate is unknown: see `line_delay_frames`).
     #[serde(default)]
     pub line_time_us: f64,
+    /// Rolling-shutter line delay in frame periods per row (0 for a global shutter).
+    #[serde(default)]
+    pub line_delay_frames: f64,
     /// Row bands with their own waveforms in the per-pixel fit (1 for a global shutter).
     #[serde(default)]
     pub row_bands: usize,
