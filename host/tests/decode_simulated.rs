@@ -252,6 +252,13 @@ fn four_leds() -> DecodeConfig {
     }
 }
 
+/// Every LED's gain within 1 % (`what` names the case in the failure).
+fn assert_gains_within_one_percent(gains: &[f64], what: &str) {
+    for (i, g) in gains.iter().enumerate() {
+        assert!((g - 1.0).abs() < 0.01, "{what} LED {}: gain {g}", i + 1);
+    }
+}
+
 fn thesis_rig() -> Rig {
     Rig::load("thesis-out-of-plane").unwrap()
 }
@@ -277,13 +284,7 @@ fn three_percent_rate_offset_decodes_every_seed() {
         assert!((report.rate_ratio - 1.03).abs() < 2e-4, "{report:?}");
         assert!((report.exposure - 0.9).abs() < 0.02, "{report:?}");
         assert!(report.median_noise < 0.006, "{report:?}");
-        for (i, g) in gains.iter().enumerate() {
-            assert!(
-                (g - 1.0).abs() < 0.01,
-                "seed {seed} LED {}: gain {g}",
-                i + 1
-            );
-        }
+        assert_gains_within_one_percent(&gains, &format!("seed {seed}"));
     }
 }
 
@@ -303,9 +304,7 @@ fn rate_offset_with_given_phases_keeps_all_four_leds() {
         decoded.report.per_led
     );
     assert_eq!(decoded.report.detected_leds, Some(4));
-    for (i, g) in gains.iter().enumerate() {
-        assert!((g - 1.0).abs() < 0.01, "LED {}: gain {g}", i + 1);
-    }
+    assert_gains_within_one_percent(&gains, "");
 }
 
 #[test]
@@ -319,13 +318,7 @@ fn short_exposures_at_the_chip_rate_keep_gains_within_one_percent() {
         };
         let (_, gains) = decode_default(&mut sphere_capture(thesis_rig(), config), &four_leds());
         eprintln!("exposure {exposure}: gains {gains:.4?}");
-        for (i, g) in gains.iter().enumerate() {
-            assert!(
-                (g - 1.0).abs() < 0.01,
-                "exposure {exposure} LED {}: gain {g}",
-                i + 1
-            );
-        }
+        assert_gains_within_one_percent(&gains, &format!("exposure {exposure}"));
     }
 }
 
@@ -345,9 +338,7 @@ fn rolling_shutter_is_fitted_by_default() {
         decoded.report.line_time_us, decoded.report.row_bands
     );
     assert!(decoded.report.row_bands > 1, "{:?}", decoded.report);
-    for (i, g) in gains.iter().enumerate() {
-        assert!((g - 1.0).abs() < 0.01, "LED {}: gain {g}", i + 1);
-    }
+    assert_gains_within_one_percent(&gains, "");
 }
 
 #[test]
@@ -364,13 +355,7 @@ fn small_object_in_a_wide_dark_view_is_found() {
             "pitch {pitch}: gains {gains:.4?} {:?}",
             decoded.report.verdict
         );
-        for (i, g) in gains.iter().enumerate() {
-            assert!(
-                (g - 1.0).abs() < 0.01,
-                "pitch {pitch} LED {}: gain {g}",
-                i + 1
-            );
-        }
+        assert_gains_within_one_percent(&gains, &format!("pitch {pitch}"));
     }
 }
 
