@@ -18,4 +18,5 @@ pub mod photometric;
 pub mod reconstruct;
 pub mod rig;
 pub mod simulate;
+pub mod tof;
 pub mod types;

@@ -9,6 +9,7 @@
 
 pub mod fast_marching;
 pub mod filter;
+pub mod fusion;
 pub mod gradients;
 pub mod least_squares;
 mod multigrid;

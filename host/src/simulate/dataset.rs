@@ -50,6 +50,7 @@ impl DatasetConfig {
                 pixel_pitch_mm: None,
             },
             leds: Vec::new(),
+            tof_camera: None,
         });
         rig.camera.width = 480;
         rig.camera.height = 270;

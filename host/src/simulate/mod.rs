@@ -18,6 +18,7 @@ pub mod mesh;
 pub mod output;
 pub mod scene;
 pub mod sensor;
+pub mod tof;
 pub mod waveform;
 
 pub use capture::{GroundTruth, SimConfig, SimulatedCapture, TruthInfo};

@@ -1,0 +1,1 @@
+//! Hybrid reconstruction (in progress).
