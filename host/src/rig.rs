@@ -342,12 +342,12 @@ impl Rig {
             _ => return None,
         };
         // Thesis Ch. 6: a 192×128 SPAD with a 16° lens, 80 cm from the sphere (which stands
-        // 100 mm in front of the scene centre); placed beside the phone, aimed at the centre.
+        // 100 mm in front of the scene centre); placed 40 mm beside the phone, aimed at the centre.
         let tof_camera = (name == "thesis-hybrid").then(|| TofCamera {
             width: 192,
             height: 128,
             fov_deg: 16.0,
-            position_mm: [60.0, 0.0, 900.0],
+            position_mm: [40.0, 0.0, 900.0],
             look_at_mm: [0.0; 3],
         });
         let leds = positions

@@ -197,45 +197,13 @@ pub fn layer_coverage(
             (r0, r1, c0, c1) = (r0.min(r), r1.max(r), c0.min(c), c1.max(c));
         }
     }
-    let sample = |x: f64, y: f64, values: &dyn Fn(usize, usize) -> Option<f64>| -> Option<f64> {
-        if !(x > -1.0 && y > -1.0 && x < cols as f64 && y < rows as f64) {
-            return None;
-        }
-        let (xf, yf) = (x.floor(), y.floor());
-        let (fx, fy) = (x - xf, y - yf);
-        let (mut sum, mut weight) = (0.0, 0.0);
-        for (dy, wy) in [(0, 1.0 - fy), (1, fy)] {
-            for (dx, wx) in [(0, 1.0 - fx), (1, fx)] {
-                let (rr, cc) = (yf as i64 + dy, xf as i64 + dx);
-                if rr < 0 || cc < 0 || rr >= rows as i64 || cc >= cols as i64 {
-                    continue;
-                }
-                if let Some(v) = values(rr as usize, cc as usize) {
-                    sum += wx * wy * v;
-                    weight += wx * wy;
-                }
-            }
-        }
-        (weight > 0.0).then_some(sum / weight)
-    };
-    let layer_range = |r: usize, c: usize| {
-        (layer.tof_mask[(r, c)] && range[(r, c)].is_finite()).then(|| f64::from(range[(r, c)]))
-    };
     let indicator = |r: usize, c: usize| Some(if layer.tof_mask[(r, c)] { 1.0 } else { 0.0 });
     let rows_out: Vec<Vec<f32>> = (0..height)
         .into_par_iter()
         .map(|row| {
             (0..width)
                 .map(|col| {
-                    let p = [col as f64, row as f64];
-                    let mut s = layer.median_mm;
-                    let mut u = calibration.camera_to_tof(p, Some(s));
-                    for _ in 0..2 {
-                        if let Some(v) = sample(u[0], u[1], &layer_range) {
-                            s = v;
-                        }
-                        u = calibration.camera_to_tof(p, Some(s));
-                    }
+                    let (u, _) = trace_to_tof(layer, range, calibration, [col as f64, row as f64]);
                     let inside_box = u[1] >= r0 as f64 - 1.0
                         && u[1] <= r1 as f64 + 1.0
                         && u[0] >= c0 as f64 - 1.0
@@ -243,7 +211,7 @@ pub fn layer_coverage(
                     if !inside_box {
                         return 0.0;
                     }
-                    sample(u[0], u[1], &indicator).unwrap_or(0.0) as f32
+                    bilinear(u, (rows, cols), &indicator).unwrap_or(0.0) as f32
                 })
                 .collect()
         })
@@ -251,6 +219,57 @@ pub fn layer_coverage(
     Ok(Array2::from_shape_fn((height, width), |(r, c)| {
         rows_out[r][c]
     }))
+}
+
+/// Bilinear interpolation at ToF position `u` = (x, y) of the defined `values` among the four
+/// neighbours (weights renormalised; `None` when none is defined or `u` is off the grid).
+pub(crate) fn bilinear(
+    u: [f64; 2],
+    (rows, cols): (usize, usize),
+    values: &dyn Fn(usize, usize) -> Option<f64>,
+) -> Option<f64> {
+    let [x, y] = u;
+    if !(x > -1.0 && y > -1.0 && x < cols as f64 && y < rows as f64) {
+        return None;
+    }
+    let (xf, yf) = (x.floor(), y.floor());
+    let (fx, fy) = (x - xf, y - yf);
+    let (mut sum, mut weight) = (0.0, 0.0);
+    for (dy, wy) in [(0, 1.0 - fy), (1, fy)] {
+        for (dx, wx) in [(0, 1.0 - fx), (1, fx)] {
+            let (rr, cc) = (yf as i64 + dy, xf as i64 + dx);
+            if rr < 0 || cc < 0 || rr >= rows as i64 || cc >= cols as i64 {
+                continue;
+            }
+            if let Some(v) = values(rr as usize, cc as usize) {
+                sum += wx * wy * v;
+                weight += wx * wy;
+            }
+        }
+    }
+    (weight > 0.0).then_some(sum / weight)
+}
+
+/// ToF position (x, y) seen at camera pixel `p` = (x, y) by `layer`'s surface, and the range
+/// used: the homography at the layer's median range, then twice at the range found there.
+pub(crate) fn trace_to_tof(
+    layer: &Layer,
+    range: &Array2<f32>,
+    calibration: &Calibration,
+    p: [f64; 2],
+) -> ([f64; 2], f64) {
+    let layer_range = |r: usize, c: usize| {
+        (layer.tof_mask[(r, c)] && range[(r, c)].is_finite()).then(|| f64::from(range[(r, c)]))
+    };
+    let mut s = layer.median_mm;
+    let mut u = calibration.camera_to_tof(p, Some(s));
+    for _ in 0..2 {
+        if let Some(v) = bilinear(u, range.dim(), &layer_range) {
+            s = v;
+        }
+        u = calibration.camera_to_tof(p, Some(s));
+    }
+    (u, s)
 }
 
 /// Camera masks of `layers`: each pixel goes to the layer covering most of it, if over 1/2.

@@ -16,14 +16,16 @@
 //! constant background in either histogram; the normalisation removes the pull of pulse energy
 //! entering and leaving the reference window (without it a 350-bin template on a 300-bin pulse
 //! period was biased by 2 bins). The integer peak is refined to a fraction of a bin by a
-//! least-squares parabola over ±[`PARABOLA_HALF_WIDTH`] lags around it, then polished by
-//! Gauss–Newton on the fit h ≈ a·r(t−n) + b with the reference shifted continuously (cubic
-//! convolution), which removes the parabola's sampling bias (0.03 bin). The fit also gives the
-//! signal photons a·Σr and the background b per bin, and the lag's standard deviation follows
-//! from the Poisson noise of the matched filter (linearised peak condition):
+//! least-squares parabola over ±[`PARABOLA_HALF_WIDTH`] lags around it, then polished to the
+//! Poisson maximum-likelihood fit h_t ~ Poisson(a·r(t−n) + b) by Fisher scoring, with the
+//! reference shifted continuously (cubic convolution). This removes the parabola's sampling bias
+//! (0.03 bin) and weights every bin by its noise, which matters when a few thousand photons sit
+//! on a background (on the simulated thesis scene: 19.7 mm RMSE for plain correlation). The fit
+//! also gives the signal photons a·Σr and the background b per bin, and the lag's standard
+//! deviation is the Cramér–Rao bound at the fit:
 //!
 //! ```text
-//! σ_n² = Σ_t E[h_t]·r'(t−n)² / (a·Σ_t r'(t−n)²)²      (+ the same term for a per-pixel reference)
+//! σ_n² = 1 / Σ_t (a·r'(t−n))² / (a·r(t−n) + b)      (+ the reference's own term per pixel)
 //! ```
 //!
 //! A lag of n bins is a time shift Δt = ±n·bin (forward TCSPC: later photons in later bins;
@@ -50,6 +52,10 @@ use std::sync::Arc;
 
 /// Lags on each side of the integer peak used by the sub-bin parabola.
 pub const PARABOLA_HALF_WIDTH: usize = 6;
+
+/// The likelihood refinement may move the lag this far from the correlation peak (bins);
+/// farther, it has left the peak and the correlation's estimate is kept.
+const MAX_REFINEMENT_BINS: f64 = 20.0;
 
 /// How bins map to time.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
@@ -83,6 +89,9 @@ pub struct RangeConfig {
     pub min_correlation: f64,
     /// Standard deviation (mm) at which the confidence is 1/2: confidence = σ₀²/(σ₀² + σ²).
     pub confidence_sigma_mm: f64,
+    /// σ in bins of the Gaussian that smooths the reference (its photon noise would otherwise
+    /// enter the template's slope); keep it well below the pulse's rise time.
+    pub reference_smoothing_bins: f64,
 }
 
 impl Default for RangeConfig {
@@ -96,6 +105,7 @@ impl Default for RangeConfig {
             min_signal_photons: 50.0,
             min_correlation: 0.3,
             confidence_sigma_mm: 10.0,
+            reference_smoothing_bins: 3.0,
         }
     }
 }
@@ -148,6 +158,14 @@ impl RangeConfig {
         }
         if !(self.min_correlation.is_finite() && self.min_correlation < 1.0) {
             return Err(bad("min_correlation", "must be below 1".into()));
+        }
+        if !(self.reference_smoothing_bins.is_finite()
+            && (0.0..=bins as f64 / 8.0).contains(&self.reference_smoothing_bins))
+        {
+            return Err(bad(
+                "reference_smoothing_bins",
+                format!("must be 0 to {} bins", bins / 8),
+            ));
         }
         if !positive(self.confidence_sigma_mm) {
             return Err(bad("confidence_sigma_mm", "must be positive".into()));
@@ -243,7 +261,11 @@ pub fn estimate_range(
     config.validate(bins)?;
     let correlator = Correlator::new(bins, config.max_lag_bins());
     let global = match reference {
-        Reference::Global(r) => Some(ReferenceSpectrum::new(&correlator, r.view())?),
+        Reference::Global(r) => Some(ReferenceSpectrum::new(
+            &correlator,
+            r.view(),
+            config.reference_smoothing_bins,
+        )?),
         Reference::PerPixel(_) => None,
     };
     let (rows, cols) = histograms.shape();
@@ -269,7 +291,11 @@ pub fn estimate_range(
                     (Some(g), _) => g,
                     (None, Reference::PerPixel(all)) => {
                         let rp = all.index_axis(Axis(0), r);
-                        match ReferenceSpectrum::new(&correlator, rp.index_axis(Axis(0), c)) {
+                        match ReferenceSpectrum::new(
+                            &correlator,
+                            rp.index_axis(Axis(0), c),
+                            config.reference_smoothing_bins,
+                        ) {
                             Ok(s) => {
                                 per_pixel = s;
                                 &per_pixel
@@ -358,6 +384,7 @@ struct Workspace {
     scratch: Vec<Complex64>,
     shifted: Vec<f64>,
     slope: Vec<f64>,
+    weight: Vec<f64>,
 }
 
 /// A reference histogram prepared for correlation: its spectrum, background and samples.
@@ -369,15 +396,22 @@ struct ReferenceSpectrum {
     samples: Vec<f64>,
     /// Its background per bin (a low percentile).
     background: f64,
+    /// Its mean count per bin.
+    mean: f64,
 }
 
 impl ReferenceSpectrum {
     /// Fails when the reference has no counts.
-    fn new(correlator: &Correlator, reference: ArrayView1<f32>) -> Result<Self, TofError> {
-        let samples: Vec<f64> = reference.iter().map(|&v| f64::from(v)).collect();
-        if samples.iter().sum::<f64>() <= 0.0 {
+    fn new(
+        correlator: &Correlator,
+        reference: ArrayView1<f32>,
+        smoothing_bins: f64,
+    ) -> Result<Self, TofError> {
+        let raw: Vec<f64> = reference.iter().map(|&v| f64::from(v)).collect();
+        if raw.iter().sum::<f64>() <= 0.0 {
             return Err(TofError::NoPhotons("reference".into()));
         }
+        let samples = smooth(&raw, smoothing_bins);
         let mut spectrum = vec![Complex64::new(0.0, 0.0); correlator.size];
         for (s, &v) in spectrum.iter_mut().zip(&samples) {
             s.re = v;
@@ -405,7 +439,9 @@ impl ReferenceSpectrum {
                 0.0
             });
         }
+        let mean = samples.iter().sum::<f64>() / samples.len() as f64;
         Ok(Self {
+            mean,
             spectrum,
             inverse_spread,
             samples,
@@ -438,6 +474,7 @@ impl Correlator {
             scratch: vec![Complex64::new(0.0, 0.0); scratch_len],
             shifted: vec![0.0; self.bins],
             slope: vec![0.0; self.bins],
+            weight: vec![0.0; self.bins],
         }
     }
 
@@ -478,40 +515,42 @@ impl Correlator {
             .max_by(|&a, &b| q(a).total_cmp(&q(b)))
             .unwrap_or(m);
         let coarse = m as f64 - refine_peak(&q, k0, 2 * m);
-        // Gauss–Newton on Σ(h − a·r(t − lag) − b)² over the central bins, r interpolated by
-        // cubic convolution: removes the parabola's sampling bias.
+        // Poisson maximum likelihood of h ~ Poisson(a·r(t − lag) + b) over the central bins by
+        // Fisher scoring (Gauss–Newton weighted by 1/mean), r shifted continuously by cubic
+        // convolution: removes the parabola's sampling bias and weights bins by their noise.
         let span = m..m + len;
         let mut lag = coarse;
-        let (mut a, mut b, mut correlation) = (0.0, 0.0, f64::NAN);
-        for _ in 0..4 {
-            shift_cubic(&reference.samples, lag, &mut ws.shifted, &mut ws.slope);
-            (a, b, correlation) = fit_scaled(&h, &ws.shifted, span.clone());
-            let (mut num, mut den) = (0.0, 0.0);
+        shift_cubic(&reference.samples, lag, &mut ws.shifted, &mut ws.slope);
+        let (mut a, mut b, mut correlation) =
+            fit_scaled(&h, &ws.shifted, &ws.weight[..0], span.clone());
+        for _ in 0..12 {
+            let floor = 0.02 * (a * reference.mean + b).max(1e-6);
+            for t in span.clone() {
+                ws.weight[t] = 1.0 / (a * ws.shifted[t] + b).max(floor);
+            }
+            (a, b, correlation) = fit_scaled(&h, &ws.shifted, &ws.weight, span.clone());
+            let (mut score, mut information) = (0.0, 0.0);
             for t in span.clone() {
                 let e = f64::from(h[t]) - a * ws.shifted[t] - b;
-                let g = a * ws.slope[t];
-                num += e * g;
-                den += g * g;
+                // ∂mean/∂lag = −a·r'(t − lag)
+                let g = -a * ws.slope[t];
+                score += ws.weight[t] * e * g;
+                information += ws.weight[t] * g * g;
             }
-            if !(den > 0.0) {
+            if !(information > 0.0) {
                 break;
             }
-            // Model derivative w.r.t. lag is −a·r'(t − lag).
-            let step = (-num / den).clamp(-1.0, 1.0);
+            let step = (score / information).clamp(-2.0, 2.0);
             lag += step;
+            shift_cubic(&reference.samples, lag, &mut ws.shifted, &mut ws.slope);
             if step.abs() < 1e-4 {
                 break;
             }
         }
-        if (lag - coarse).abs() > 2.0 || !lag.is_finite() {
+        if (lag - coarse).abs() > MAX_REFINEMENT_BINS || !lag.is_finite() {
             lag = coarse;
+            shift_cubic(&reference.samples, lag, &mut ws.shifted, &mut ws.slope);
         }
-        shift_cubic(&reference.samples, lag, &mut ws.shifted, &mut ws.slope);
-        let (a, b, correlation) = if correlation.is_nan() {
-            (a, b, correlation)
-        } else {
-            fit_scaled(&h, &ws.shifted, span.clone())
-        };
         let signal =
             a * (ws.shifted[span.clone()].iter().sum::<f64>() - len as f64 * reference.background);
         let background = b + a * reference.background;
@@ -525,18 +564,18 @@ impl Correlator {
         if correlation.is_nan() || correlation < config.min_correlation {
             return PixelOutcome::Rejected(Rejected::PoorMatch(signal_f, corr_f));
         }
-        // Lag variance from the Poisson noise of the matched filter (module docs).
-        let (mut num, mut den, mut num_ref) = (0.0, 0.0, 0.0);
+        // Lag variance: the inverse Fisher information (module docs), plus the reference's own
+        // for a per-pixel reference.
+        let floor = 0.02 * (a * reference.mean + b).max(1e-6);
+        let (mut information, mut reference_information) = (0.0, 0.0);
         for t in span {
             let d = ws.slope[t];
-            let expected = (a * ws.shifted[t] + b).max(0.0);
-            num += expected * d * d;
-            num_ref += ws.shifted[t].max(0.0) * d * d;
-            den += d * d;
+            information += (a * d).powi(2) / (a * ws.shifted[t] + b).max(floor);
+            reference_information += d * d / ws.shifted[t].max(0.02 * reference.mean);
         }
-        let mut variance = num / (a * den).powi(2);
+        let mut variance = 1.0 / information;
         if !global_reference {
-            variance += num_ref / (den * den);
+            variance += 1.0 / reference_information;
         }
         let sign = match config.mode {
             TimingMode::Forward => 1.0,
@@ -560,6 +599,29 @@ impl Correlator {
             correlation: corr_f,
         })
     }
+}
+
+/// `values` convolved with a unit-area Gaussian of σ = `sigma` samples (edges held).
+fn smooth(values: &[f64], sigma: f64) -> Vec<f64> {
+    if !(sigma > 0.0) {
+        return values.to_vec();
+    }
+    let half = (3.0 * sigma).ceil() as i64;
+    let kernel: Vec<f64> = (-half..=half)
+        .map(|j| (-0.5 * (j as f64 / sigma).powi(2)).exp())
+        .collect();
+    let norm: f64 = kernel.iter().sum();
+    let n = values.len() as i64;
+    (0..n)
+        .map(|i| {
+            kernel
+                .iter()
+                .zip(-half..=half)
+                .map(|(w, j)| w * values[(i + j).clamp(0, n - 1) as usize])
+                .sum::<f64>()
+                / norm
+        })
+        .collect()
 }
 
 /// Vertex of the least-squares parabola through q over ±[`PARABOLA_HALF_WIDTH`] around `k0`
@@ -620,26 +682,33 @@ fn shift_cubic(r: &[f64], lag: f64, out: &mut [f64], slope: &mut [f64]) {
     }
 }
 
-/// Least-squares h ≈ a·g + b over `span`, and the Pearson correlation of h and g there.
-fn fit_scaled(h: &ArrayView1<f32>, g: &[f64], span: std::ops::Range<usize>) -> (f64, f64, f64) {
-    let n = span.len() as f64;
-    let (mut sh, mut sg, mut shh, mut sgg, mut shg) = (0.0, 0.0, 0.0, 0.0, 0.0);
+/// Weighted least squares h ≈ a·g + b over `span` (unit weights when `weight` is empty), and
+/// the (weighted) Pearson correlation of h and g there.
+fn fit_scaled(
+    h: &ArrayView1<f32>,
+    g: &[f64],
+    weight: &[f64],
+    span: std::ops::Range<usize>,
+) -> (f64, f64, f64) {
+    let (mut sw, mut sh, mut sg, mut shh, mut sgg, mut shg) = (0.0, 0.0, 0.0, 0.0, 0.0, 0.0);
     for t in span {
+        let w = weight.get(t).copied().unwrap_or(1.0);
         let (x, y) = (g[t], f64::from(h[t]));
-        sh += y;
-        sg += x;
-        shh += y * y;
-        sgg += x * x;
-        shg += x * y;
+        sw += w;
+        sh += w * y;
+        sg += w * x;
+        shh += w * y * y;
+        sgg += w * x * x;
+        shg += w * x * y;
     }
-    let cov = shg - sh * sg / n;
-    let var_g = sgg - sg * sg / n;
-    let var_h = shh - sh * sh / n;
-    if var_g <= 0.0 {
-        return (0.0, sh / n, f64::NAN);
+    let cov = shg - sh * sg / sw;
+    let var_g = sgg - sg * sg / sw;
+    let var_h = shh - sh * sh / sw;
+    if !(var_g > 0.0) {
+        return (0.0, sh / sw, f64::NAN);
     }
     let a = cov / var_g;
-    let b = (sh - a * sg) / n;
+    let b = (sh - a * sg) / sw;
     let r = if var_h > 0.0 {
         cov / (var_g * var_h).sqrt()
     } else {
@@ -780,3 +849,4 @@ mod tests {
         assert!(matches!(err, TofError::NoReliableRange { .. }), "{err}");
     }
 }
+
