@@ -1,395 +1,278 @@
-//! The chip engine: plays a [`ChipTable`] on the PWM outputs at an exact chip rate, without the
-//! CPU (issue 6, SPEC §2 "the firmware plays the on-mask table cyclically at the chip rate").
+//! The chip engine on the board: owns TIM2, TIM3, TIM5, their DMA streams, the LED pins and the
+//! frame buffers, and carries out `chip_plan`'s register plans through [`Mmio`]. Every register
+//! value and the order of the writes come from `chip_plan` (host-tested on a register model of
+//! RM0383); nothing here computes one.
 //!
-//! ```text
-//!  TIM2 (32-bit, 96 MHz)      update every (PSC+1)(ARR+1) ticks = one chip   [timing::chip_timer_period]
-//!    └─ TRGO = update ──┬──► TIM3 slave "reset" on ITR1 ─ trigger DMA ─► DMA1 S4 ch5 ─► TIM3_DMAR
-//!                       └──► TIM5 slave "reset" on ITR0 ─ trigger DMA ─► DMA1 S1 ch6 ─► TIM5_DMAR
-//!  TIM3/TIM5: PWM mode 1, 1000 steps at 96 kHz, CCR preload; DCR burst of 4 → CCR1..CCR4
-//! ```
-//!
-//! At every chip boundary TIM2's update event resets both PWM timers (their 96 kHz periods start
-//! in phase with the chip) and makes each request a 4-word DMA burst through its DMAR, which
-//! writes the next chip's four compare values (from a RAM frame buffer, circular) into the
-//! preload registers. They take effect at the next PWM period, so every edge of every chip is
-//! late by exactly one PWM period (10.4 µs): a constant offset, no jitter and no drift, and
-//! irrelevant to the phase-invariant carriers. Nothing on the path touches flash or needs an
-//! interrupt, so the carriers keep running while a flash sector is erased (the CPU stalls, the
-//! DMA and timers do not) and while USB is busy or gone.
-//!
-//! Frame buffers: TIM5 (LEDs 5–8) holds the whole frame, up to 512 chips; TIM3 (LEDs 1–4) only
-//! the first 32 chips, because those carriers repeat every ≤ 32 chips whatever N and the phases;
-//! both streams are paced by the same trigger, so they stay in step.
-//!
-//! TIM5's registers are 32 bits wide, so its frames are `u32` (a 16-bit APB write would be
-//! replicated into the upper half of the compare register); TIM3's are `u16`.
-//!
-//! Not verified on a board: that the F411's timer DMA burst runs from the *trigger* request
-//! (RM0383 describes the burst for any timer DMA request). If it does not, `Hardware test` in
-//! `firmware/README.md` says how to see it; the fallback is a TIM2 update interrupt writing the
-//! same frames.
+//! Nothing on the carrier path touches flash or needs the CPU: each TIM2 update resets the PWM
+//! timers and makes them pull the next chip's compare values from RAM by DMA, so the carriers
+//! keep playing while a flash sector is erased and while USB is busy or gone. With the
+//! `chip-interrupt-fallback` feature TIM2's update interrupt copies the values instead (for a
+//! part whose timer DMA burst does not run from the trigger request; see `firmware/README.md`);
+//! that path stalls with the CPU during a flash erase.
 
+use core::cell::RefCell;
+
+use chip_plan::outputs::{Bank, TIM3_MAX_CHIPS};
+use chip_plan::plan::{
+    ChipEngine, ChipError, ChipInterrupt, ChipInterruptSlot, FrameMemory, Loaded, Mode,
+    WATCHDOG_FEED, WATCHDOG_MIN_TIMEOUT_MS, watchdog_plan, watchdog_setting,
+};
+use chip_plan::step::{Bus, run};
 use embassy_stm32::Peri;
 use embassy_stm32::gpio::OutputType;
-use embassy_stm32::pac;
-use embassy_stm32::pac::dma::vals::{Dir, Pl, Size};
 use embassy_stm32::peripherals::{
-    DMA1_CH1, DMA1_CH4, PA0, PA1, PA2, PA3, PA6, PA7, PB0, PB1, TIM2, TIM3, TIM5,
-};
-use embassy_stm32::timer::low_level::{
-    MasterMode, OutputCompareMode, SlaveMode, Timer, TriggerSource,
+    DMA1_CH1, DMA1_CH4, IWDG, PA0, PA1, PA2, PA3, PA6, PA7, PB0, PB1, TIM2, TIM3, TIM5,
 };
 use embassy_stm32::timer::simple_pwm::PwmPin;
-use embassy_stm32::timer::{Ch1, Ch2, Ch3, Ch4, Channel, GeneralInstance4Channel};
+use embassy_stm32::timer::{Ch1, Ch2, Ch3, Ch4};
+use embassy_sync::blocking_mutex::Mutex;
+use embassy_sync::blocking_mutex::raw::ThreadModeRawMutex;
 use protocol::carriers::{ChipTable, MAX_CHIPS, MAX_LEDS};
-use protocol::timing::{
-    PWM_STEPS, TimerPeriod, TimingError, brightness_pwm_period, chip_timer_period,
-    fill_compare_frames,
-};
+use protocol::wire::OutputFault;
 use static_cell::ConstStaticCell;
 
-use crate::board::{Bank, slots_of};
+/// How the compare values reach the timers in this build.
+const MODE: Mode = if cfg!(feature = "chip-interrupt-fallback") {
+    Mode::ChipInterrupt
+} else {
+    Mode::Dma
+};
 
-/// Compare values per chip and bank (CCR1..CCR4).
-const SLOTS: usize = 4;
-/// DMA stream and request channel of TIM3_TRIG (RM0383 table 27).
-const TIM3_STREAM: (usize, u8) = (4, 5);
-/// DMA stream and request channel of TIM5_TRIG.
-const TIM5_STREAM: (usize, u8) = (1, 6);
-/// Polls of NDTR to wait for a burst in flight (a burst is 4 APB writes, ~100 CPU cycles).
-const BURST_SPIN_LIMIT: u32 = 10_000;
-/// DCR base address of the burst: CCR1 is register 13 (offset 0x34) of a general-purpose timer.
-const DCR_BASE_CCR1: u8 = 13;
-
-/// LEDs 1–4 repeat within 32 chips whatever N and the phases (`protocol::timing::slot_pattern_period`), so
-/// TIM3 needs 32 frames; TIM5 (LEDs 5–8) needs the full 512.
-const TIM3_MAX_CHIPS: usize = 32;
-
-static TIM3_FRAMES: ConstStaticCell<[u16; TIM3_MAX_CHIPS * SLOTS]> =
-    ConstStaticCell::new([0; TIM3_MAX_CHIPS * SLOTS]);
-static TIM5_FRAMES: ConstStaticCell<[u32; MAX_CHIPS * SLOTS]> =
-    ConstStaticCell::new([0; MAX_CHIPS * SLOTS]);
-
-/// The LED pins, in board-table order (see [`crate::board::LED_OUTPUTS`]).
-pub struct LedPins<'d> {
-    /// LED 1, TIM3 CH1.
-    pub pa6: Peri<'d, PA6>,
-    /// LED 2, TIM3 CH2.
-    pub pa7: Peri<'d, PA7>,
-    /// LED 3, TIM3 CH3.
-    pub pb0: Peri<'d, PB0>,
-    /// LED 4, TIM3 CH4.
-    pub pb1: Peri<'d, PB1>,
-    /// LED 5, TIM5 CH2.
-    pub pa1: Peri<'d, PA1>,
-    /// LED 6, TIM5 CH3.
-    pub pa2: Peri<'d, PA2>,
-    /// LED 7, TIM5 CH4.
-    pub pa3: Peri<'d, PA3>,
-    /// LED 8, TIM5 CH1.
-    pub pa0: Peri<'d, PA0>,
-}
-
-/// The four channel pins of one PWM timer.
-type BankPins<'d, T> = (
-    PwmPin<'d, T, Ch1>,
-    PwmPin<'d, T, Ch2>,
-    PwmPin<'d, T, Ch3>,
-    PwmPin<'d, T, Ch4>,
+static TIM3_FRAMES: ConstStaticCell<[u16; TIM3_MAX_CHIPS * 4]> =
+    ConstStaticCell::new([0; TIM3_MAX_CHIPS * 4]);
+static TIM5_FRAMES: ConstStaticCell<[u32; MAX_CHIPS * 4]> =
+    ConstStaticCell::new([0; MAX_CHIPS * 4]);
+const _: () = assert!(
+    Bank::Tim3.frame_buffer_bytes() as usize == TIM3_MAX_CHIPS * 4 * 2
+        && Bank::Tim5.frame_buffer_bytes() as usize == MAX_CHIPS * 4 * 4,
+    "frame buffers and the plan's frame layout disagree"
 );
 
-/// The pins in alternate-function mode; kept alive so they stay timer outputs.
-#[allow(dead_code)]
-struct PwmPins<'d> {
-    tim3: BankPins<'d, TIM3>,
-    tim5: BankPins<'d, TIM5>,
+/// The memory-mapped registers and SRAM, as the plan's bus.
+///
+/// The plan only names addresses from `chip_plan::regs` (RM0383's register map, cross-checked
+/// against stm32-metapac) and the two frame buffers this module owns, so every access is to a
+/// peripheral register or to memory nothing else uses.
+pub struct Mmio;
+
+impl Bus for Mmio {
+    fn read(&mut self, addr: u32) -> u32 {
+        // SAFETY: an aligned peripheral register or frame-buffer word (see `Mmio`).
+        unsafe { core::ptr::read_volatile(addr as *const u32) }
+    }
+
+    fn write(&mut self, addr: u32, value: u32) {
+        // SAFETY: as in `read`.
+        unsafe { core::ptr::write_volatile(addr as *mut u32, value) }
+    }
+
+    fn read16(&mut self, addr: u32) -> u16 {
+        // SAFETY: an aligned half-word of TIM3's frame buffer.
+        unsafe { core::ptr::read_volatile(addr as *const u16) }
+    }
+
+    fn write16(&mut self, addr: u32, value: u16) {
+        // SAFETY: as in `read16`.
+        unsafe { core::ptr::write_volatile(addr as *mut u16, value) }
+    }
+
+    fn fence(&mut self) {
+        // A real barrier (DMB), not just a compiler fence: the DMA reads the buffers.
+        core::sync::atomic::fence(core::sync::atomic::Ordering::SeqCst);
+    }
 }
 
-/// Why an output plan could not be loaded.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, defmt::Format)]
-pub enum ChipError {
-    /// No timer setting for the requested rate.
-    Timing(TimingError),
+/// The chip interrupt's state while the fallback plays.
+static CHIP_INTERRUPT: embassy_sync::blocking_mutex::CriticalSectionMutex<
+    core::cell::Cell<Option<ChipInterrupt>>,
+> = embassy_sync::blocking_mutex::CriticalSectionMutex::new(core::cell::Cell::new(None));
+
+impl ChipInterruptSlot for Mmio {
+    fn set_chip_interrupt(&mut self, interrupt: Option<ChipInterrupt>) {
+        CHIP_INTERRUPT.lock(|cell| cell.set(interrupt));
+    }
 }
 
-/// What the engine is playing.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, defmt::Format)]
-pub struct Loaded {
-    /// Chips per frame.
-    pub chips: usize,
-    /// Chip timer registers.
-    pub period: TimerPeriod,
-    /// Achieved chip rate in microhertz.
-    pub rate_microhertz: u64,
-    /// Error against the requested rate in parts per billion.
-    pub error_ppb: i64,
-}
+#[cfg(feature = "chip-interrupt-fallback")]
+mod chip_interrupt {
+    use chip_plan::plan::CHIP_INTERRUPT_ACK;
+    use chip_plan::step::run;
+    use embassy_stm32::pac::interrupt;
 
-/// Owner of the chip timer, both PWM banks, their DMA streams and frame buffers.
-pub struct ChipEngine<'d> {
-    chip_clock: Timer<'d, TIM2>,
-    tim3: Timer<'d, TIM3>,
-    tim5: Timer<'d, TIM5>,
-    _pins: PwmPins<'d>,
-    _dma: (Peri<'d, DMA1_CH4>, Peri<'d, DMA1_CH1>),
-    tim3_frames: &'static mut [u16; TIM3_MAX_CHIPS * SLOTS],
-    tim5_frames: &'static mut [u32; MAX_CHIPS * SLOTS],
-    loaded: Option<Loaded>,
-    /// DMA transfers of one cycle of each bank's frames (TIM3, TIM5).
-    transfers: (u16, u16),
-    running: bool,
-}
+    use super::{CHIP_INTERRUPT, Mmio};
 
-impl<'d> ChipEngine<'d> {
-    /// Takes the timers, DMA streams and pins; all outputs start off, nothing plays.
-    ///
-    /// Panics if called twice (the frame buffers are singletons).
-    pub fn new(
-        tim2: Peri<'d, TIM2>,
-        tim3: Peri<'d, TIM3>,
-        tim5: Peri<'d, TIM5>,
-        dma: (Peri<'d, DMA1_CH4>, Peri<'d, DMA1_CH1>),
-        pins: LedPins<'d>,
-    ) -> Self {
-        let push_pull = OutputType::PushPull;
-        let pins = PwmPins {
-            tim3: (
-                PwmPin::new(pins.pa6, push_pull),
-                PwmPin::new(pins.pa7, push_pull),
-                PwmPin::new(pins.pb0, push_pull),
-                PwmPin::new(pins.pb1, push_pull),
-            ),
-            tim5: (
-                PwmPin::new(pins.pa0, push_pull),
-                PwmPin::new(pins.pa1, push_pull),
-                PwmPin::new(pins.pa2, push_pull),
-                PwmPin::new(pins.pa3, push_pull),
-            ),
+    /// TIM2 update: the next chip's compare values into TIM3/TIM5.
+    #[interrupt]
+    fn TIM2() {
+        let plan = CHIP_INTERRUPT.lock(|cell| {
+            cell.get().map(|mut state| {
+                let plan = state.next_plan();
+                cell.set(Some(state));
+                plan
+            })
+        });
+        let _ = match plan {
+            Some(plan) => run(plan.steps(), &mut Mmio),
+            None => run(&[CHIP_INTERRUPT_ACK], &mut Mmio),
         };
-        // DMA1 carries the frames; embassy enables its clock only for its own transfers.
-        pac::RCC.ahb1enr().modify(|w| w.set_dma1en(true));
-        let engine = Self {
-            chip_clock: Timer::new(tim2),
-            tim3: Timer::new(tim3),
-            tim5: Timer::new(tim5),
-            _pins: pins,
-            _dma: dma,
-            tim3_frames: TIM3_FRAMES.take(),
-            tim5_frames: TIM5_FRAMES.take(),
-            loaded: None,
-            transfers: (0, 0),
-            running: false,
-        };
-        // TIM3 is triggered by ITR1 = TIM2, TIM5 by ITR0 = TIM2 (RM0383 table 54).
-        setup_pwm_bank(&engine.tim3, TriggerSource::ITR1);
-        setup_pwm_bank(&engine.tim5, TriggerSource::ITR0);
-        engine
-    }
-
-    /// Timer clock of the chip timer (TIM2), from the RCC state.
-    pub fn chip_clock_hz(&self) -> u32 {
-        self.chip_clock.get_clock_frequency().0
-    }
-
-    /// Whether the carriers are playing.
-    pub fn is_running(&self) -> bool {
-        self.running
-    }
-
-    /// Loads a chip table, per-LED brightness and chip rate; keeps playing if it was.
-    pub fn load(
-        &mut self,
-        table: &ChipTable,
-        brightness_permille: &[u16; MAX_LEDS],
-        rate_millihertz: u32,
-    ) -> Result<Loaded, ChipError> {
-        let clock = self.chip_clock_hz();
-        let period = chip_timer_period(clock, rate_millihertz, 32).map_err(ChipError::Timing)?;
-        let was_running = self.running;
-        self.halt();
-        let tim3_slots = slots_of(Bank::Tim3);
-        let tim5_slots = slots_of(Bank::Tim5);
-        fill_compare_frames(
-            table,
-            brightness_permille,
-            &tim3_slots,
-            &mut self.tim3_frames[..],
-        )
-        .map_err(ChipError::Timing)?;
-        fill_compare_frames(
-            table,
-            brightness_permille,
-            &tim5_slots,
-            &mut self.tim5_frames[..],
-        )
-        .map_err(ChipError::Timing)?;
-        let regs = self.chip_clock.regs_gp32();
-        regs.psc().write_value(period.prescaler);
-        regs.arr().write_value(period.auto_reload);
-        let loaded = Loaded {
-            chips: table.chips(),
-            period,
-            rate_microhertz: period.rate_microhertz(clock),
-            error_ppb: period.error_ppb(clock, rate_millihertz),
-        };
-        self.loaded = Some(loaded);
-        if was_running {
-            self.start();
-        }
-        Ok(loaded)
-    }
-
-    /// Starts playing the loaded table from chip 0 (no-op if nothing is loaded or running).
-    pub fn start(&mut self) {
-        let Some(loaded) = self.loaded else {
-            return;
-        };
-        if self.running {
-            return;
-        }
-        if loaded.chips == 0 {
-            return;
-        }
-        let tim3 = self.tim3.regs_gp16();
-        let tim5 = self.tim5.regs_gp16();
-        start_stream(
-            TIM3_STREAM,
-            tim3.dmar().as_ptr() as u32,
-            self.tim3_frames.as_ptr() as u32,
-            self.transfers.0,
-            Size::BITS16,
-        );
-        start_stream(
-            TIM5_STREAM,
-            tim5.dmar().as_ptr() as u32,
-            self.tim5_frames.as_ptr() as u32,
-            self.transfers.1,
-            Size::BITS32,
-        );
-        for regs in [tim3, tim5] {
-            set_burst(regs);
-            regs.sr().write(|w| w.0 = 0);
-            regs.dier().modify(|w| w.set_tde(true));
-        }
-        // Chip timer: load PSC/ARR with a silent update, then every update drives TRGO.
-        self.chip_clock.stop();
-        self.chip_clock.regs_core().cnt().write(|w| w.set_cnt(0));
-        self.chip_clock.generate_update_event();
-        self.chip_clock.set_master_mode(MasterMode::UPDATE);
-        self.chip_clock.start();
-        self.running = true;
-    }
-
-    /// Stops playing; every output goes to 0 (LEDs off) within one PWM period.
-    pub fn stop(&mut self) {
-        self.halt();
-    }
-
-    fn halt(&mut self) {
-        // No new chip triggers; then let a burst in flight finish (4 transfers, well under a
-        // microsecond) so the timer's DMAR index is back at CCR1 for the next start.
-        self.chip_clock.stop();
-        for (regs, stream) in [
-            (self.tim3.regs_gp16(), TIM3_STREAM),
-            (self.tim5.regs_gp16(), TIM5_STREAM),
-        ] {
-            let st = pac::DMA1.st(stream.0);
-            let mut spins = 0u32;
-            while st.cr().read().en()
-                && !usize::from(st.ndtr().read().ndt()).is_multiple_of(SLOTS)
-                && spins < BURST_SPIN_LIMIT
-            {
-                spins += 1;
-            }
-            regs.dier().modify(|w| w.set_tde(false));
-            stop_stream(stream.0);
-        }
-        for channel in [Channel::Ch1, Channel::Ch2, Channel::Ch3, Channel::Ch4] {
-            self.tim3.set_compare_value(channel, 0);
-            self.tim5.set_compare_value(channel, 0);
-        }
-        self.running = false;
     }
 }
 
-/// PWM mode 1 with CCR preload on all four channels, 1000 steps at prescaler 0, slave reset on
-/// `trigger`, DMA burst of CCR1..CCR4 through DMAR on each trigger request; counter running.
-fn setup_pwm_bank<T: GeneralInstance4Channel>(timer: &Timer<'_, T>, trigger: TriggerSource) {
-    let pwm = match brightness_pwm_period(timer.get_clock_frequency().0) {
-        Ok(period) => period,
-        Err(_) => TimerPeriod {
-            prescaler: 0,
-            auto_reload: u32::from(PWM_STEPS) - 1,
-        },
+/// The LED pins, in the order of `chip_plan::outputs::LED_OUTPUTS`.
+pub struct LedPins {
+    /// LED 1, TIM3 CH1.
+    pub pa6: Peri<'static, PA6>,
+    /// LED 2, TIM3 CH2.
+    pub pa7: Peri<'static, PA7>,
+    /// LED 3, TIM3 CH3.
+    pub pb0: Peri<'static, PB0>,
+    /// LED 4, TIM3 CH4.
+    pub pb1: Peri<'static, PB1>,
+    /// LED 5, TIM5 CH2.
+    pub pa1: Peri<'static, PA1>,
+    /// LED 6, TIM5 CH3.
+    pub pa2: Peri<'static, PA2>,
+    /// LED 7, TIM5 CH4.
+    pub pa3: Peri<'static, PA3>,
+    /// LED 8, TIM5 CH1.
+    pub pa0: Peri<'static, PA0>,
+}
+
+/// The peripherals the engine drives, taken so that nothing else can.
+pub struct ChipHardware {
+    /// Chip clock.
+    pub tim2: Peri<'static, TIM2>,
+    /// PWM bank of LEDs 1–4.
+    pub tim3: Peri<'static, TIM3>,
+    /// PWM bank of LEDs 5–8.
+    pub tim5: Peri<'static, TIM5>,
+    /// TIM3's trigger stream (DMA1 stream 4).
+    pub tim3_stream: Peri<'static, DMA1_CH4>,
+    /// TIM5's trigger stream (DMA1 stream 1).
+    pub tim5_stream: Peri<'static, DMA1_CH1>,
+    /// The LED pins.
+    pub pins: LedPins,
+}
+
+/// The four channel pins of one PWM timer, in alternate-function mode while they live.
+type BankPins<T> = (
+    PwmPin<'static, T, Ch1>,
+    PwmPin<'static, T, Ch2>,
+    PwmPin<'static, T, Ch3>,
+    PwmPin<'static, T, Ch4>,
+);
+
+/// The timers and DMA streams, held so that nothing else can take them.
+type OwnedPeripherals = (
+    Peri<'static, TIM2>,
+    Peri<'static, TIM3>,
+    Peri<'static, TIM5>,
+    Peri<'static, DMA1_CH4>,
+    Peri<'static, DMA1_CH1>,
+);
+
+/// The engine with its hardware.
+pub struct Carriers {
+    engine: ChipEngine,
+    _hardware: OwnedPeripherals,
+    _pins: (BankPins<TIM3>, BankPins<TIM5>),
+}
+
+/// The engine, shared by the link (effects) and the fault watch (both thread mode).
+static CARRIERS: Mutex<ThreadModeRawMutex, RefCell<Option<Carriers>>> =
+    Mutex::new(RefCell::new(None));
+
+/// Takes the hardware, enables the clocks and halts: every output 0, nothing plays.
+/// `clock_hz` is the timer clock of TIM2/TIM3/TIM5.
+pub fn install(hardware: ChipHardware, clock_hz: u32) -> Result<(), ChipError> {
+    let push_pull = OutputType::PushPull;
+    let p = hardware.pins;
+    let pins = (
+        (
+            PwmPin::new(p.pa6, push_pull),
+            PwmPin::new(p.pa7, push_pull),
+            PwmPin::new(p.pb0, push_pull),
+            PwmPin::new(p.pb1, push_pull),
+        ),
+        (
+            PwmPin::new(p.pa0, push_pull),
+            PwmPin::new(p.pa1, push_pull),
+            PwmPin::new(p.pa2, push_pull),
+            PwmPin::new(p.pa3, push_pull),
+        ),
+    );
+    // Taken once (a second `install` panics), then only reached through their addresses: the
+    // CPU writes them through `Mmio`, the DMA reads them.
+    let frames = FrameMemory {
+        tim3: TIM3_FRAMES.take().as_mut_ptr() as u32,
+        tim5: TIM5_FRAMES.take().as_mut_ptr() as u32,
     };
-    let regs = timer.regs_gp16();
-    timer.stop();
-    regs.psc().write_value(pwm.prescaler);
-    timer.set_autoreload_preload(true);
-    regs.arr().write(|w| w.set_arr(pwm.auto_reload as u16));
-    for channel in [Channel::Ch1, Channel::Ch2, Channel::Ch3, Channel::Ch4] {
-        timer.set_output_compare_mode(channel, OutputCompareMode::PwmMode1);
-        timer.set_output_compare_preload(channel, true);
-        timer.enable_channel(channel, true);
+    let engine = ChipEngine::new(&mut Mmio, clock_hz, frames, MODE)?;
+    let carriers = Carriers {
+        engine,
+        _hardware: (
+            hardware.tim2,
+            hardware.tim3,
+            hardware.tim5,
+            hardware.tim3_stream,
+            hardware.tim5_stream,
+        ),
+        _pins: pins,
+    };
+    CARRIERS.lock(|cell| *cell.borrow_mut() = Some(carriers));
+    Ok(())
+}
+
+/// Runs `f` on the engine (`None` before [`install`]).
+fn with_engine<R>(f: impl FnOnce(&mut ChipEngine) -> R) -> Option<R> {
+    CARRIERS.lock(|cell| cell.borrow_mut().as_mut().map(|c| f(&mut c.engine)))
+}
+
+/// Loads a chip table, per-LED brightness and chip rate; keeps playing if it was.
+pub fn load(
+    table: &ChipTable,
+    brightness_permille: &[u16; MAX_LEDS],
+    rate_millihertz: u32,
+) -> Option<Result<Loaded, ChipError>> {
+    with_engine(|e| e.load(&mut Mmio, table, brightness_permille, rate_millihertz))
+}
+
+/// Starts playing.
+pub fn start() -> Option<Result<(), ChipError>> {
+    with_engine(|e| e.start(&mut Mmio))
+}
+
+/// Stops playing (all outputs 0).
+pub fn stop() -> Option<Result<(), ChipError>> {
+    with_engine(|e| e.stop(&mut Mmio))
+}
+
+/// Whether the carriers are playing.
+pub fn is_running() -> bool {
+    with_engine(|e| e.is_running()).unwrap_or(false)
+}
+
+/// Checks the DMA streams; a fault has already stopped the carriers when it is returned.
+pub fn poll_fault() -> Option<OutputFault> {
+    with_engine(|e| e.poll_fault(&mut Mmio)).flatten()
+}
+
+/// The independent watchdog, started once; [`Watchdog::feed`] keeps the board from resetting.
+pub struct Watchdog {
+    _iwdg: Peri<'static, IWDG>,
+}
+
+impl Watchdog {
+    /// Starts the IWDG with a timeout above the longest flash erase at any LSI frequency.
+    pub fn start(iwdg: Peri<'static, IWDG>) -> Self {
+        let setting = watchdog_setting(WATCHDOG_MIN_TIMEOUT_MS);
+        // The watchdog plan has no waits: it cannot fail.
+        let _ = run(watchdog_plan(setting).steps(), &mut Mmio);
+        Self { _iwdg: iwdg }
     }
-    set_burst(regs);
-    timer.set_trigger_source(trigger);
-    timer.set_slave_mode(SlaveMode::RESET_MODE);
-    timer.generate_update_event();
-    timer.start();
-}
 
-/// DMA burst through DMAR: CCR1..CCR4, one burst per DMA request of the timer.
-fn set_burst(regs: pac::timer::TimGp16) {
-    regs.dcr().write(|w| {
-        w.set_dba(DCR_BASE_CCR1);
-        w.set_dbl(SLOTS as u8 - 1);
-    });
-}
-
-/// Programs and enables a DMA1 stream: circular, memory → peripheral, memory increment, one
-/// item per request (direct mode), highest priority, no interrupts.
-fn start_stream(
-    (stream, request): (usize, u8),
-    peripheral: u32,
-    memory: u32,
-    items: u16,
-    size: Size,
-) {
-    stop_stream(stream);
-    let st = pac::DMA1.st(stream);
-    st.par().write_value(peripheral);
-    st.m0ar().write_value(memory);
-    st.ndtr().write(|w| w.set_ndt(items));
-    st.fcr()
-        .write(|w| w.set_dmdis(pac::dma::vals::Dmdis::ENABLED));
-    st.cr().write(|w| {
-        w.set_chsel(request);
-        w.set_dir(Dir::MEMORY_TO_PERIPHERAL);
-        w.set_circ(true);
-        w.set_minc(true);
-        w.set_pinc(false);
-        w.set_psize(size);
-        w.set_msize(size);
-        w.set_pl(Pl::VERY_HIGH);
-    });
-    // The frame buffer must be written before the DMA may read it.
-    core::sync::atomic::compiler_fence(core::sync::atomic::Ordering::SeqCst);
-    st.cr().modify(|w| w.set_en(true));
-}
-
-/// Disables a DMA1 stream, waits until it has stopped and clears its flags.
-fn stop_stream(stream: usize) {
-    let st = pac::DMA1.st(stream);
-    st.cr().modify(|w| w.set_en(false));
-    while st.cr().read().en() {}
-    pac::DMA1.ifcr(stream / 4).write(|w| {
-        let n = stream % 4;
-        w.set_tcif(n, true);
-        w.set_htif(n, true);
-        w.set_teif(n, true);
-        w.set_dmeif(n, true);
-        w.set_feif(n, true);
-    });
-    core::sync::atomic::compiler_fence(core::sync::atomic::Ordering::SeqCst);
+    /// Reloads the watchdog counter.
+    pub fn feed(&mut self) {
+        let _ = run(&[WATCHDOG_FEED], &mut Mmio);
+    }
 }

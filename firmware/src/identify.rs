@@ -1,5 +1,5 @@
 //! Identify: blink the board LED (PC13, active low) so a user can tell which luminaire answers
-//! (`Identify` request, issue 6). 5 Hz for the requested seconds; a new request restarts or (0)
+//! (`Identify` request). 5 Hz for the requested seconds; a new request restarts or (0)
 //! ends the blink.
 
 use embassy_futures::select::{Either, select};

@@ -1,5 +1,5 @@
 //! The host link: CDC-ACM bytes → the protocol's [`Endpoint`] (streaming frame reader + luminaire
-//! state machine) → reply frames back, [`Effects`] carried out on the hardware (issue 6).
+//! state machine) → reply frames back, [`Effects`] carried out on the hardware.
 //!
 //! The endpoint lives in a thread-mode mutex so the save and identify tasks can report back
 //! (`notify_saved`, `notify_identify_finished`). A dropped USB link is a value
@@ -18,7 +18,9 @@ use protocol::config::LuminaireConfig;
 use protocol::framing::MAX_FRAME_LEN;
 use protocol::luminaire::{Effect, Effects, Endpoint, Luminaire};
 
-use crate::chips::ChipEngine;
+use chip_plan::plan::ChipError;
+
+use crate::chips;
 use crate::identify::IDENTIFY;
 use crate::usb::{PACKET_SIZE, Serial};
 
@@ -63,17 +65,14 @@ pub fn reset_reader() {
 }
 
 /// Serves one connection until the host goes away.
-pub async fn serve(serial: &mut Serial, engine: &mut ChipEngine<'_>) -> Disconnected {
-    match serve_inner(serial, engine).await {
+pub async fn serve(serial: &mut Serial) -> Disconnected {
+    match serve_inner(serial).await {
         Ok(never) => match never {},
         Err(disconnected) => disconnected,
     }
 }
 
-async fn serve_inner(
-    serial: &mut Serial,
-    engine: &mut ChipEngine<'_>,
-) -> Result<core::convert::Infallible, Disconnected> {
+async fn serve_inner(serial: &mut Serial) -> Result<core::convert::Infallible, Disconnected> {
     let mut packet = [0u8; PACKET_SIZE as usize];
     loop {
         let received = serial.read_packet(&mut packet).await?;
@@ -89,7 +88,7 @@ async fn serve_inner(
                 }
             });
             if let Some((frame, effects)) = reply {
-                apply(engine, &effects);
+                apply(&effects);
                 send(serial, &frame).await?;
             }
         }
@@ -108,20 +107,21 @@ async fn send(serial: &mut Serial, frame: &[u8]) -> Result<(), Disconnected> {
     Ok(())
 }
 
-/// Carries out the state machine's effects in order.
-pub fn apply(engine: &mut ChipEngine<'_>, effects: &Effects) {
+/// Carries out the state machine's effects in order; a chip-engine error that stopped the
+/// carriers is reported to the state machine as an output fault.
+pub fn apply(effects: &Effects) {
     for effect in effects {
         match *effect {
             Effect::ApplyOutput(plan) => {
                 let loaded = plan.chip_table().map(|table| {
-                    engine.load(
+                    chips::load(
                         &table,
                         &plan.brightness_permille,
                         plan.chip_rate.millihertz(),
                     )
                 });
                 match loaded {
-                    Ok(Ok(loaded)) => info!(
+                    Ok(Some(Ok(loaded))) => info!(
                         "output: {} LEDs, {} chips, {} mHz requested, {} uHz played ({} ppb), brightness {}",
                         plan.led_count,
                         loaded.chips,
@@ -130,7 +130,8 @@ pub fn apply(engine: &mut ChipEngine<'_>, effects: &Effects) {
                         loaded.error_ppb,
                         plan.brightness_permille
                     ),
-                    Ok(Err(e)) => error!("output not loaded: {}", e),
+                    Ok(Some(Err(e))) => engine_error(e),
+                    Ok(None) => error!("output not loaded: no chip engine"),
                     Err(e) => error!("output plan invalid: {}", e),
                 }
             }
@@ -139,11 +140,15 @@ pub fn apply(engine: &mut ChipEngine<'_>, effects: &Effects) {
                 SAVE.signal(config);
             }
             Effect::Start => {
-                engine.start();
+                if let Some(Err(e)) = chips::start() {
+                    engine_error(e);
+                }
                 info!("carriers started");
             }
             Effect::Stop => {
-                engine.stop();
+                if let Some(Err(e)) = chips::stop() {
+                    engine_error(e);
+                }
                 info!("carriers stopped");
             }
             Effect::Identify { seconds } => {
@@ -151,5 +156,13 @@ pub fn apply(engine: &mut ChipEngine<'_>, effects: &Effects) {
                 IDENTIFY.signal(seconds);
             }
         }
+    }
+}
+
+/// Logs a chip-engine error and reports the fault it caused, if any.
+fn engine_error(error: ChipError) {
+    error!("chip engine: {}", error);
+    if let Some(fault) = error.fault() {
+        with_luminaire(|l| l.notify_output_fault(fault));
     }
 }

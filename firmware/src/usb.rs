@@ -1,5 +1,7 @@
-//! USB CDC-ACM device: "meb luminaire", serial number = the chip's 96-bit unique ID in hex, so
-//! the host can tell boards apart and find the same board again after a replug (issue 6).
+//! USB CDC-ACM device with the identity of `protocol::usb` (pid.codes VID, placeholder PID,
+//! manufacturer and product strings the host matches in full); serial number = the chip's 96-bit
+//! unique ID in hex, so the host can tell boards apart and find the same board again after a
+//! replug.
 
 use embassy_stm32::peripherals::{PA11, PA12, USB_OTG_FS};
 use embassy_stm32::usb::{self, Driver};
@@ -8,7 +10,7 @@ use embassy_usb::class::cdc_acm::{CdcAcmClass, State};
 use embassy_usb::{Builder, UsbDevice};
 use static_cell::StaticCell;
 
-use crate::board::{USB_MANUFACTURER, USB_PID, USB_PRODUCT, USB_VID};
+use protocol::usb::{USB_MANUFACTURER, USB_PID, USB_PRODUCT, USB_VID};
 
 /// Full-speed bulk packet size.
 pub const PACKET_SIZE: u16 = 64;

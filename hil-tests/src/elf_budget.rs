@@ -1,4 +1,4 @@
-//! The firmware's size budget (issue 3): ≤ 64 KiB of flash and ≤ 16 KiB of static RAM beyond
+//! The firmware's size budget: ≤ 64 KiB of flash and ≤ 16 KiB of static RAM beyond
 //! the chip table, measured from the shipped (`firmware` profile) ELF's section headers.
 //!
 //! Flash holds `.vector_table`, `.text`, `.rodata` and the load image of `.data`; static RAM is
@@ -64,27 +64,41 @@ pub fn workspace_root() -> PathBuf {
 /// Cargo profile of the shipped firmware (`cargo firmware`): release + fat LTO + `opt-level = "z"`.
 pub const FIRMWARE_PROFILE: &str = "firmware";
 
-/// Builds the shipped firmware (the `firmware` profile, as `cargo firmware` does) in the workspace
-/// target dir; returns the ELF path or cargo's output on failure.
-pub fn build_firmware() -> Result<PathBuf, String> {
+/// Cargo feature of the TIM2-update-interrupt fallback build (`cargo firmware-fallback`).
+pub const FALLBACK_FEATURE: &str = "chip-interrupt-fallback";
+
+/// Builds the shipped firmware (the `firmware` profile, as `cargo firmware` does, with
+/// `features` on) in the workspace target dir; returns the ELF path or cargo's output on
+/// failure. Builds run one at a time: both variants write the same ELF path.
+pub fn build_firmware(features: &[&str]) -> Result<PathBuf, String> {
+    static ONE_BUILD: std::sync::Mutex<()> = std::sync::Mutex::new(());
+    let _turn = ONE_BUILD
+        .lock()
+        .unwrap_or_else(std::sync::PoisonError::into_inner);
     let root = workspace_root();
     let cargo = std::env::var_os("CARGO").unwrap_or_else(|| "cargo".into());
+    let mut args = vec![
+        "build",
+        "-p",
+        "firmware",
+        "--profile",
+        FIRMWARE_PROFILE,
+        "--target",
+        FIRMWARE_TARGET,
+    ];
+    let feature_list = features.join(",");
+    if !features.is_empty() {
+        args.extend(["--features", &feature_list]);
+    }
     let output = Command::new(cargo)
         .current_dir(&root)
-        .args([
-            "build",
-            "-p",
-            "firmware",
-            "--profile",
-            FIRMWARE_PROFILE,
-            "--target",
-            FIRMWARE_TARGET,
-        ])
+        .args(&args)
         .output()
         .map_err(|e| format!("cannot run cargo: {e}"))?;
     if !output.status.success() {
         return Err(format!(
-            "`cargo build -p firmware --profile {FIRMWARE_PROFILE} --target {FIRMWARE_TARGET}` failed ({}):\n{}",
+            "`cargo {}` failed ({}):\n{}",
+            args.join(" "),
             output.status,
             String::from_utf8_lossy(&output.stderr)
         ));

@@ -1,6 +1,6 @@
 //! End to end: a virtual luminaire configured over the wire (4 LEDs, 960 Hz) lights a
 //! simulated sphere capture through its recorded timeline; the capture is decoded and
-//! reconstructed, and the depth must meet the reconstruction issue's target under its
+//! reconstructed, and the depth must meet the product's accuracy target under the thesis'
 //! conditions (128 frames, σ = 1 %, background at 0 dB SNR, exposure 0.8, gamma 2.2): depth
 //! RMSE ≤ 0.5 mm over ≥ 95 % of the surface lit by ≥ 3 LEDs. The grid is coarser than the
 //! thesis' camera (0.5 mm pixels, 192×128) to keep the test fast.
@@ -8,21 +8,19 @@
 use std::sync::Arc;
 
 use hil_tests::client;
-use meb::demo::{
-    decoded_reconstruct_config, expose_without_clipping, level_noise, usable_led_images,
-};
 use meb::demod::{DecodeConfig, Linearize, decode};
 use meb::device::{EmulatorOptions, TimelineWaveform, VirtualLuminaire};
 use meb::metrics::depth::compare_depth;
-use meb::reconstruct::reconstruct;
+use meb::reconstruct::{ReconstructConfig, from_decoded};
 use meb::rig::Rig;
+use meb::simulate::exposure::expose_without_clipping;
 use meb::simulate::{
     NoiseModel, Scene, SceneObject, Shape, SimConfig, SimulatedCapture, ToneCurve,
 };
 use ndarray::Array2;
 use protocol::config::{ChipRate, LuminaireConfig};
 
-/// Depth RMSE target of the reconstruction issue, mm.
+/// Depth RMSE target on the thesis' sphere capture, mm.
 const DEPTH_RMSE_TARGET_MM: f64 = 0.5;
 /// Fraction of the surface lit by ≥ 3 LEDs that must be reconstructed.
 const COVERAGE_TARGET: f64 = 0.95;
@@ -82,19 +80,13 @@ fn configured_luminaire_to_depth_map_meets_the_target() {
     };
     let decoded = decode(&mut capture, &decode_config, &mut |_, _| {}).unwrap();
 
-    // 4. Near-field photometric stereo ↔ integration (the `meb reconstruct` stage).
+    // 4. Near-field photometric stereo ↔ integration: the path `meb reconstruct` takes.
     assert!(
         !decoded.saturated.iter().any(|&s| s),
         "the capture must not clip"
     );
-    let reconstruction = reconstruct(
-        &usable_led_images(&decoded),
-        &rig,
-        None,
-        Some(&level_noise(&decoded)),
-        &decoded_reconstruct_config(),
-    )
-    .unwrap();
+    let reconstruction =
+        from_decoded(&decoded, &rig, None, &ReconstructConfig::decoded_capture()).unwrap();
     let errors = compare_depth(
         &reconstruction.integration.depth.depth_mm,
         &truth.depth_mm,

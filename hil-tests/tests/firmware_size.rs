@@ -1,19 +1,21 @@
-//! The shipped firmware (`cargo firmware`) builds for the board and fits its size budget.
+//! The shipped firmware (`cargo firmware`) and its TIM2-interrupt fallback build
+//! (`cargo firmware-fallback`) build for the board and fit the size budget.
 
 use hil_tests::elf_budget::{
-    CHIP_TABLE_ALLOWANCE, FLASH_BUDGET, Footprint, RAM_BUDGET, build_firmware,
+    CHIP_TABLE_ALLOWANCE, FALLBACK_FEATURE, FLASH_BUDGET, Footprint, RAM_BUDGET, build_firmware,
 };
 
-#[test]
-fn shipped_firmware_build_fits_flash_and_ram_budget() {
-    let elf = match build_firmware() {
+/// Builds with `features`, measures the ELF and checks the budget. Both variants write the same
+/// ELF path, so they run one after the other in one test.
+fn check(features: &[&str]) {
+    let elf = match build_firmware(features) {
         Ok(path) => path,
         Err(log) => panic!("the firmware does not build:\n{log}"),
     };
     let bytes = std::fs::read(&elf).unwrap_or_else(|e| panic!("{}: {e}", elf.display()));
     let footprint = Footprint::of_elf(&bytes).unwrap_or_else(|e| panic!("{e}"));
     eprintln!(
-        "firmware footprint: flash {} / {FLASH_BUDGET} B, static RAM {} / {} B (incl. {CHIP_TABLE_ALLOWANCE} B chip tables)",
+        "firmware {features:?} footprint: flash {} / {FLASH_BUDGET} B, static RAM {} / {} B (incl. {CHIP_TABLE_ALLOWANCE} B chip tables)",
         footprint.flash,
         footprint.ram,
         RAM_BUDGET + CHIP_TABLE_ALLOWANCE
@@ -24,4 +26,10 @@ fn shipped_firmware_build_fits_flash_and_ram_budget() {
         elf.display()
     );
     assert!(footprint.fits(), "over budget: {footprint:?}");
+}
+
+#[test]
+fn shipped_firmware_builds_fit_flash_and_ram_budget_with_and_without_the_fallback() {
+    check(&[]);
+    check(&[FALLBACK_FEATURE]);
 }

@@ -1,14 +1,16 @@
 //! Protocol tests against the virtual luminaire on a pseudo-terminal, driven by the real client.
 
+use std::time::{Duration, Instant};
+
 use hil_tests::{
-    check_disconnect_recovery, check_garbage_recovery, check_invalid_configs_rejected, client,
-    configure_and_save, sample_config,
+    check_disconnect_recovery, check_garbage_recovery, check_invalid_configs_rejected,
+    check_no_output_fault, client, configure_and_save, sample_config,
 };
 use meb::device::client::DeviceError;
 use meb::device::{EmulatorOptions, VirtualLuminaire};
 use protocol::config::LuminaireConfig;
 use protocol::luminaire::RestoredConfig;
-use protocol::wire::ConfigSource;
+use protocol::wire::{ConfigSource, OutputFault};
 
 fn emulator_with_storage(dir: &tempfile::TempDir) -> (VirtualLuminaire, EmulatorOptions) {
     let options = EmulatorOptions {
@@ -109,4 +111,34 @@ fn missing_port_is_a_clear_no_device_error() {
         }
         other => panic!("{other:?}"),
     }
+}
+
+#[test]
+fn output_fault_is_reported_and_cleared_by_start() {
+    let emulator = VirtualLuminaire::spawn(EmulatorOptions::default()).unwrap();
+    check_no_output_fault(emulator.port_path());
+    emulator.inject_output_fault(OutputFault::DmaStopTimeout);
+    let mut c = client(emulator.port_path());
+    let deadline = Instant::now() + Duration::from_secs(5);
+    while c.status().unwrap().output_fault.is_none() && Instant::now() < deadline {
+        std::thread::sleep(Duration::from_millis(20));
+    }
+    let status = c.status().unwrap();
+    assert_eq!(status.output_fault, Some(OutputFault::DmaStopTimeout));
+    assert!(!status.running);
+    c.start().unwrap();
+    drop(c);
+    check_no_output_fault(emulator.port_path());
+}
+
+#[test]
+fn a_save_during_a_two_second_flash_stall_completes() {
+    let dir = tempfile::tempdir().unwrap();
+    let options = EmulatorOptions {
+        storage: Some(dir.path().join("flash.rec")),
+        save_stall: Duration::from_secs(2),
+        ..EmulatorOptions::default()
+    };
+    let emulator = VirtualLuminaire::spawn(options).unwrap();
+    configure_and_save(emulator.port_path(), &sample_config());
 }

@@ -1,24 +1,22 @@
-//! The end-to-end demonstration (issue 5, SPEC §8): simulate a thesis scene, decode it with
-//! the MEB-FDMA demodulator, reconstruct with near-field photometric stereo and masked least
-//! squares, and compare with the simulator's ground truth over the surface lit by ≥ 3 LEDs.
+//! The end-to-end demonstration (SPEC §8): simulate a thesis scene, decode it with the
+//! MEB-FDMA demodulator, reconstruct it through the decoded-capture path every other caller
+//! uses ([`crate::reconstruct::from_decoded`]), and compare with the simulator's ground truth
+//! over the surface lit by ≥ 3 LEDs.
 //!
-//! Like a real capture, the simulated one is exposed so that nothing clips: the simulator's
-//! default gain lets background + all LEDs exceed full scale (at 0 dB background SNR the
-//! thesis sphere saturated 1 777 of its pixels, which biased the decoded LED gains by 2–9 %
-//! and the depth by 1.3 mm RMSE), so [`expose_without_clipping`] lowers the gain until the
-//! brightest possible frame stays below [`HEADROOM_CODE`] of full scale after the tone curve,
-//! and pixels the decoder still flags as saturated or under-exposed are left out.
+//! The capture is exposed like a real one, so that nothing clips
+//! ([`crate::simulate::exposure::expose_without_clipping`]).
 
 use crate::capture::FrameSource;
 use crate::demod::{DecodeConfig, Decoded, DemodError, Linearize, decode};
 use crate::metrics::{AngularErrors, DepthErrors, MetricsError, compare_depth, compare_normals};
-use crate::reconstruct::{
-    ReconstructConfig, ReconstructError, Reconstruction, StageTiming, reconstruct,
-};
+use crate::reconstruct::{ReconstructConfig, ReconstructError, Reconstruction, from_decoded};
 use crate::rig::Rig;
-use crate::simulate::{GroundTruth, NoiseModel, Scene, SimConfig, SimulatedCapture, ToneCurve};
-use crate::types::LedImages;
-use ndarray::{Array2, Zip};
+use crate::simulate::exposure::expose_without_clipping;
+use crate::simulate::{
+    GroundTruth, NoiseModel, Scene, SimConfig, SimulateError, SimulatedCapture, ToneCurve,
+};
+use crate::timing::StageTiming;
+use ndarray::Array2;
 use std::time::Instant;
 use thiserror::Error;
 
@@ -27,8 +25,8 @@ use thiserror::Error;
 #[non_exhaustive]
 pub enum DemoError {
     /// The simulator rejected the settings.
-    #[error("simulation: {0}")]
-    Simulate(String),
+    #[error("simulation")]
+    Simulate(#[from] SimulateError),
     /// Decoding failed.
     #[error(transparent)]
     Decode(#[from] DemodError),
@@ -66,95 +64,6 @@ pub fn thesis_decode_config(leds: usize) -> DecodeConfig {
     }
 }
 
-/// Code value (fraction of full scale, after the tone curve) the brightest frame may reach.
-pub const HEADROOM_CODE: f64 = 0.9;
-
-/// Inverse of a tone curve (monotone on [0, 1]) by bisection.
-fn tone_inverse(tone: ToneCurve, code: f64) -> f64 {
-    let (mut lo, mut hi) = (0.0f64, 1.0f64);
-    for _ in 0..50 {
-        let mid = 0.5 * (lo + hi);
-        if tone.encode(mid) < code {
-            lo = mid;
-        } else {
-            hi = mid;
-        }
-    }
-    0.5 * (lo + hi)
-}
-
-/// Returns `sim` with the gain lowered (never raised) so that the brightest possible frame —
-/// background plus every LED fully on, plus 3 σ read noise — stays below [`HEADROOM_CODE`]
-/// after the tone curve at time 0, as an auto-exposed camera would capture it.
-pub fn expose_without_clipping(
-    rig: &Rig,
-    scene: &Scene,
-    sim: SimConfig,
-) -> Result<SimConfig, DemoError> {
-    let capture = SimulatedCapture::new(rig.clone(), scene.clone(), sim.clone())
-        .map_err(|e| DemoError::Simulate(e.to_string()))?;
-    let truth = capture.truth_at(0.0);
-    let info = capture.info();
-    let mut brightest = 0.0f64;
-    for ((r, c), &inside) in truth.mask.indexed_iter() {
-        let mut v: f64 = truth
-            .led_true
-            .images
-            .iter()
-            .map(|im| f64::from(im[[r, c]]))
-            .sum();
-        if inside {
-            let (albedo, nz) = (truth.albedo[[r, c]], truth.normals[[r, c, 2]]);
-            v += info.background_irradiance * f64::from(albedo) * (1.0 + f64::from(nz)) / 2.0;
-        }
-        if v.is_finite() {
-            brightest = brightest.max(v);
-        }
-    }
-    let allowed = tone_inverse(sim.tone, HEADROOM_CODE) - 3.0 * sim.noise.sigma;
-    if brightest <= allowed || allowed <= 0.0 {
-        return Ok(sim);
-    }
-    Ok(SimConfig {
-        gain: Some(info.gain * allowed / brightest),
-        ..sim
-    })
-}
-
-/// The decoded LED images with the pixels the decoder flagged as saturated or under-exposed
-/// set to NaN, so photometric stereo leaves them out.
-pub fn usable_led_images(decoded: &Decoded) -> LedImages {
-    let mut images = decoded.leds.clone();
-    for image in &mut images.images {
-        Zip::from(image)
-            .and(&decoded.saturated)
-            .and(&decoded.underexposed)
-            .for_each(|v, &sat, &under| {
-                if sat || under {
-                    *v = f32::NAN;
-                }
-            });
-    }
-    images
-}
-
-/// Per-pixel noise σ of the decoded on-levels A_i: the decoder reports σ of one frame sample,
-/// and an on-level averages about frames/2 samples, so σ_A = σ · √(2/frames).
-pub fn level_noise(decoded: &Decoded) -> Array2<f32> {
-    let frames = decoded.report.frames_used.max(2) as f32;
-    decoded.noise.mapv(|s| s * (2.0 / frames).sqrt())
-}
-
-/// Reconstruction settings for decoded captures: an LED below 7 % of the pixel's brightest
-/// counts as shadowed. Near the terminator such grazing values sit at the noise floor and
-/// tilted the whole least-squares surface (sphere e2e, seed 7: 0.58 mm at the default 2 %,
-/// 0.18 mm at 7 % with 96.8 % of the ≥ 3-lit surface kept).
-pub fn decoded_reconstruct_config() -> ReconstructConfig {
-    let mut config = ReconstructConfig::default();
-    config.photometric.shadow_fraction = 0.07;
-    config
-}
-
 /// Everything one demonstration run produced.
 #[derive(Debug)]
 pub struct DemoRun {
@@ -174,8 +83,8 @@ pub struct DemoRun {
     pub timings: Vec<StageTiming>,
 }
 
-/// Simulates `scene` under `rig` (exposed by [`expose_without_clipping`]), decodes, reconstructs and compares; `progress(done, total)`
-/// reports decoded frames.
+/// Simulates `scene` under `rig` (exposed by [`expose_without_clipping`]), decodes,
+/// reconstructs with `config` and compares; `progress(done, total)` reports decoded frames.
 pub fn run(
     rig: &Rig,
     scene: Scene,
@@ -186,28 +95,17 @@ pub fn run(
 ) -> Result<DemoRun, DemoError> {
     let start = Instant::now();
     let sim = expose_without_clipping(rig, &scene, sim)?;
-    let mut capture = SimulatedCapture::new(rig.clone(), scene, sim)
-        .map_err(|e| DemoError::Simulate(e.to_string()))?;
+    let mut capture = SimulatedCapture::new(rig.clone(), scene, sim)?;
     let truth = capture.truth_at(0.0);
-    let mut timings = vec![StageTiming {
-        stage: "simulation set-up + ground truth".into(),
-        ms: start.elapsed().as_secs_f64() * 1e3,
-    }];
+    let mut timings = vec![StageTiming::since(
+        "simulation set-up + ground truth",
+        start,
+    )];
     let start = Instant::now();
     let source: &mut dyn FrameSource = &mut capture;
     let decoded = decode(source, decode_config, progress)?;
-    timings.push(StageTiming {
-        stage: "render frames + decode".into(),
-        ms: start.elapsed().as_secs_f64() * 1e3,
-    });
-    let level_noise = level_noise(&decoded);
-    let reconstruction = reconstruct(
-        &usable_led_images(&decoded),
-        rig,
-        None,
-        Some(&level_noise),
-        config,
-    )?;
+    timings.push(StageTiming::since("render frames + decode", start));
+    let reconstruction = from_decoded(&decoded, rig, None, config)?;
     timings.extend(reconstruction.timings.iter().cloned());
     let lit_by_three = Array2::from_shape_fn(truth.mask.dim(), |p| {
         truth.mask[p]

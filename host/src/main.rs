@@ -31,6 +31,8 @@ enum Command {
     Simulate(Box<cli::simulate::SimulateArgs>),
     /// Reconstruct normals, depth and a mesh from a capture or a `meb decode` folder.
     Reconstruct(Box<cli::reconstruct::ReconstructArgs>),
+    /// Time of flight: range maps from SPAD histograms, ToF → camera calibration, object masks.
+    Tof(cli::tof::TofArgs),
 }
 
 fn main() -> ExitCode {
@@ -44,12 +46,33 @@ fn main() -> ExitCode {
         Command::Device(args) => cli::device::run(&args),
         Command::Simulate(args) => cli::simulate::run(&args),
         Command::Reconstruct(args) => cli::reconstruct::run(&args),
+        Command::Tof(args) => cli::tof::run(&args),
     };
     match result {
         Ok(()) => ExitCode::SUCCESS,
         Err(err) => {
-            eprintln!("error: {err:#}");
+            eprintln!("error: {}", error_chain(&err));
             ExitCode::FAILURE
         }
     }
+}
+
+/// The error and its causes on one line, "outer: inner: …", leaving out a cause whose text
+/// the message before it already contains (libraries that print their source in their own
+/// message would otherwise show it twice, as in "entity not found: entity not found").
+fn error_chain(err: &anyhow::Error) -> String {
+    let mut line = String::new();
+    let mut previous = String::new();
+    for cause in err.chain() {
+        let text = cause.to_string();
+        if text.is_empty() || previous.contains(&text) {
+            continue;
+        }
+        if !line.is_empty() {
+            line.push_str(": ");
+        }
+        line.push_str(&text);
+        previous = text;
+    }
+    line
 }

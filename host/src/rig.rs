@@ -29,7 +29,7 @@ pub const PRESETS: [&str; 4] = [
 #[non_exhaustive]
 pub enum RigError {
     /// The rig file could not be read.
-    #[error("cannot read rig file {path}: {source}")]
+    #[error("cannot read rig file {path}")]
     Io {
         /// The file.
         path: std::path::PathBuf,

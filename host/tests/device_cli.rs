@@ -1,8 +1,15 @@
-//! `meb device`: a session against `meb device emulate` run as a separate process.
+//! `meb device`: a session against `meb device emulate` run as a separate process, and
+//! `meb device` commands against an in-process virtual luminaire.
+#![cfg(unix)]
 
-use std::io::{BufRead, BufReader};
+use std::io::{BufRead, BufReader, Read};
 use std::path::Path;
 use std::process::{Child, Command, Output, Stdio};
+use std::sync::mpsc;
+use std::time::Duration;
+
+use meb::device::{EmulatorOptions, VirtualLuminaire};
+use protocol::wire::OutputFault;
 
 use nix::sys::signal::{Signal, kill};
 use nix::unistd::Pid;
@@ -156,4 +163,124 @@ fn missing_port_fails_with_one_clear_line() {
     assert!(!output.status.success());
     let message = String::from_utf8_lossy(&output.stderr);
     assert!(message.contains("no device at /dev/meb-none"), "{message}");
+    assert_eq!(message.matches("/dev/meb-none").count(), 1, "{message}");
+}
+
+#[test]
+fn a_rate_beyond_the_limit_is_refused_naming_the_value_and_the_limit() {
+    let dir = tempfile::tempdir().unwrap();
+    let emulator = Emulator::start(dir.path());
+    for rate in ["1e9", "4000.001", "0.5", "NaN"] {
+        let output = emulator.meb(&["set", "--leds", "4", "--rate", rate]);
+        assert!(!output.status.success(), "--rate {rate} accepted");
+        let message = String::from_utf8_lossy(&output.stderr);
+        assert!(message.contains("1.000..=4000.000 Hz"), "{message}");
+        assert!(!message.contains("4294967295"), "{message}");
+    }
+    let message = String::from_utf8_lossy(
+        &emulator
+            .meb(&["set", "--leds", "4", "--rate", "1e9"])
+            .stderr,
+    )
+    .into_owned();
+    assert!(message.contains("--rate 1000000000 Hz"), "{message}");
+    // The edges are accepted.
+    stdout_of(&emulator.meb(&["set", "--leds", "4", "--rate", "4000"]));
+    stdout_of(&emulator.meb(&["set", "--leds", "4", "--rate", "1"]));
+    emulator.stop();
+}
+
+#[test]
+fn ping_count_zero_is_refused() {
+    let output = Command::new(MEB)
+        .args(["device", "--port", "/dev/meb-none", "ping", "--count", "0"])
+        .output()
+        .unwrap();
+    assert!(!output.status.success());
+    let message = String::from_utf8_lossy(&output.stderr);
+    assert!(
+        message.contains("--count") && message.contains('0'),
+        "{message}"
+    );
+    assert!(
+        !message.contains("no device"),
+        "refused before connecting: {message}"
+    );
+}
+
+#[test]
+fn ping_prints_each_round_trip_as_it_arrives_and_keeps_them_when_the_link_breaks() {
+    let dir = tempfile::tempdir().unwrap();
+    let emulator = Emulator::start(dir.path());
+    let mut ping = Command::new(MEB)
+        .args([
+            "device",
+            "--port",
+            &emulator.port,
+            "--timeout-ms",
+            "200",
+            "--attempts",
+            "1",
+        ])
+        .args(["ping", "--count", "1000000"])
+        .stdout(Stdio::piped())
+        .stderr(Stdio::piped())
+        .spawn()
+        .unwrap();
+    let mut stdout = BufReader::new(ping.stdout.take().unwrap());
+    let (lines, received) = mpsc::channel();
+    std::thread::spawn(move || {
+        let mut line = String::new();
+        while stdout.read_line(&mut line).is_ok_and(|n| n > 0) {
+            let _ = lines.send(std::mem::take(&mut line));
+        }
+    });
+    // The first round trip shows up while the pinging goes on.
+    let first = received
+        .recv_timeout(Duration::from_secs(20))
+        .expect("no round trip printed while pinging");
+    assert!(first.starts_with("pong in "), "{first}");
+    drop(emulator); // the luminaire goes away mid-run
+    let status = ping.wait().unwrap();
+    assert!(!status.success(), "a broken link is a failure");
+    let mut stderr = String::new();
+    ping.stderr
+        .take()
+        .unwrap()
+        .read_to_string(&mut stderr)
+        .unwrap();
+    assert!(stderr.contains("of 1000000 failed"), "{stderr}");
+    let kept: Vec<String> = received.try_iter().collect();
+    assert!(kept.iter().all(|l| l.starts_with("pong in ")), "{kept:?}");
+}
+
+#[test]
+fn status_reports_an_output_fault() {
+    let emulator = VirtualLuminaire::spawn(EmulatorOptions::default()).unwrap();
+    let port = emulator.port_path().to_string_lossy().into_owned();
+    let status = |json: bool| {
+        let mut args = vec!["device", "--port", &port, "status"];
+        if json {
+            args.push("--json");
+        }
+        stdout_of(&Command::new(MEB).args(&args).output().unwrap())
+    };
+    assert!(status(false).contains("output fault      none"));
+    emulator.inject_output_fault(OutputFault::DmaTransferError);
+    let mut text = String::new();
+    for _ in 0..100 {
+        text = status(false);
+        if !text.contains("output fault      none") {
+            break;
+        }
+        std::thread::sleep(Duration::from_millis(20));
+    }
+    assert!(
+        text.contains("output fault      DMA transfer error"),
+        "{text}"
+    );
+    assert!(text.contains("running           no"), "{text}");
+    let json: serde_json::Value = serde_json::from_str(&status(true)).unwrap();
+    assert_eq!(json["output_fault"], "DmaTransferError");
+    assert_eq!(json["running"], false);
 }

@@ -137,8 +137,7 @@ impl ChipTable {
     /// CRC-32 (ISO-HDLC) of the LED count followed by the on-masks: a fingerprint of the
     /// table a luminaire is playing, reported by `GetInfo`.
     pub fn fingerprint(&self) -> u32 {
-        let crc = crc::Crc::<u32>::new(&crc::CRC_32_ISO_HDLC);
-        let mut digest = crc.digest();
+        let mut digest = crate::framing::CRC32.digest();
         digest.update(&[self.led_count]);
         digest.update(self.masks());
         digest.finalize()

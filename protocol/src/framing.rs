@@ -1,8 +1,8 @@
-//! Framing: `COBS(postcard(Header) ‖ postcard(body) ‖ crc32_le(…)) 0x00` (issue 2 item 3).
+//! Framing: `COBS(postcard(Header) ‖ postcard(body) ‖ crc32_le(…)) 0x00`.
 //!
-//! Encoding uses postcard's own flavors (`CrcModifier` over `Cobs` over `Slice`); decoding
-//! undoes COBS in place (the `cobs` crate postcard depends on), checks the CRC-32 (ISO-HDLC,
-//! the `crc` crate), then reads the header and the body with postcard. A frame on the wire is
+//! Encoding serializes with postcard, appends the CRC-32 (ISO-HDLC, the `crc` crate) and COBS-
+//! encodes (the `cobs` crate postcard itself uses); decoding undoes COBS in place, checks the
+//! CRC, then reads the header and the body with postcard. A frame on the wire is
 //! at most [`MAX_FRAME_LEN`] bytes including its 0x00 terminator.
 //!
 //! [`FrameReader`] splits a byte stream at 0x00 delimiters. Resynchronisation rules:
@@ -15,7 +15,6 @@
 //! * A candidate longer than the capacity is reported once as [`FrameEvent::TooLong`] and the
 //!   rest is discarded up to the next 0x00; the frame after that is read intact.
 
-use postcard::ser_flavors::{Cobs, Slice, crc::CrcModifier};
 use serde::{Deserialize, Serialize};
 
 use crate::wire::{Header, PROTOCOL_VERSION, Request, Response};
@@ -29,8 +28,10 @@ pub const MAX_COBS_LEN: usize = MAX_FRAME_LEN - 1;
 /// Length of the CRC-32 trailer inside a decoded frame.
 pub const CRC_LEN: usize = 4;
 
-/// The frame and record CRC: CRC-32/ISO-HDLC.
-pub static CRC32: crc::Crc<u32> = crc::Crc::<u32>::new(&crc::CRC_32_ISO_HDLC);
+/// The frame and record CRC: CRC-32/ISO-HDLC, computed bit by bit (frames are at most
+/// 256 bytes; a lookup table would cost the firmware 1 KiB of flash).
+pub static CRC32: crc::Crc<u32, crc::NoTable> =
+    crc::Crc::<u32, crc::NoTable>::new(&crc::CRC_32_ISO_HDLC);
 
 /// A [`FrameReader`] sized for this protocol's frames.
 pub type WireFrameReader = FrameReader<MAX_COBS_LEN>;
@@ -119,21 +120,30 @@ impl std::error::Error for EncodeError {}
 #[cfg(feature = "std")]
 impl std::error::Error for FrameError {}
 
-/// Encodes `(header, body)` as one complete frame (terminator included) into `buf`.
+/// Encodes `(header, body)` as one complete frame (terminator included) into `buf`:
+/// postcard into a scratch payload, the CRC-32 appended, COBS-encoded into `buf`, 0x00.
 fn encode<'a, T: Serialize>(
     header: Header,
     body: &T,
     buf: &'a mut [u8],
 ) -> Result<&'a [u8], EncodeError> {
     let limit = buf.len().min(MAX_FRAME_LEN);
-    let slice = Slice::new(&mut buf[..limit]);
-    let cobs = Cobs::try_new(slice).map_err(|_| EncodeError::BufferFull)?;
-    let flavor = CrcModifier::new(cobs, CRC32.digest());
-    match postcard::serialize_with_flavor::<_, _, &mut [u8]>(&(header, body), flavor) {
-        Ok(frame) => Ok(frame),
-        Err(postcard::Error::SerializeBufferFull) => Err(EncodeError::BufferFull),
-        Err(_) => Err(EncodeError::Serialize),
+    let mut payload = [0u8; MAX_FRAME_LEN];
+    let used = match postcard::to_slice(&(header, body), &mut payload[..MAX_FRAME_LEN - CRC_LEN]) {
+        Ok(serialized) => serialized.len(),
+        Err(postcard::Error::SerializeBufferFull) => return Err(EncodeError::BufferFull),
+        Err(_) => return Err(EncodeError::Serialize),
+    };
+    let crc = CRC32.checksum(&payload[..used]);
+    payload[used..used + CRC_LEN].copy_from_slice(&crc.to_le_bytes());
+    let out = &mut buf[..limit];
+    let encoded =
+        cobs::try_encode(&payload[..used + CRC_LEN], out).map_err(|_| EncodeError::BufferFull)?;
+    match out.get_mut(encoded) {
+        Some(terminator) => *terminator = 0,
+        None => return Err(EncodeError::BufferFull),
     }
+    Ok(&out[..=encoded])
 }
 
 /// Encodes a request frame with sequence number `seq`; returns the bytes to send.
@@ -280,7 +290,9 @@ impl<const N: usize> FrameReader<N> {
 mod tests {
     use super::*;
     use crate::config::{ChipRate, ConfigError, LuminaireConfig};
-    use crate::wire::{CommandError, ConfigSource, DeviceInfo, ProtocolError, SaveState, Status};
+    use crate::wire::{
+        CommandError, ConfigSource, DeviceInfo, OutputFault, ProtocolError, SaveState, Status,
+    };
 
     fn frame(seq: u32, request: &Request) -> ([u8; MAX_FRAME_LEN], usize) {
         let mut buf = [0u8; MAX_FRAME_LEN];
@@ -329,6 +341,7 @@ mod tests {
         };
         let status = Status {
             running: true,
+            output_fault: Some(OutputFault::DmaStopTimeout),
             config_source: ConfigSource::CorruptRecordDefaults,
             unsaved_changes: true,
             save: SaveState::Failed,
@@ -397,26 +410,30 @@ mod tests {
 
     #[test]
     fn version_and_body_errors_carry_the_seq() {
-        // Version 2, seq 5, Ping(1).
-        let mut raw = raw_frame(&[2, 5, 0, 1]);
+        // The next version, seq 5, Ping(1).
+        let next = (PROTOCOL_VERSION + 1) as u8;
+        let mut raw = raw_frame(&[next, 5, 0, 1]);
         assert_eq!(
             decode_request(&mut raw),
-            Err(FrameError::UnsupportedVersion { version: 2, seq: 5 })
+            Err(FrameError::UnsupportedVersion {
+                version: u16::from(next),
+                seq: 5
+            })
         );
-        // Version 1, seq 5, unknown command 99.
-        let mut raw = raw_frame(&[1, 5, 99]);
+        // This version, seq 5, unknown command 99.
+        let mut raw = raw_frame(&[PROTOCOL_VERSION as u8, 5, 99]);
         assert_eq!(
             decode_request(&mut raw),
             Err(FrameError::Malformed { seq: Some(5) })
         );
         // Trailing byte after a complete Ping.
-        let mut raw = raw_frame(&[1, 5, 0, 1, 0]);
+        let mut raw = raw_frame(&[PROTOCOL_VERSION as u8, 5, 0, 1, 0]);
         assert_eq!(
             decode_request(&mut raw),
             Err(FrameError::Malformed { seq: Some(5) })
         );
         // Header truncated.
-        let mut raw = raw_frame(&[1]);
+        let mut raw = raw_frame(&[PROTOCOL_VERSION as u8]);
         assert_eq!(
             decode_request(&mut raw),
             Err(FrameError::Malformed { seq: None })

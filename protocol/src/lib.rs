@@ -7,10 +7,13 @@
 //! * [`record`]: the persisted configuration record (flash and emulator file).
 //! * [`luminaire`]: the hardware-free state machine and [`luminaire::Endpoint`] that both the
 //!   firmware and `meb device emulate` run.
+//! * [`timing`]: the chip timer and brightness PWM arithmetic.
+//! * [`usb`]: the USB identity the firmware enumerates with and the host looks for.
 //!
 //! `no_std` and allocation-free; the `std` feature adds `std::error::Error` impls for the host,
 //! the `defmt` feature adds `defmt::Format` derives for the firmware's logs.
 #![cfg_attr(not(any(feature = "std", test)), no_std)]
+#![forbid(unsafe_code)]
 #![deny(missing_docs)]
 
 pub mod carriers;
@@ -19,4 +22,5 @@ pub mod framing;
 pub mod luminaire;
 pub mod record;
 pub mod timing;
+pub mod usb;
 pub mod wire;

@@ -1,4 +1,4 @@
-//! The hardware-free luminaire state machine (issue 2 item 4) and the byte-level
+//! The hardware-free luminaire state machine and the byte-level
 //! [`Endpoint`] around it.
 //!
 //! [`Luminaire::handle`] maps a request to a response plus [`Effects`] the hardware layer must
@@ -7,8 +7,11 @@
 //! and the host's virtual luminaire (`meb device emulate`) both run exactly this code through
 //! [`Endpoint`], so the emulator answers byte for byte like the hardware.
 //!
-//! A request carrying the same sequence number and body as the previous one is a retry: the
-//! cached response is returned and no effects are repeated.
+//! A state-changing request carrying the same sequence number and body as the previous one is
+//! a retry: the cached response is returned and no effects are repeated. Read-only requests
+//! (`Ping`, `GetInfo`, `GetConfig`, `GetStatus`) have no effects to repeat and are always
+//! answered afresh, so a new session that happens to reuse a sequence number never reads a stale
+//! status.
 
 use heapless::{String, Vec};
 
@@ -19,8 +22,8 @@ use crate::framing::{
 };
 use crate::record::RecordError;
 use crate::wire::{
-    CommandError, ConfigSource, DeviceInfo, MAX_IDENTIFY_SECONDS, PROTOCOL_VERSION, ProtocolError,
-    Request, Response, SEQ_UNKNOWN, SaveOutcome, SaveState, Status,
+    CommandError, ConfigSource, DeviceInfo, MAX_IDENTIFY_SECONDS, OutputFault, PROTOCOL_VERSION,
+    ProtocolError, Request, Response, SEQ_UNKNOWN, SaveOutcome, SaveState, Status,
 };
 
 /// What the hardware must play: everything of a config except the running flag.
@@ -161,6 +164,7 @@ pub struct Luminaire {
     save: SaveState,
     saving: Option<LuminaireConfig>,
     identify_active: bool,
+    fault: Option<OutputFault>,
     counters: LinkCounters,
     last: Option<(u32, Request, Response)>,
 }
@@ -187,6 +191,7 @@ impl Luminaire {
             save: SaveState::Idle,
             saving: None,
             identify_active: false,
+            fault: None,
             counters: LinkCounters::default(),
             last: None,
         }
@@ -233,7 +238,8 @@ impl Luminaire {
     /// The `GetStatus` answer.
     pub fn status(&self) -> Status {
         Status {
-            running: self.config.running,
+            running: self.config.running && self.fault.is_none(),
+            output_fault: self.fault,
             config_source: self.source,
             unsaved_changes: self.stored != Some(self.config),
             save: self.save,
@@ -249,6 +255,16 @@ impl Luminaire {
     /// Handles one decoded request with sequence number `seq`.
     pub fn handle(&mut self, seq: u32, request: &Request) -> (Response, Effects) {
         self.counters.frames_ok = self.counters.frames_ok.wrapping_add(1);
+        let read_only = matches!(
+            request,
+            Request::Ping(_)
+                | Request::GetInfo(())
+                | Request::GetConfig(())
+                | Request::GetStatus(())
+        );
+        if read_only {
+            return self.execute(request);
+        }
         if let Some((last_seq, last_request, last_response)) = &self.last
             && *last_seq == seq
             && last_request == request
@@ -269,6 +285,7 @@ impl Luminaire {
             Request::SetConfig(new) => Response::SetConfig(match new.validate() {
                 Ok(()) => {
                     self.config = *new;
+                    self.fault = None;
                     push(&mut effects, Effect::ApplyOutput(OutputPlan::of(new)));
                     push(&mut effects, self.run_effect());
                     Ok(())
@@ -288,6 +305,7 @@ impl Luminaire {
             }),
             Request::Start(()) => {
                 self.config.running = true;
+                self.fault = None;
                 push(&mut effects, Effect::Start);
                 Response::Start(Ok(()))
             }
@@ -328,6 +346,12 @@ impl Luminaire {
             }
             Err(_) => self.save = SaveState::Failed,
         }
+    }
+
+    /// Reports that the hardware stopped the carriers on its own (see [`OutputFault`]); the
+    /// configuration is kept, `GetStatus` shows the fault until the next `Start` or `SetConfig`.
+    pub fn notify_output_fault(&mut self, fault: OutputFault) {
+        self.fault = Some(fault);
     }
 
     /// Reports that an identify blink ended.
@@ -576,6 +600,27 @@ mod tests {
     }
 
     #[test]
+    fn read_only_requests_are_answered_afresh_even_with_a_repeated_sequence_number() {
+        let mut lum = Luminaire::new(board(), RestoredConfig::Missing);
+        let (first, _) = lum.handle(1, &Request::GetStatus(()));
+        lum.notify_output_fault(OutputFault::DmaTransferError);
+        // Another session starting at sequence number 1 again.
+        let (second, _) = lum.handle(1, &Request::GetStatus(()));
+        assert_ne!(first, second, "a stale status from the retry cache");
+        let Response::GetStatus(status) = second else {
+            panic!("not a status");
+        };
+        assert_eq!(status.output_fault, Some(OutputFault::DmaTransferError));
+        // A state-changing retry is still answered from the cache, effects not repeated,
+        // even with read-only requests in between.
+        let (_, effects) = lum.handle(7, &Request::Stop(()));
+        assert_eq!(effects.as_slice(), [Effect::Stop]);
+        lum.handle(8, &Request::GetConfig(()));
+        let (_, effects) = lum.handle(7, &Request::Stop(()));
+        assert!(effects.is_empty());
+    }
+
+    #[test]
     fn save_flow() {
         let mut lum = Luminaire::new(board(), RestoredConfig::Missing);
         let (response, effects) = lum.handle(1, &Request::SaveConfig(()));
@@ -606,6 +651,35 @@ mod tests {
         lum.notify_saved(Err(CommandError::StorageFailed));
         assert_eq!(lum.status().save, SaveState::Failed);
         assert!(lum.status().unsaved_changes);
+    }
+
+    #[test]
+    fn output_fault_is_reported_until_start_or_set_config() {
+        let mut lum = Luminaire::new(board(), RestoredConfig::Missing);
+        let before = lum.status();
+        assert_eq!(before.output_fault, None);
+        assert!(before.running);
+        lum.notify_output_fault(OutputFault::DmaTransferError);
+        let status = lum.status();
+        assert!(!status.running, "a faulted luminaire does not play");
+        assert_eq!(status.output_fault, Some(OutputFault::DmaTransferError));
+        assert_eq!(
+            status.unsaved_changes, before.unsaved_changes,
+            "a fault is not a configuration change"
+        );
+        assert!(lum.config().running, "the configuration still asks to play");
+        lum.handle(1, &Request::Stop(()));
+        assert_eq!(
+            lum.status().output_fault,
+            Some(OutputFault::DmaTransferError)
+        );
+        let (_, effects) = lum.handle(2, &Request::Start(()));
+        assert_eq!(effects.as_slice(), [Effect::Start]);
+        assert_eq!(lum.status().output_fault, None);
+        assert!(lum.status().running);
+        lum.notify_output_fault(OutputFault::DmaStopTimeout);
+        lum.handle(3, &Request::SetConfig(other_config()));
+        assert_eq!(lum.status().output_fault, None);
     }
 
     #[test]

@@ -1,5 +1,5 @@
 //! Persisted configuration record, used by the firmware's flash page and the host emulator's
-//! storage file alike (issue 2 items 2 and 4).
+//! storage file alike.
 //!
 //! Layout (little-endian): `b"MEBC"` magic, `u16` record version, `u16` payload length,
 //! postcard([`LuminaireConfig`]), CRC-32/ISO-HDLC of everything before it. Bytes after the

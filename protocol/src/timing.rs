@@ -1,4 +1,4 @@
-//! Timer arithmetic of the luminaire: the chip clock and the brightness PWM (issue 6, SPEC §2).
+//! Timer arithmetic of the luminaire: the chip clock and the brightness PWM (SPEC §2).
 //!
 //! The firmware plays the on-mask table at the chip rate (chip rate = camera frame rate). The
 //! chip period is an integer number of timer-clock ticks, `(PSC + 1) · (ARR + 1)`, so the rate a
@@ -240,17 +240,27 @@ pub fn fill_compare_frames<W: From<u16> + Copy>(
         });
     }
     for (frame, &mask) in out[..needed].chunks_exact_mut(slots).zip(table.masks()) {
-        for (value, led) in frame.iter_mut().zip(led_of_slot) {
-            let compare = match *led {
-                Some(led) if led < table.led_count() && mask & (1 << led) != 0 => {
-                    on_compare(brightness_permille[usize::from(led)])
-                }
-                _ => 0,
-            };
-            *value = W::from(compare);
+        for (value, &led) in frame.iter_mut().zip(led_of_slot) {
+            *value = W::from(slot_compare(table, brightness_permille, led, mask));
         }
     }
     Ok(needed)
+}
+
+/// Compare value of a slot playing LED `led` (`None`: no LED) during a chip with on-mask
+/// `mask`: the LED's [`on_compare`] when it is on, 0 when it is off, unused or beyond the table.
+pub fn slot_compare(
+    table: &ChipTable,
+    brightness_permille: &[u16; MAX_LEDS],
+    led: Option<u8>,
+    mask: u8,
+) -> u16 {
+    match led {
+        Some(led) if led < table.led_count() && mask & (1 << led) != 0 => {
+            on_compare(brightness_permille[usize::from(led)])
+        }
+        _ => 0,
+    }
 }
 
 #[cfg(test)]

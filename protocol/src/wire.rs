@@ -1,5 +1,5 @@
 //! Wire messages: header, one command table generating [`Request`] and [`Response`], and the
-//! payload types (issue 2 item 3; the command-table idea is postcard-rpc's).
+//! payload types (the command-table idea is postcard-rpc's).
 //!
 //! Every frame is `COBS(postcard(Header) ‖ postcard(body) ‖ crc32_le) 0x00` (see
 //! [`crate::framing`]). The [`Header`] comes first so a peer speaking another protocol version
@@ -17,7 +17,7 @@ use serde::{Deserialize, Serialize};
 use crate::config::{ChipRate, ConfigError, LuminaireConfig};
 
 /// Version of this wire protocol, carried in every [`Header`].
-pub const PROTOCOL_VERSION: u16 = 1;
+pub const PROTOCOL_VERSION: u16 = 2;
 
 /// Sequence number meaning "unknown" in a [`Response::ProtocolError`] reply to an unreadable
 /// frame; hosts number their requests from 1 and skip 0 on wrap-around.
@@ -111,6 +111,30 @@ pub enum SaveState {
     Failed,
 }
 
+/// Why the carriers stopped on their own: the luminaire switched every output off and reports
+/// it in [`Status::output_fault`] until the next `Start` or `SetConfig`.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub enum OutputFault {
+    /// A DMA stream feeding the PWM compare registers reported a transfer error (TEIF) or
+    /// stopped by itself.
+    DmaTransferError,
+    /// A DMA stream did not stop when the carriers were stopped or reloaded; the timers were
+    /// reset, so the outputs are off, but the new configuration was not started.
+    DmaStopTimeout,
+}
+
+impl core::fmt::Display for OutputFault {
+    fn fmt(&self, f: &mut core::fmt::Formatter<'_>) -> core::fmt::Result {
+        f.write_str(match self {
+            Self::DmaTransferError => "DMA transfer error: carriers stopped, outputs off",
+            Self::DmaStopTimeout => {
+                "DMA stream did not stop: outputs off, new settings not started"
+            }
+        })
+    }
+}
+
 /// Identity and limits of a luminaire (`GetInfo`).
 #[derive(Debug, Clone, PartialEq, Eq, Serialize, Deserialize)]
 #[cfg_attr(feature = "defmt", derive(defmt::Format))]
@@ -135,8 +159,10 @@ pub struct DeviceInfo {
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
 #[cfg_attr(feature = "defmt", derive(defmt::Format))]
 pub struct Status {
-    /// Whether the carriers are playing.
+    /// Whether the carriers are playing (false after an [`OutputFault`]).
     pub running: bool,
+    /// Why the carriers stopped on their own, if they did.
+    pub output_fault: Option<OutputFault>,
     /// Where the configuration came from at boot.
     pub config_source: ConfigSource,
     /// Whether the active configuration differs from the stored one.

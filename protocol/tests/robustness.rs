@@ -1,4 +1,4 @@
-//! Robustness of reader + state machine against arbitrary input (issue 2 item 5).
+//! Robustness of reader + state machine against arbitrary input.
 //!
 //! Every stream is fed through [`Endpoint::on_bytes`] in random chunks and compared with an
 //! independent reference: split the whole stream at 0x00 with `split`, decode each piece on
@@ -9,7 +9,7 @@
 //! answered with a command response, never a protocol error.
 //!
 //! Case counts: `MEB_FUZZ_CASES` (default 20 000 deterministic mixed streams) plus the
-//! proptest cases; the report of issue 2 lists the count of a long run.
+//! proptest cases (raise `MEB_FUZZ_CASES` for a long run).
 
 use proptest::prelude::*;
 use protocol::config::{ChipRate, LuminaireConfig};

@@ -281,28 +281,13 @@ impl FrameSource for FfmpegSource {
             return Ok(None);
         }
         let pixels = self.format.pixels();
-        let samples = if self.format.bit_depth > 8 {
-            let mut bytes = vec![0u8; 2 * pixels];
-            let got = self.fill(&mut bytes)?;
-            if got < bytes.len() {
-                self.finish(got)?;
-                return Ok(None);
-            }
-            Samples::U16(
-                bytes
-                    .chunks_exact(2)
-                    .map(|b| u16::from_le_bytes([b[0], b[1]]))
-                    .collect(),
-            )
-        } else {
-            let mut bytes = vec![0u8; pixels];
-            let got = self.fill(&mut bytes)?;
-            if got < bytes.len() {
-                self.finish(got)?;
-                return Ok(None);
-            }
-            Samples::U8(bytes)
-        };
+        let mut bytes = vec![0u8; Samples::bytes_per_sample(self.format.bit_depth) * pixels];
+        let got = self.fill(&mut bytes)?;
+        if got < bytes.len() {
+            self.finish(got)?;
+            return Ok(None);
+        }
+        let samples = Samples::from_le_bytes(bytes, self.format.bit_depth);
         let frame = Frame {
             index: self.index,
             samples,

@@ -71,6 +71,28 @@ impl Samples {
         self.len() == 0
     }
 
+    /// Bytes one sample takes in a little-endian stream of `bit_depth`-bit samples: 1 up to
+    /// 8 bits, else 2.
+    pub fn bytes_per_sample(bit_depth: u8) -> usize {
+        if bit_depth > 8 { 2 } else { 1 }
+    }
+
+    /// Samples from a little-endian byte stream of `bit_depth`-bit samples (y4m, raw files,
+    /// FFmpeg's `gray`/`gray16le` output): bytes as they are up to 8 bits, byte pairs above
+    /// (a trailing odd byte is ignored).
+    pub fn from_le_bytes(bytes: Vec<u8>, bit_depth: u8) -> Self {
+        if Self::bytes_per_sample(bit_depth) == 1 {
+            Self::U8(bytes)
+        } else {
+            Self::U16(
+                bytes
+                    .chunks_exact(2)
+                    .map(|b| u16::from_le_bytes([b[0], b[1]]))
+                    .collect(),
+            )
+        }
+    }
+
     /// Sample `i` as a code value.
     pub fn code(&self, i: usize) -> f32 {
         match self {
@@ -94,7 +116,7 @@ pub struct Frame {
 #[non_exhaustive]
 pub enum CaptureError {
     /// An I/O error on a named file.
-    #[error("cannot read {path}: {source}")]
+    #[error("cannot read {path}")]
     Io {
         /// The file.
         path: std::path::PathBuf,
@@ -108,6 +130,14 @@ pub enum CaptureError {
         path: std::path::PathBuf,
         /// What is wrong.
         reason: String,
+    },
+    /// An image file the codec cannot decode.
+    #[error("{path}: cannot decode the image")]
+    Decode {
+        /// The file.
+        path: std::path::PathBuf,
+        /// The codec's error.
+        source: Box<dyn std::error::Error + Send + Sync>,
     },
     /// A frame whose size differs from the stream's.
     #[error("frame {index} is {got_width}x{got_height}, expected {width}x{height}")]

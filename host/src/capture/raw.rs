@@ -15,6 +15,13 @@ pub struct RawLayout {
     pub bit_depth: u8,
 }
 
+impl std::fmt::Display for RawLayout {
+    /// "1280x720, 8-bit", the `WxHxBITS` layout in words.
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        write!(f, "{}x{}, {}-bit", self.width, self.height, self.bit_depth)
+    }
+}
+
 /// A raw frame file read one frame at a time.
 pub struct RawSource {
     format: FrameFormat,
@@ -31,9 +38,14 @@ impl RawSource {
             path: path.to_path_buf(),
             source,
         };
-        if !(1..=16).contains(&layout.bit_depth) || layout.width == 0 || layout.height == 0 {
+        if layout.width == 0 || layout.height == 0 {
             return Err(CaptureError::Other(format!(
-                "invalid raw layout {layout:?}"
+                "raw layout {layout}: width and height must be at least 1"
+            )));
+        }
+        if !(1..=16).contains(&layout.bit_depth) {
+            return Err(CaptureError::Other(format!(
+                "raw layout {layout}: bits per sample must be 1 to 16"
             )));
         }
         let file = std::fs::File::open(path).map_err(io)?;
@@ -41,9 +53,11 @@ impl RawSource {
         let frame_bytes = layout
             .width
             .checked_mul(layout.height)
-            .and_then(|p| p.checked_mul(if layout.bit_depth > 8 { 2 } else { 1 }))
+            .and_then(|p| p.checked_mul(Samples::bytes_per_sample(layout.bit_depth)))
             .ok_or_else(|| {
-                CaptureError::Other(format!("raw frame size {layout:?} is too large"))
+                CaptureError::Other(format!(
+                    "raw layout {layout}: a frame is too large to address"
+                ))
             })?;
         if !size.is_multiple_of(frame_bytes) {
             return Err(CaptureError::Format {
@@ -78,20 +92,9 @@ impl FrameSource for RawSource {
             path: self.path.clone(),
             source,
         };
-        let samples = if self.format.bit_depth > 8 {
-            let mut bytes = vec![0u8; 2 * pixels];
-            self.reader.read_exact(&mut bytes).map_err(io)?;
-            Samples::U16(
-                bytes
-                    .chunks_exact(2)
-                    .map(|b| u16::from_le_bytes([b[0], b[1]]))
-                    .collect(),
-            )
-        } else {
-            let mut bytes = vec![0u8; pixels];
-            self.reader.read_exact(&mut bytes).map_err(io)?;
-            Samples::U8(bytes)
-        };
+        let mut bytes = vec![0u8; Samples::bytes_per_sample(self.format.bit_depth) * pixels];
+        self.reader.read_exact(&mut bytes).map_err(io)?;
+        let samples = Samples::from_le_bytes(bytes, self.format.bit_depth);
         let frame = Frame {
             index: self.index,
             samples,

@@ -134,7 +134,7 @@ impl FrameSource for Y4mSource {
             reason: format!("file is truncated inside frame {index}"),
         };
         let pixels = self.format.pixels();
-        let sample_bytes = if self.format.bit_depth > 8 { 2 } else { 1 };
+        let sample_bytes = Samples::bytes_per_sample(self.format.bit_depth);
         // Read up to one luma plane, growing the buffer as data arrives, so a bad header's
         // size cannot allocate more than the file holds.
         let mut bytes = Vec::new();
@@ -145,16 +145,7 @@ impl FrameSource for Y4mSource {
         if bytes.len() != sample_bytes * pixels {
             return Err(truncated(self.index));
         }
-        let samples = if sample_bytes == 2 {
-            Samples::U16(
-                bytes
-                    .chunks_exact(2)
-                    .map(|b| u16::from_le_bytes([b[0], b[1]]))
-                    .collect(),
-            )
-        } else {
-            Samples::U8(bytes)
-        };
+        let samples = Samples::from_le_bytes(bytes, self.format.bit_depth);
         let skipped = std::io::copy(
             &mut (&mut self.reader).take(self.chroma_bytes as u64),
             &mut std::io::sink(),

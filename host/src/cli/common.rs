@@ -1,16 +1,25 @@
-//! Helpers shared by the reconstruction commands: mask loading and writing the output folder.
+//! Helpers shared by the commands: mask loading, the atomic output folder with its `--force`
+//! rule, and writing a reconstruction's folder.
 
 use anyhow::{Context, Result};
-use meb::export::report::{ReportInputs, WrittenReport, write_report};
+use meb::export::files::{
+    FilesError, OutputFolder, Replace, read_mask, remove_temporaries_on_signal,
+};
+use meb::export::report::{ReportInputs, Summary, WrittenReport, write_report};
 use meb::metrics::{AngularErrors, DepthErrors};
-use meb::reconstruct::StageTiming;
+use meb::timing::StageTiming;
 use meb::types::{DepthMap, NormalField};
 use ndarray::Array2;
 use std::path::Path;
 
+/// Help text of every command's `--force` flag: one flag, one meaning.
+pub const FORCE_HELP: &str = "Write even what meb would otherwise refuse: over a non-empty --out \
+    that is not an earlier output of this command (its contents are replaced whole), or a \
+    result meb judges implausible (written with the warning recorded)";
+
 /// Reads a mask image (non-zero = inside) and checks it is not empty.
 pub fn load_mask(path: &Path) -> Result<Array2<bool>> {
-    let mask = meb::datasets::diligent::read_mask(path)?;
+    let mask = read_mask(path)?;
     anyhow::ensure!(
         mask.iter().any(|&m| m),
         "empty mask: {} has no non-zero pixel",
@@ -19,10 +28,46 @@ pub fn load_mask(path: &Path) -> Result<Array2<bool>> {
     Ok(mask)
 }
 
-/// Writes the output folder and returns the report paths.
+/// Starts the atomic output folder `out` of `command` (see `meb::export::files::folder`):
+/// refuses, before any work, a non-empty `out` that is not an earlier output of `command`
+/// unless `force`. The first call installs the handler that deletes the temporary folder on
+/// SIGINT/SIGTERM/SIGHUP (only commands that write folders get it: `meb device emulate`
+/// handles SIGTERM itself).
+pub fn output_folder(out: &Path, command: &str, force: bool) -> Result<OutputFolder> {
+    static SIGNALS: std::sync::Once = std::sync::Once::new();
+    SIGNALS.call_once(|| {
+        if let Err(err) = remove_temporaries_on_signal() {
+            eprintln!(
+                "warning: cannot watch for interrupts ({err}); an interrupted run may leave a \
+                 temporary folder, which the next run into the same folder removes"
+            );
+        }
+    });
+    let replace = if force {
+        Replace::Anything
+    } else {
+        Replace::EarlierOutput
+    };
+    OutputFolder::create(out, command, replace).map_err(|e| match e {
+        FilesError::OutputNotEmpty { .. } => {
+            anyhow::anyhow!("{e}; choose another --out or pass --force to replace it")
+        }
+        e => e.into(),
+    })
+}
+
+/// Moves a finished output folder into place and returns its final path.
+pub fn commit(folder: OutputFolder) -> Result<std::path::PathBuf> {
+    let target = folder.target().to_path_buf();
+    folder
+        .commit()
+        .with_context(|| format!("cannot put the output in place at {}", target.display()))
+}
+
+/// Writes a reconstruction's files into `dir` and returns the report paths.
 #[allow(clippy::too_many_arguments)]
 pub fn write_outputs(
-    out: &Path,
+    dir: &Path,
     title: &str,
     source: String,
     normals: &NormalField,
@@ -30,11 +75,11 @@ pub fn write_outputs(
     depth_errors: Option<&DepthErrors>,
     angular_errors: Option<&AngularErrors>,
     timings: &[StageTiming],
-    summary: serde_json::Map<String, serde_json::Value>,
+    summary: Summary,
     mesh_formats: Vec<String>,
 ) -> Result<WrittenReport> {
-    write_report(
-        out,
+    Ok(write_report(
+        dir,
         &ReportInputs {
             title: title.to_string(),
             source,
@@ -46,6 +91,62 @@ pub fn write_outputs(
             summary,
             mesh_formats,
         },
-    )
-    .with_context(|| format!("writing {}", out.display()))
+    )?)
+}
+
+/// The report's name of an integrator, e.g. `least-squares`.
+pub fn integrator_name(integrator: meb::integrate::Integrator) -> String {
+    serde_json::to_value(integrator)
+        .ok()
+        .and_then(|v| v.as_str().map(str::to_string))
+        .unwrap_or_else(|| format!("{integrator:?}"))
+}
+
+/// The report's description of a light model.
+pub fn light_model_name(model: meb::reconstruct::LightModel) -> String {
+    match model {
+        meb::reconstruct::LightModel::Distant => "distant (L_i(0))".into(),
+        meb::reconstruct::LightModel::NearField { refinements } => {
+            format!("near-field ({refinements} refinements)")
+        }
+    }
+}
+
+/// Surface mesh formats written besides `surface.ply`.
+#[derive(clap::ValueEnum, Clone, Copy, Debug, PartialEq, Eq)]
+pub enum MeshFormat {
+    /// Wavefront OBJ (`surface.obj`).
+    Obj,
+    /// Binary STL (`surface.stl`).
+    Stl,
+}
+
+/// The file extensions of `formats`.
+pub fn mesh_extensions(formats: &[MeshFormat]) -> Vec<String> {
+    formats
+        .iter()
+        .map(|f| match f {
+            MeshFormat::Obj => "obj".to_string(),
+            MeshFormat::Stl => "stl".to_string(),
+        })
+        .collect()
+}
+
+/// The report summary every decoded-capture reconstruction shares: LED images, frames,
+/// integrator, light model, object pixels and the artefact filter's share.
+pub fn reconstruction_summary(
+    decoded: &meb::demod::Decoded,
+    config: &meb::reconstruct::ReconstructConfig,
+    reconstruction: &meb::reconstruct::Reconstruction,
+) -> Summary {
+    let mask = &reconstruction.photometric.field.mask;
+    Summary {
+        leds: Some(decoded.leds.images.len()),
+        decoded_frames: Some(decoded.report.frames_used),
+        integrator: Some(integrator_name(config.integrate.integrator)),
+        light_model: Some(light_model_name(config.light_model)),
+        object_pixels: Some(mask.iter().filter(|&&m| m).count()),
+        kept_fraction: Some(reconstruction.integration.kept_fraction),
+        ..Summary::default()
+    }
 }

@@ -15,9 +15,12 @@ pub struct DecodeArgs {
     /// Input: a directory of PNG/TIFF frames, a multi-page TIFF, a .y4m file, a raw file
     /// (with --raw) or a video file (through FFmpeg).
     input: PathBuf,
-    /// Output directory (led1.npy…, ledI.png, noise.npy, decode.json).
+    /// Output folder (led1.npy…, ledI.png, noise.npy, decode.json), replaced whole and
+    /// atomically.
     #[arg(long)]
     out: PathBuf,
+    #[arg(long, help = super::common::FORCE_HELP)]
+    force: bool,
     /// Decoder settings.
     #[command(flatten)]
     options: DecodeOptions,
@@ -152,8 +155,10 @@ pub fn decode_capture(
 
 /// Runs `meb decode`.
 pub fn run(args: &DecodeArgs) -> Result<()> {
+    let folder = super::common::output_folder(&args.out, "decode", args.force)?;
     let decoded = decode_capture(&args.input, &args.options, 4)?;
-    write_decode_dir(&args.out, &decoded)?;
+    write_decode_dir(folder.path(), &decoded)?;
+    let out = super::common::commit(folder)?;
     let report = &decoded.report;
     println!(
         "decoded {} LEDs from {} frames ({}x{}), rate ratio {:.5}, exposure {:.2}, median noise {:.4}",
@@ -171,6 +176,6 @@ pub fn run(args: &DecodeArgs) -> Result<()> {
             led.led, led.phase_chips, led.mean_level, led.snr_db
         );
     }
-    println!("wrote {}", args.out.display());
+    println!("wrote {}", out.display());
     Ok(())
 }

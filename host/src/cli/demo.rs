@@ -4,9 +4,9 @@
 use anyhow::Result;
 use clap::Args;
 use indicatif::{ProgressBar, ProgressStyle};
-use meb::demo::{
-    decoded_reconstruct_config, run as run_demo, thesis_capture_config, thesis_decode_config,
-};
+use meb::demo::{run as run_demo, thesis_capture_config, thesis_decode_config};
+use meb::export::report::Summary;
+use meb::reconstruct::ReconstructConfig;
 use meb::rig::Rig;
 use meb::simulate::{Scene, SceneObject};
 use std::path::PathBuf;
@@ -14,9 +14,11 @@ use std::path::PathBuf;
 /// Arguments of `meb demo`.
 #[derive(Args, Debug)]
 pub struct DemoArgs {
-    /// Output folder (one sub-folder per object).
+    /// Output folder (one sub-folder per object), replaced whole and atomically.
     #[arg(long, default_value = "out/demo")]
     pub out: PathBuf,
+    #[arg(long, help = super::common::FORCE_HELP)]
+    pub force: bool,
     /// Only the sphere (skip the cube).
     #[arg(long)]
     pub sphere_only: bool,
@@ -33,6 +35,8 @@ pub fn run(args: &DemoArgs) -> Result<()> {
     if !args.sphere_only {
         objects.push(("cube", SceneObject::cube(75.0, false)));
     }
+    let folder = super::common::output_folder(&args.out, "demo", args.force)?;
+    let mut reports = Vec::new();
     println!(
         "meb demo: thesis out-of-plane rig, {}x{}, 128 frames, σ 1 %, background 0 dB SNR, exposure 0.8, gamma 2.2",
         rig.camera.width, rig.camera.height
@@ -49,7 +53,7 @@ pub fn run(args: &DemoArgs) -> Result<()> {
             Scene::single(object),
             thesis_capture_config(args.seed),
             &thesis_decode_config(rig.leds.len()),
-            &decoded_reconstruct_config(),
+            &ReconstructConfig::decoded_capture(),
             &mut |done, total| {
                 bar.set_length(total as u64);
                 bar.set_position(done as u64);
@@ -57,24 +61,16 @@ pub fn run(args: &DemoArgs) -> Result<()> {
         )?;
         bar.finish_and_clear();
         let e = &out.depth_errors;
-        let mut summary = serde_json::Map::new();
-        summary.insert("object".into(), name.into());
-        summary.insert("integrator".into(), "least-squares".into());
-        summary.insert("light model".into(), "near-field".into());
-        summary.insert(
-            "decoded frames".into(),
-            out.decoded.report.frames_used.into(),
-        );
-        summary.insert(
-            "surface lit by ≥3 LEDs (pixels)".into(),
-            out.lit_by_three.iter().filter(|&&m| m).count().into(),
-        );
-        summary.insert(
-            "kept by artefact filter (%)".into(),
-            (100.0 * out.reconstruction.integration.kept_fraction).into(),
-        );
-        let dir = args.out.join(name);
-        let written = super::common::write_outputs(
+        let config = ReconstructConfig::decoded_capture();
+        let summary = Summary {
+            rig: Some("thesis-out-of-plane".into()),
+            object: Some(name.into()),
+            lit_by_three_pixels: Some(out.lit_by_three.iter().filter(|&&m| m).count()),
+            ..super::common::reconstruction_summary(&out.decoded, &config, &out.reconstruction)
+        };
+        let dir = folder.path().join(name);
+        std::fs::create_dir(&dir).map_err(|e| meb::export::files::FilesError::write(&dir, e))?;
+        super::common::write_outputs(
             &dir,
             &format!("meb demo: {name}"),
             "simulated capture (meb simulate), decoded with meb demod".into(),
@@ -97,7 +93,11 @@ pub fn run(args: &DemoArgs) -> Result<()> {
             out.angular_errors.median_deg,
             total_ms / 1e3
         );
-        println!("        report: {}", written.html.display());
+        reports.push(name);
+    }
+    let out = super::common::commit(folder)?;
+    for name in reports {
+        println!("report: {}", out.join(name).join("report.html").display());
     }
     Ok(())
 }

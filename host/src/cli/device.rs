@@ -1,16 +1,13 @@
 //! `meb device`: list, query and configure luminaires over USB serial, or emulate one.
 
 use std::io::Write;
-use std::path::{Path, PathBuf};
-use std::sync::Arc;
-use std::sync::atomic::{AtomicBool, Ordering};
+use std::path::PathBuf;
 use std::time::Duration;
 
-use anyhow::{Context, Result, bail};
+use anyhow::{Result, anyhow, bail};
 use clap::{Args, Subcommand};
-use meb::device::discovery::{self, PortEntry};
-use meb::device::{DeviceClient, EmulatorOptions, Timeouts, VirtualLuminaire};
-use nix::sys::signal::{SigSet, Signal};
+use meb::device::discovery::{self, DiscoveryError, PortEntry};
+use meb::device::{DeviceClient, Timeouts};
 use protocol::carriers::MAX_LEDS;
 use protocol::config::{ChipRate, FULL_BRIGHTNESS_PERMILLE, LuminaireConfig};
 use protocol::wire::SaveOutcome;
@@ -61,6 +58,7 @@ enum DeviceAction {
     /// Check the link and measure the round-trip time.
     Ping(PingArgs),
     /// Run a virtual luminaire on a pseudo-terminal until Ctrl-C / SIGTERM.
+    #[cfg(unix)]
     Emulate(EmulateArgs),
 }
 
@@ -78,7 +76,7 @@ struct SetArgs {
     /// Number of LEDs N (1..=8).
     #[arg(long)]
     leds: u8,
-    /// Chip rate in Hz (= the camera frame rate), e.g. 960 or 959.5.
+    /// Chip rate in Hz (= the camera frame rate), e.g. 960 or 959.5; 1 to 4000 Hz.
     #[arg(long)]
     rate: f64,
     /// Per-LED brightness in per mille, N comma-separated values (default all 1000).
@@ -92,8 +90,8 @@ struct SetArgs {
 /// Arguments of `meb device ping`.
 #[derive(Args)]
 struct PingArgs {
-    /// Number of pings.
-    #[arg(long, default_value_t = 1)]
+    /// Number of pings (at least 1).
+    #[arg(long, default_value_t = 1, value_parser = clap::value_parser!(u32).range(1..))]
     count: u32,
     /// Print JSON instead of text.
     #[arg(long)]
@@ -101,6 +99,7 @@ struct PingArgs {
 }
 
 /// Arguments of `meb device emulate`.
+#[cfg(unix)]
 #[derive(Args)]
 struct EmulateArgs {
     /// Record file standing in for flash (restart on the same file = power cycle).
@@ -118,7 +117,8 @@ struct EmulateArgs {
 pub fn run(args: &DeviceArgs) -> Result<()> {
     match &args.action {
         DeviceAction::List(flag) => list(flag.json),
-        DeviceAction::Emulate(emulate_args) => emulate(emulate_args),
+        #[cfg(unix)]
+        DeviceAction::Emulate(emulate_args) => emulate::run(emulate_args),
         action => {
             let mut client = connect(args)?;
             talk(&mut client, action)
@@ -127,7 +127,12 @@ pub fn run(args: &DeviceArgs) -> Result<()> {
 }
 
 fn connect(args: &DeviceArgs) -> Result<DeviceClient> {
-    let path = discovery::select_port(args.port.as_deref())?;
+    let path = discovery::select_port(args.port.as_deref()).map_err(|err| match err {
+        DiscoveryError::NoLuminaire | DiscoveryError::SeveralLuminaires(_) => {
+            anyhow!("{err}; pass --port PATH (e.g. the path `meb device emulate` prints)")
+        }
+        other => other.into(),
+    })?;
     let timeouts = Timeouts {
         reply: Duration::from_millis(args.timeout_ms),
         attempts: args.attempts.max(1),
@@ -160,6 +165,10 @@ fn talk(client: &mut DeviceClient, action: &DeviceAction) -> Result<()> {
                 return print_json(&s);
             }
             println!("running           {}", yes_no(s.running));
+            match s.output_fault {
+                Some(fault) => println!("output fault      {fault}"),
+                None => println!("output fault      none"),
+            }
             println!("config source     {:?}", s.config_source);
             println!("unsaved changes   {}", yes_no(s.unsaved_changes));
             println!("save              {:?}", s.save);
@@ -203,21 +212,46 @@ fn talk(client: &mut DeviceClient, action: &DeviceAction) -> Result<()> {
             client.identify(*seconds)?;
             println!("identifying for {seconds} s");
         }
-        DeviceAction::Ping(ping) => {
-            let mut rtts_ms = Vec::new();
-            for nonce in 0..ping.count.max(1) {
-                rtts_ms.push(client.ping(nonce)?.as_secs_f64() * 1e3);
-            }
-            if ping.json {
-                return print_json(&serde_json::json!({ "round_trip_ms": rtts_ms }));
-            }
-            for rtt in rtts_ms {
-                println!("pong in {rtt:.2} ms");
-            }
-        }
-        DeviceAction::List(_) | DeviceAction::Emulate(_) => {}
+        DeviceAction::Ping(ping) => return ping_repeatedly(client, ping),
+        DeviceAction::List(_) => {}
+        #[cfg(unix)]
+        DeviceAction::Emulate(_) => {}
     }
     Ok(())
+}
+
+/// Pings `ping.count` times, printing each round trip as it arrives (text) so that a link
+/// that breaks keeps what it measured; JSON prints the measured list, also on failure.
+fn ping_repeatedly(client: &mut DeviceClient, ping: &PingArgs) -> Result<()> {
+    let mut rtts_ms = Vec::new();
+    let mut failure = None;
+    for nonce in 0..ping.count {
+        match client.ping(nonce) {
+            Ok(rtt) => {
+                let ms = rtt.as_secs_f64() * 1e3;
+                if !ping.json {
+                    println!("pong in {ms:.2} ms");
+                    std::io::stdout().flush()?;
+                }
+                rtts_ms.push(ms);
+            }
+            Err(err) => {
+                failure = Some(err);
+                break;
+            }
+        }
+    }
+    if ping.json {
+        print_json(&serde_json::json!({ "round_trip_ms": rtts_ms }))?;
+    }
+    match failure {
+        None => Ok(()),
+        Some(err) => Err(anyhow::Error::new(err).context(format!(
+            "ping {} of {} failed",
+            rtts_ms.len() + 1,
+            ping.count
+        ))),
+    }
 }
 
 /// The full configuration `meb device set` sends.
@@ -226,8 +260,13 @@ fn config_from_args(set: &SetArgs, running: bool) -> Result<LuminaireConfig> {
     if n == 0 || n > MAX_LEDS {
         bail!("--leds {} is outside 1..={MAX_LEDS}", set.leds);
     }
-    if !set.rate.is_finite() || set.rate <= 0.0 {
-        bail!("--rate {} Hz is not a positive rate", set.rate);
+    let (min, max) = (ChipRate::MIN.hz(), ChipRate::MAX.hz());
+    // Checked in hertz: converting first would saturate 1e9 Hz to u32::MAX millihertz.
+    if !(set.rate >= min && set.rate <= max) {
+        bail!(
+            "--rate {} Hz is outside the supported {min:.3}..={max:.3} Hz",
+            set.rate
+        );
     }
     let mut brightness = [FULL_BRIGHTNESS_PERMILLE; MAX_LEDS];
     if let Some(values) = &set.brightness {
@@ -303,6 +342,7 @@ fn list(json: bool) -> Result<()> {
         path,
         vid,
         pid,
+        manufacturer,
         product,
         serial_number,
         is_luminaire,
@@ -313,9 +353,10 @@ fn list(json: bool) -> Result<()> {
             _ => "-".into(),
         };
         println!(
-            "{}{}  {ids}  {}  {}",
+            "{}{}  {ids}  {} / {}  {}",
             if *is_luminaire { "* " } else { "  " },
             path.display(),
+            manufacturer.as_deref().unwrap_or("-"),
             product.as_deref().unwrap_or("-"),
             serial_number.as_deref().unwrap_or("")
         );
@@ -326,46 +367,63 @@ fn list(json: bool) -> Result<()> {
     Ok(())
 }
 
-fn emulate(args: &EmulateArgs) -> Result<()> {
-    // Block SIGINT/SIGTERM in every thread; one watcher thread receives them with sigwait.
-    let mut signals = SigSet::empty();
-    signals.add(Signal::SIGINT);
-    signals.add(Signal::SIGTERM);
-    signals
-        .thread_block()
-        .context("cannot block SIGINT/SIGTERM")?;
-    let stop = Arc::new(AtomicBool::new(false));
-    let stop_flag = Arc::clone(&stop);
-    std::thread::spawn(move || {
-        let _ = signals.wait();
-        stop_flag.store(true, Ordering::Relaxed);
-    });
+/// `meb device emulate` (pseudo-terminals and signals: Unix only).
+#[cfg(unix)]
+mod emulate {
+    use std::io::Write;
+    use std::path::Path;
+    use std::sync::Arc;
+    use std::sync::atomic::{AtomicBool, Ordering};
+    use std::time::Duration;
 
-    let emulator = VirtualLuminaire::spawn(EmulatorOptions {
-        storage: args.storage.clone(),
-        rate_error_ppm: args.rate_error_ppm,
-        timeline: args.timeline.clone(),
-    })?;
-    println!("{}", emulator.port_path().display());
-    std::io::stdout().flush()?;
-    eprintln!(
-        "virtual luminaire on {} (booted from {:?}); Ctrl-C to stop",
-        emulator.port_path().display(),
-        emulator.restored()
-    );
-    while !stop.load(Ordering::Relaxed) && emulator.is_running() {
-        std::thread::sleep(Duration::from_millis(50));
+    use anyhow::{Context, Result};
+    use meb::device::{EmulatorOptions, VirtualLuminaire};
+    use nix::sys::signal::{SigSet, Signal};
+
+    use super::EmulateArgs;
+
+    pub fn run(args: &EmulateArgs) -> Result<()> {
+        // Block SIGINT/SIGTERM in every thread; one watcher thread receives them with sigwait.
+        let mut signals = SigSet::empty();
+        signals.add(Signal::SIGINT);
+        signals.add(Signal::SIGTERM);
+        signals
+            .thread_block()
+            .context("cannot block SIGINT/SIGTERM")?;
+        let stop = Arc::new(AtomicBool::new(false));
+        let stop_flag = Arc::clone(&stop);
+        std::thread::spawn(move || {
+            let _ = signals.wait();
+            stop_flag.store(true, Ordering::Relaxed);
+        });
+
+        let emulator = VirtualLuminaire::spawn(EmulatorOptions {
+            storage: args.storage.clone(),
+            rate_error_ppm: args.rate_error_ppm,
+            timeline: args.timeline.clone(),
+            ..EmulatorOptions::default()
+        })?;
+        println!("{}", emulator.port_path().display());
+        std::io::stdout().flush()?;
+        eprintln!(
+            "virtual luminaire on {} (booted from {:?}); Ctrl-C to stop",
+            emulator.port_path().display(),
+            emulator.restored()
+        );
+        while !stop.load(Ordering::Relaxed) && emulator.is_running() {
+            std::thread::sleep(Duration::from_millis(50));
+        }
+        let timeline = emulator.shutdown()?;
+        eprintln!(
+            "virtual luminaire stopped after {} output change(s){}",
+            timeline.segments.len(),
+            args.timeline
+                .as_deref()
+                .map(|p: &Path| format!("; timeline in {}", p.display()))
+                .unwrap_or_default()
+        );
+        Ok(())
     }
-    let timeline = emulator.shutdown()?;
-    eprintln!(
-        "virtual luminaire stopped after {} output change(s){}",
-        timeline.segments.len(),
-        args.timeline
-            .as_deref()
-            .map(|p: &Path| format!("; timeline in {}", p.display()))
-            .unwrap_or_default()
-    );
-    Ok(())
 }
 
 fn print_json<T: Serialize>(value: &T) -> Result<()> {

@@ -1,11 +1,13 @@
 //! `meb integrate`: integrate a normal map (H×W×3 .npy) inside a mask into depth.
 
-use anyhow::{Context, Result};
+use anyhow::Result;
 use clap::Args;
+use meb::export::files::read_float;
+use meb::export::report::Summary;
 use meb::integrate::{IntegrateConfig, Integrator, integrate_normals};
-use meb::reconstruct::StageTiming;
+use meb::timing::StageTiming;
 use meb::types::NormalField;
-use ndarray::{Array2, Array3};
+use ndarray::{Array2, Ix3};
 use std::path::PathBuf;
 use std::time::Instant;
 
@@ -20,9 +22,14 @@ pub struct IntegrateArgs {
     /// Grid pitch in mm per pixel.
     #[arg(long)]
     pub pitch: f64,
-    /// Output folder.
+    /// Output folder, replaced whole and atomically.
     #[arg(long)]
     pub out: PathBuf,
+    #[arg(long, help = super::common::FORCE_HELP)]
+    pub force: bool,
+    /// Also write the surface in these formats (comma-separated): obj, stl.
+    #[arg(long, value_enum, value_delimiter = ',')]
+    pub mesh: Vec<super::common::MeshFormat>,
     /// Integrator.
     #[arg(long, value_enum, default_value = "least-squares")]
     pub integrator: IntegratorArg,
@@ -51,22 +58,9 @@ impl From<IntegratorArg> for Integrator {
 
 /// Runs `meb integrate`.
 pub fn run(args: &IntegrateArgs) -> Result<()> {
-    let normals: Array3<f32> = ndarray_npy::read_npy::<_, Array3<f32>>(&args.normals)
-        .or_else(|_| {
-            ndarray_npy::read_npy::<_, Array3<f64>>(&args.normals).map(|a| a.mapv(|v| v as f32))
-        })
-        .with_context(|| {
-            format!(
-                "reading {} (expected an H×W×3 float array)",
-                args.normals.display()
-            )
-        })?;
-    let (rows, cols, three) = normals.dim();
-    anyhow::ensure!(
-        three == 3,
-        "{}: last axis must be 3, got {three}",
-        args.normals.display()
-    );
+    let folder = super::common::output_folder(&args.out, "integrate", args.force)?;
+    let normals = read_float::<Ix3>(&args.normals, &[None, None, Some(3)])?;
+    let (rows, cols, _) = normals.dim();
     let mask = super::common::load_mask(&args.mask)?;
     anyhow::ensure!(
         mask.dim() == (rows, cols),
@@ -85,18 +79,16 @@ pub fn run(args: &IntegrateArgs) -> Result<()> {
     };
     let start = Instant::now();
     let out = integrate_normals(&field, args.pitch, &config, None)?;
-    let timings = vec![StageTiming {
-        stage: "integration".into(),
-        ms: start.elapsed().as_secs_f64() * 1e3,
-    }];
-    let mut summary = serde_json::Map::new();
-    summary.insert(
-        "integrator".into(),
-        serde_json::to_value(config.integrator)?,
-    );
-    summary.insert("kept_fraction".into(), out.kept_fraction.into());
-    let written = super::common::write_outputs(
-        &args.out,
+    let timings = vec![StageTiming::since("integration", start)];
+    let summary = Summary {
+        input: Some(args.normals.display().to_string()),
+        integrator: Some(super::common::integrator_name(config.integrator)),
+        object_pixels: Some(field.mask.iter().filter(|&&m| m).count()),
+        kept_fraction: Some(out.kept_fraction),
+        ..Summary::default()
+    };
+    super::common::write_outputs(
+        folder.path(),
         "meb integrate",
         args.normals.display().to_string(),
         &field,
@@ -105,14 +97,15 @@ pub fn run(args: &IntegrateArgs) -> Result<()> {
         None,
         &timings,
         summary,
-        vec![],
+        super::common::mesh_extensions(&args.mesh),
     )?;
+    let written = super::common::commit(folder)?;
     println!(
         "integrated {} pixels ({:.1} % kept) in {:.1} ms → {}",
         out.kept.iter().filter(|&&k| k).count(),
         100.0 * out.kept_fraction,
         timings[0].ms,
-        written.html.display()
+        written.join("report.html").display()
     );
     Ok(())
 }

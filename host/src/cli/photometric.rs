@@ -3,10 +3,11 @@
 use anyhow::{Context, Result};
 use clap::Args;
 use meb::datasets::diligent::{ImageSet, load_diligent, load_image_set};
+use meb::export::report::Summary;
 use meb::integrate::{IntegrateConfig, integrate_normals};
 use meb::metrics::compare_normals;
 use meb::photometric::{Lights, PhotometricConfig, estimate_normals};
-use meb::reconstruct::StageTiming;
+use meb::timing::StageTiming;
 use std::path::PathBuf;
 use std::time::Instant;
 
@@ -31,13 +32,16 @@ pub struct PhotometricArgs {
     /// Grid pitch in mm per pixel for the depth output.
     #[arg(long, default_value_t = 1.0)]
     pub pitch: f64,
-    /// Output folder.
+    /// Output folder, replaced whole and atomically.
     #[arg(long)]
     pub out: PathBuf,
+    #[arg(long, help = super::common::FORCE_HELP)]
+    pub force: bool,
 }
 
 /// Runs `meb photometric`.
 pub fn run(args: &PhotometricArgs) -> Result<()> {
+    let folder = super::common::output_folder(&args.out, "photometric", args.force)?;
     let mut set: ImageSet = match &args.diligent {
         Some(dir) => load_diligent(dir)?,
         None => {
@@ -60,28 +64,27 @@ pub fn run(args: &PhotometricArgs) -> Result<()> {
         None,
         &PhotometricConfig::default(),
     )?;
-    let mut timings = vec![StageTiming {
-        stage: "photometric stereo".into(),
-        ms: start.elapsed().as_secs_f64() * 1e3,
-    }];
+    let mut timings = vec![StageTiming::since("photometric stereo", start)];
     let start = Instant::now();
     let integration = integrate_normals(&ps.field, args.pitch, &IntegrateConfig::default(), None)?;
-    timings.push(StageTiming {
-        stage: "integration".into(),
-        ms: start.elapsed().as_secs_f64() * 1e3,
-    });
+    timings.push(StageTiming::since("integration", start));
     let angular = match (&set.normals_gt, &set.mask) {
         (Some(gt), Some(mask)) => Some(compare_normals(&ps.field.normals, gt, mask)?),
         _ => None,
     };
-    let mut summary = serde_json::Map::new();
-    summary.insert("lights".into(), set.lights.len().into());
-    summary.insert(
-        "solved_pixels".into(),
-        ps.field.mask.iter().filter(|&&m| m).count().into(),
-    );
-    let written = super::common::write_outputs(
-        &args.out,
+    let summary = Summary {
+        input: args.diligent.as_ref().map(|d| d.display().to_string()),
+        leds: Some(set.lights.len()),
+        integrator: Some(super::common::integrator_name(
+            IntegrateConfig::default().integrator,
+        )),
+        light_model: Some("distant (given light vectors)".into()),
+        object_pixels: Some(ps.field.mask.iter().filter(|&&m| m).count()),
+        kept_fraction: Some(integration.kept_fraction),
+        ..Summary::default()
+    };
+    super::common::write_outputs(
+        folder.path(),
         "meb photometric",
         args.diligent.as_ref().map_or_else(
             || format!("{} images", args.images.len()),
@@ -95,12 +98,13 @@ pub fn run(args: &PhotometricArgs) -> Result<()> {
         summary,
         vec![],
     )?;
+    let out = super::common::commit(folder)?;
     if let Some(a) = &angular {
         println!(
             "normal error vs ground truth: mean {:.2}°, median {:.2}° over {} pixels",
             a.mean_deg, a.median_deg, a.compared_pixels
         );
     }
-    println!("report: {}", written.html.display());
+    println!("report: {}", out.join("report.html").display());
     Ok(())
 }

@@ -7,13 +7,15 @@ use anyhow::{Context, Result, bail, ensure};
 use clap::Args;
 use meb::demod::Decoded;
 use meb::demod::output::read_decode_dir;
+use meb::export::files::read_float;
+use meb::export::report::Summary;
 use meb::metrics::{
     AngularErrors, DepthErrors, compare_depth, compare_normals, load_mesh_triangles,
     normals_from_depth, render_mesh_depth,
 };
-use meb::reconstruct::{LightModel, reconstruct};
+use meb::reconstruct::{LightModel, ReconstructConfig, Reconstruction, from_decoded};
 use meb::rig::Rig;
-use ndarray::{Array2, Array3};
+use ndarray::{Array2, Array3, Ix2};
 use std::path::{Path, PathBuf};
 
 /// Arguments of `meb reconstruct`.
@@ -27,9 +29,14 @@ pub struct ReconstructArgs {
     #[arg(long)]
     rig: String,
     /// Output folder (normals.npy, albedo.npy, depth.npy, mask.png, previews, surface.ply,
-    /// report.json, report.html).
+    /// report.json, report.html), replaced whole and atomically.
     #[arg(long)]
     out: PathBuf,
+    #[arg(long, help = super::common::FORCE_HELP)]
+    force: bool,
+    /// Also write the surface in these formats (comma-separated): obj, stl.
+    #[arg(long, value_enum, value_delimiter = ',')]
+    mesh: Vec<super::common::MeshFormat>,
     /// Normal integrator.
     #[arg(long, value_enum, default_value = "least-squares")]
     integrator: IntegratorArg,
@@ -55,8 +62,54 @@ struct Truth {
     normals: Array3<f32>,
 }
 
-/// Runs `meb reconstruct`.
+/// What `meb reconstruct` reads: the rig, the decoded capture and the optional mask and truth.
+struct Inputs {
+    rig: Rig,
+    decoded: Decoded,
+    /// Whether INPUT was a `meb decode` folder (else a capture decoded here).
+    from_folder: bool,
+    mask: Option<Array2<bool>>,
+    truth: Option<Truth>,
+}
+
+/// Runs `meb reconstruct`: read and check the inputs, reconstruct, compare with the truth,
+/// write the folder, print a summary.
 pub fn run(args: &ReconstructArgs) -> Result<()> {
+    let folder = super::common::output_folder(&args.out, "reconstruct", args.force)?;
+    let inputs = read_inputs(args)?;
+    let config = reconstruct_config(args);
+    let reconstruction = from_decoded(&inputs.decoded, &inputs.rig, inputs.mask.as_ref(), &config)?;
+    let field = &reconstruction.photometric.field;
+    let depth = &reconstruction.integration.depth;
+    let (depth_errors, angular_errors) = match &inputs.truth {
+        Some(t) => compare(t, field, &depth.depth_mm)?,
+        None => (None, None),
+    };
+    super::common::write_outputs(
+        folder.path(),
+        "meb reconstruct",
+        source_text(args, &inputs),
+        field,
+        depth,
+        depth_errors.as_ref(),
+        angular_errors.as_ref(),
+        &reconstruction.timings,
+        summary(args, &inputs, &config, &reconstruction),
+        super::common::mesh_extensions(&args.mesh),
+    )?;
+    let out = super::common::commit(folder)?;
+    print_summary(
+        &reconstruction,
+        depth_errors.as_ref(),
+        angular_errors.as_ref(),
+    );
+    println!("report: {}", out.join("report.html").display());
+    Ok(())
+}
+
+/// Loads the rig, decodes or reads the capture, loads mask and truth, and checks that their
+/// sizes agree.
+fn read_inputs(args: &ReconstructArgs) -> Result<Inputs> {
     let rig = Rig::load(&args.rig).with_context(|| format!("cannot load rig {}", args.rig))?;
     ensure!(
         rig.leds.len() >= 3,
@@ -112,76 +165,65 @@ pub fn run(args: &ReconstructArgs) -> Result<()> {
         .as_deref()
         .map(|path| load_truth(path, &rig, shape))
         .transpose()?;
+    Ok(Inputs {
+        rig,
+        decoded,
+        from_folder,
+        mask,
+        truth,
+    })
+}
 
-    // Decoded captures: grazing LEDs count as shadowed, and pixels the decoder flagged as
-    // saturated or under-exposed are left out (the same settings `meb demo` is measured with).
-    let mut config = meb::demo::decoded_reconstruct_config();
+/// The decoded-capture settings with the command line's integrator and light model.
+fn reconstruct_config(args: &ReconstructArgs) -> ReconstructConfig {
+    let mut config = ReconstructConfig::decoded_capture();
     config.integrate.integrator = args.integrator.into();
     if args.no_near_field {
         config.light_model = LightModel::Distant;
     }
-    let usable = meb::demo::usable_led_images(&decoded);
-    let reconstruction = reconstruct(&usable, &rig, mask.as_ref(), Some(&decoded.noise), &config)?;
-    let field = &reconstruction.photometric.field;
-    let depth = &reconstruction.integration.depth;
+    config
+}
 
-    let (depth_errors, angular_errors) = match &truth {
-        Some(t) => compare(t, field, &depth.depth_mm)?,
-        None => (None, None),
-    };
-
-    let mut summary = serde_json::Map::new();
-    summary.insert("input".into(), args.input.display().to_string().into());
-    summary.insert("rig".into(), args.rig.clone().into());
-    summary.insert("leds".into(), leds.into());
-    summary.insert("decoded frames".into(), decoded.report.frames_used.into());
-    summary.insert(
-        "integrator".into(),
-        serde_json::to_value(config.integrate.integrator)?,
-    );
-    summary.insert(
-        "light model".into(),
-        serde_json::to_value(config.light_model)?,
-    );
-    summary.insert(
-        "object pixels".into(),
-        field.mask.iter().filter(|&&m| m).count().into(),
-    );
-    summary.insert(
-        "kept by artefact filter (%)".into(),
-        (100.0 * reconstruction.integration.kept_fraction).into(),
-    );
-    if let Some(path) = &args.ground_truth {
-        summary.insert("ground truth".into(), path.display().to_string().into());
-    }
-    let source = if from_folder {
+/// Where the data came from, for the report.
+fn source_text(args: &ReconstructArgs, inputs: &Inputs) -> String {
+    if inputs.from_folder {
         format!("decode folder {}", args.input.display())
     } else {
         format!("capture {}, decoded with meb demod", args.input.display())
-    };
-    let written = super::common::write_outputs(
-        &args.out,
-        "meb reconstruct",
-        source,
-        field,
-        depth,
-        depth_errors.as_ref(),
-        angular_errors.as_ref(),
-        &reconstruction.timings,
-        summary,
-        vec![],
-    )?;
+    }
+}
 
+/// The report's summary figures.
+fn summary(
+    args: &ReconstructArgs,
+    inputs: &Inputs,
+    config: &ReconstructConfig,
+    reconstruction: &Reconstruction,
+) -> Summary {
+    Summary {
+        input: Some(args.input.display().to_string()),
+        rig: Some(args.rig.clone()),
+        ground_truth: args.ground_truth.as_ref().map(|p| p.display().to_string()),
+        ..super::common::reconstruction_summary(&inputs.decoded, config, reconstruction)
+    }
+}
+
+/// Prints what was reconstructed and, with ground truth, how well.
+fn print_summary(
+    reconstruction: &Reconstruction,
+    depth_errors: Option<&DepthErrors>,
+    angular_errors: Option<&AngularErrors>,
+) {
+    let field = &reconstruction.photometric.field;
+    let (rows, cols) = field.mask.dim();
     let total_ms: f64 = reconstruction.timings.iter().map(|t| t.ms).sum();
     println!(
-        "reconstructed {} pixels from {leds} LED images ({}x{}) in {:.1} s, {:.1} % kept",
+        "reconstructed {} pixels ({cols}x{rows}) in {:.1} s, {:.1} % kept",
         field.mask.iter().filter(|&&m| m).count(),
-        shape.1,
-        shape.0,
         total_ms / 1e3,
         100.0 * reconstruction.integration.kept_fraction
     );
-    if let Some(e) = &depth_errors {
+    if let Some(e) = depth_errors {
         println!(
             "depth RMSE {:.3} mm, NRMSE {}, surface reconstructed {:.1} %",
             e.rmse_mm,
@@ -192,14 +234,12 @@ pub fn run(args: &ReconstructArgs) -> Result<()> {
             100.0 * e.reconstructed_fraction
         );
     }
-    if let Some(a) = &angular_errors {
+    if let Some(a) = angular_errors {
         println!(
             "normal error mean {:.2}°, median {:.2}° over {} pixels",
             a.mean_deg, a.median_deg, a.compared_pixels
         );
     }
-    println!("report: {}", written.html.display());
-    Ok(())
 }
 
 /// Loads ground truth from a depth `.npy` or renders a mesh in the rig's camera.
@@ -211,16 +251,8 @@ fn load_truth(path: &Path, rig: &Rig, shape: (usize, usize)) -> Result<Truth> {
         .unwrap_or_default();
     let truth = match ext.as_str() {
         "npy" => {
-            let depth: Array2<f32> = ndarray_npy::read_npy::<_, Array2<f32>>(path)
-                .or_else(|_| {
-                    ndarray_npy::read_npy::<_, Array2<f64>>(path).map(|a| a.mapv(|v| v as f32))
-                })
-                .with_context(|| {
-                    format!(
-                        "reading ground truth {} (expected an H×W float depth map in mm)",
-                        path.display()
-                    )
-                })?;
+            let depth = read_float::<Ix2>(path, &[Some(shape.0), Some(shape.1)])
+                .context("expected a ground-truth depth map in mm (NaN = background)")?;
             let normals = normals_from_depth(&depth, rig.camera.pitch_mm());
             Truth { depth, normals }
         }

@@ -116,11 +116,10 @@ struct CaptureArgs {
     /// Number of frames.
     #[arg(long, default_value_t = 128)]
     frames: usize,
-    /// Output directory (written atomically).
+    /// Output folder, replaced whole and atomically.
     #[arg(long)]
     out: Option<PathBuf>,
-    /// Replace an existing non-empty output directory.
-    #[arg(long)]
+    #[arg(long, help = super::common::FORCE_HELP)]
     force: bool,
     /// Frame container.
     #[arg(long, value_enum, default_value_t = FormatArg::Png)]
@@ -182,7 +181,7 @@ struct DatasetArgs {
     /// Number of objects.
     #[arg(long, default_value_t = 100)]
     count: usize,
-    /// Output directory (written atomically).
+    /// Output folder, replaced whole and atomically.
     #[arg(long)]
     out: PathBuf,
     /// Rig (default: thesis-in-plane); its camera is resized to --width × --height.
@@ -200,8 +199,7 @@ struct DatasetArgs {
     /// Seed of the shapes and poses.
     #[arg(long, default_value_t = 0)]
     seed: u64,
-    /// Replace an existing non-empty output directory.
-    #[arg(long)]
+    #[arg(long, help = super::common::FORCE_HELP)]
     force: bool,
 }
 
@@ -230,6 +228,7 @@ fn run_capture(args: &CaptureArgs) -> Result<()> {
         .context("--out DIR is required (where to write the capture)")?;
     let rig = Rig::load(&args.rig)?;
     let (scene, description) = build_scene(args)?;
+    let folder = super::common::output_folder(out, "simulate", args.force)?;
     let tone = match (args.gamma, args.srgb) {
         (Some(g), _) => ToneCurve::Gamma(g),
         (None, true) => ToneCurve::Srgb,
@@ -273,14 +272,14 @@ fn run_capture(args: &CaptureArgs) -> Result<()> {
             FormatArg::Mp4 => VideoFormat::Mp4,
         },
         truth_frame: args.truth_frame,
-        force: args.force,
         scene: description,
     };
     let bar = progress_bar(args.frames, "rendering");
-    let path = write_capture(&mut capture, out, &options, &mut |done, _| {
+    write_capture(&mut capture, folder.path(), &options, &mut |done, _| {
         bar.set_position(done as u64)
     })?;
     bar.finish_and_clear();
+    let path = super::common::commit(folder)?;
     let info = capture.info();
     eprintln!(
         "wrote {} frames ({}x{}, {}-bit) and ground truth to {} in {:.1} s; phases {:?} chips, gain {:.4e}",
@@ -336,7 +335,23 @@ fn build_scene(args: &CaptureArgs) -> Result<(Scene, serde_json::Value)> {
                 .mesh
                 .as_ref()
                 .context("--scene mesh needs --mesh FILE.stl|FILE.obj")?;
-            let mut mesh = TriMesh::load(path)?.centred(size);
+            let mesh = TriMesh::load(path)?;
+            let area: f64 = mesh
+                .triangles
+                .iter()
+                .map(|t| {
+                    let [a, b, c] = t.map(|i| mesh.vertices[i]);
+                    0.5 * (b - a).cross(&(c - a)).norm()
+                })
+                .sum();
+            if area.is_nan() || area <= 0.0 {
+                bail!(
+                    "mesh {} has no surface: its {} triangles have zero total area",
+                    path.display(),
+                    mesh.triangles.len()
+                );
+            }
+            let mut mesh = mesh.centred(size);
             if args.smooth_normals {
                 mesh = mesh.with_smooth_normals();
             }
@@ -418,13 +433,14 @@ fn run_dataset(args: &DatasetArgs) -> Result<()> {
         rig,
         size_mm: args.size_mm,
         seed: args.seed,
-        force: args.force,
     };
+    let folder = super::common::output_folder(&args.out, "simulate dataset", args.force)?;
     let bar = progress_bar(args.count, "objects");
-    let path = write_dataset(&config, &args.out, &mut |done, _| {
+    write_dataset(&config, folder.path(), &mut |done, _| {
         bar.set_position(done as u64)
     })?;
     bar.finish_and_clear();
+    let path = super::common::commit(folder)?;
     eprintln!("wrote {} objects to {}", args.count, path.display());
     Ok(())
 }

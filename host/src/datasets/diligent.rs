@@ -67,17 +67,6 @@ pub fn read_grey(path: &Path, intensity: [f64; 3]) -> Result<Array2<f32>, Datase
     }))
 }
 
-/// Reads a mask image: non-zero pixels are inside.
-pub fn read_mask(path: &Path) -> Result<Array2<bool>, DatasetError> {
-    let img = image::open(path)
-        .map_err(|e| DatasetError::format(path, format!("cannot decode mask: {e}")))?
-        .into_luma16();
-    let (w, h) = img.dimensions();
-    Ok(Array2::from_shape_fn((h as usize, w as usize), |(r, c)| {
-        img.get_pixel(c as u32, r as u32).0[0] > 0
-    }))
-}
-
 /// Loads images with lights from a text file (one "x y z" row per image) and optional
 /// per-image intensities (one "r g b" or one value per row) and mask.
 pub fn load_image_set(
@@ -123,7 +112,7 @@ pub fn load_image_set(
         .zip(&gains)
         .map(|(p, g)| read_grey(p, *g))
         .collect::<Result<Vec<_>, _>>()?;
-    let mask = mask.map(read_mask).transpose()?;
+    let mask = mask.map(crate::export::files::read_mask).transpose()?;
     Ok(ImageSet {
         images: LedImages { images: grey },
         lights: light_rows

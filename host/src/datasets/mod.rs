@@ -12,13 +12,16 @@ use thiserror::Error;
 #[non_exhaustive]
 pub enum DatasetError {
     /// A file could not be read.
-    #[error("cannot read {path}: {source}")]
+    #[error("cannot read {path}")]
     Io {
         /// The file.
         path: PathBuf,
         /// The underlying error.
         source: std::io::Error,
     },
+    /// A file of the common formats (images, masks, arrays) could not be read.
+    #[error(transparent)]
+    Files(#[from] crate::export::files::FilesError),
     /// A file's content is not what the layout promises.
     #[error("{path}: {reason}")]
     Format {

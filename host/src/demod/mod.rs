@@ -509,11 +509,7 @@ fn median_of_valid(values: &[f32], valid: impl Fn(usize) -> bool) -> f64 {
             .map(|p| values[p])
             .collect();
     }
-    if sample.is_empty() {
-        return f64::NAN;
-    }
-    let middle = sample.len() / 2;
-    f64::from(*sample.select_nth_unstable_by(middle, f32::total_cmp).1)
+    crate::stats::quantile_in_place(&mut sample, 0.5).map_or(f64::NAN, f64::from)
 }
 
 /// Bytes of a frame's samples (for memory budgeting by callers).

@@ -1,12 +1,17 @@
 //! The host side of the luminaire protocol: one method per command over a [`Link`].
 //!
-//! Every request carries a fresh sequence number (1, 2, …; 0 is reserved for replies to
-//! unreadable frames). A request whose reply does not arrive within [`Timeouts::reply`] is sent
+//! Every request carries a fresh sequence number (counting up from a random start per client,
+//! skipping 0, which is reserved for replies to unreadable frames, so that two sessions one
+//! after the other do not reuse each other's numbers). A request whose reply does not arrive within [`Timeouts::reply`] is sent
 //! again with the SAME sequence number, up to [`Timeouts::attempts`] times: the luminaire caches
 //! its last reply per sequence number, so a retried `SetConfig` or `SaveConfig` is answered from
 //! the cache and never executed twice. Every frame is preceded by a 0x00 delimiter so line
 //! noise or a partial frame left by an earlier client can never corrupt it (see
 //! `protocol::framing`).
+//!
+//! A save may stall the luminaire: erasing a 128 KiB flash sector stops the Black Pill's CPU
+//! (and its USB) for up to 2 s. Requests around a save therefore keep retransmitting for at
+//! least [`Timeouts::stall`] before giving up.
 
 use std::path::Path;
 use std::time::{Duration, Instant};
@@ -31,6 +36,9 @@ pub struct Timeouts {
     pub attempts: u32,
     /// Longest wait for a deferred save to complete.
     pub save: Duration,
+    /// Longest the luminaire may go silent around a save (a flash sector erase stalls its CPU
+    /// for up to 2 s): requests during a save retransmit at least this long.
+    pub stall: Duration,
 }
 
 impl Default for Timeouts {
@@ -39,7 +47,19 @@ impl Default for Timeouts {
             reply: Duration::from_millis(500),
             attempts: 3,
             save: Duration::from_secs(5),
+            stall: Duration::from_secs(3),
         }
+    }
+}
+
+impl Timeouts {
+    /// Transmissions per request: [`Self::attempts`], or enough to wait `patience` in all.
+    fn attempts_for(&self, patience: Duration) -> u32 {
+        let per_reply = self.reply.as_millis().max(1);
+        let needed = patience.as_millis().div_ceil(per_reply);
+        self.attempts
+            .max(1)
+            .max(u32::try_from(needed).unwrap_or(u32::MAX))
     }
 }
 
@@ -51,7 +71,7 @@ pub enum DeviceError {
     #[error(transparent)]
     Open(#[from] OpenError),
     /// The link failed mid-command (device unplugged, emulator stopped).
-    #[error("link to the luminaire failed: {0}")]
+    #[error("link to the luminaire failed")]
     Link(#[from] std::io::Error),
     /// No valid reply after every attempt.
     #[error(
@@ -162,7 +182,7 @@ impl<L: Link> DeviceClient<L> {
         Self {
             link,
             timeouts,
-            next_seq: 1,
+            next_seq: first_sequence_number(),
             reader: WireFrameReader::new(),
             noise: None,
         }
@@ -207,9 +227,11 @@ impl<L: Link> DeviceClient<L> {
         }
     }
 
-    /// Asks the device to persist its configuration (`SaveConfig`); may complete later.
+    /// Asks the device to persist its configuration (`SaveConfig`); may complete later. The
+    /// device may stall while it erases flash: this waits up to [`Timeouts::stall`] for the reply.
     pub fn save(&mut self) -> Result<SaveOutcome, DeviceError> {
-        match self.request(&Request::SaveConfig(()))? {
+        let patience = self.timeouts.stall;
+        match self.request_within(&Request::SaveConfig(()), patience)? {
             Response::SaveConfig(result) => {
                 result.map_err(|e| command_error(Command::SaveConfig, e))
             }
@@ -225,7 +247,11 @@ impl<L: Link> DeviceClient<L> {
         }
         let started = Instant::now();
         loop {
-            match self.status()?.save {
+            let status = match self.request_within(&Request::GetStatus(()), self.timeouts.stall)? {
+                Response::GetStatus(status) => status,
+                other => return Err(unexpected(Command::GetStatus, &other)),
+            };
+            match status.save {
                 SaveState::Idle => return Ok(outcome),
                 SaveState::Failed => return Err(DeviceError::SaveFailed),
                 SaveState::Pending if started.elapsed() > self.timeouts.save => {
@@ -270,6 +296,15 @@ impl<L: Link> DeviceClient<L> {
 
     /// Sends `request` and returns the device's answer, retrying with the same sequence number.
     pub fn request(&mut self, request: &Request) -> Result<Response, DeviceError> {
+        self.request_within(request, Duration::ZERO)
+    }
+
+    /// [`Self::request`], retransmitting until at least `patience` has passed without a reply.
+    fn request_within(
+        &mut self,
+        request: &Request,
+        patience: Duration,
+    ) -> Result<Response, DeviceError> {
         let command = request.command();
         let seq = self.take_seq();
         // Leading 0x00: ends whatever partial frame the device may hold.
@@ -278,7 +313,7 @@ impl<L: Link> DeviceClient<L> {
             .map_err(|error| DeviceError::Encode { command, error })?
             .len();
         let frame = &frame[..len + 1];
-        let attempts = self.timeouts.attempts.max(1);
+        let attempts = self.timeouts.attempts_for(patience);
         let mut last_protocol_error = None;
         self.noise = None;
         for _ in 0..attempts {
@@ -341,6 +376,14 @@ impl<L: Link> DeviceClient<L> {
             }
         }
     }
+}
+
+/// A random sequence number to start a session at (never [`SEQ_UNKNOWN`]): std's per-process
+/// random hashing keys are the randomness.
+fn first_sequence_number() -> u32 {
+    use std::hash::{BuildHasher, RandomState};
+    let seq = RandomState::new().hash_one(std::process::id()) as u32;
+    if seq == SEQ_UNKNOWN { 1 } else { seq }
 }
 
 /// Interprets one received frame while waiting for the reply to `seq`.

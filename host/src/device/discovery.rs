@@ -1,20 +1,16 @@
 //! Finding luminaires among the host's serial ports.
 //!
 //! `serialport::available_ports()` (built without libudev) scans `/sys/class/tty` and reads each
-//! USB device's `idVendor`, `idProduct` and `product` attributes. A port is a luminaire when its
-//! USB IDs are [`USB_VID`]:[`USB_PID`] and its product string is [`USB_PRODUCT`]: the IDs are the
-//! shared V-USB CDC-ACM pair, which by its licence must be told apart by the strings.
+//! USB device's `idVendor`, `idProduct`, `manufacturer` and `product` attributes. A port is a
+//! luminaire when all four match the identity the firmware enumerates with
+//! ([`protocol::usb::is_luminaire`]): pid.codes' VID with a placeholder test PID, so the strings
+//! are compared in full too.
 
 use std::path::{Path, PathBuf};
 
 use serde::Serialize;
 
-/// USB vendor ID the firmware enumerates with (shared V-USB/obdev CDC-ACM ID).
-pub const USB_VID: u16 = 0x16c0;
-/// USB product ID the firmware enumerates with (shared V-USB/obdev CDC-ACM ID).
-pub const USB_PID: u16 = 0x05e1;
-/// USB product string the firmware reports; it is what tells our boards apart.
-pub const USB_PRODUCT: &str = "meb luminaire";
+pub use protocol::usb::{USB_MANUFACTURER, USB_PID, USB_PRODUCT, USB_VID};
 
 /// One serial port on the host.
 #[derive(Debug, Clone, PartialEq, Eq, Serialize)]
@@ -25,11 +21,13 @@ pub struct PortEntry {
     pub vid: Option<u16>,
     /// USB product ID, when the port is on USB.
     pub pid: Option<u16>,
+    /// USB manufacturer string, when reported.
+    pub manufacturer: Option<String>,
     /// USB product string, when reported.
     pub product: Option<String>,
     /// USB serial number, when reported.
     pub serial_number: Option<String>,
-    /// Whether the port is a meb luminaire (IDs and product string match).
+    /// Whether the port is a meb luminaire (IDs and both strings match).
     pub is_luminaire: bool,
 }
 
@@ -38,16 +36,16 @@ pub struct PortEntry {
 #[non_exhaustive]
 pub enum DiscoveryError {
     /// The operating system's port list could not be read.
-    #[error("cannot list serial ports: {0}")]
+    #[error("cannot list serial ports")]
     List(#[from] serialport::Error),
     /// No luminaire is attached.
     #[error(
-        "no meb luminaire found (looked for USB {USB_VID:04x}:{USB_PID:04x} \"{USB_PRODUCT}\"); \
-         plug one in or pass --port PATH (e.g. the path printed by `meb device emulate`)"
+        "no meb luminaire found (looked for USB {USB_VID:04x}:{USB_PID:04x}, \
+         \"{USB_MANUFACTURER}\" \"{USB_PRODUCT}\")"
     )]
     NoLuminaire,
     /// More than one luminaire is attached and none was chosen.
-    #[error("{} meb luminaires attached ({}); choose one with --port PATH", .0.len(), join_paths(.0))]
+    #[error("{} meb luminaires attached ({}): name the one to use", .0.len(), join_paths(.0))]
     SeveralLuminaires(Vec<PathBuf>),
 }
 
@@ -59,9 +57,9 @@ fn join_paths(paths: &[PathBuf]) -> String {
         .join(", ")
 }
 
-/// Whether USB identity `(vid, pid, product)` is a meb luminaire.
-pub fn is_luminaire(vid: u16, pid: u16, product: Option<&str>) -> bool {
-    vid == USB_VID && pid == USB_PID && product.is_some_and(|p| p.trim() == USB_PRODUCT)
+/// Whether USB identity `(vid, pid, manufacturer, product)` is a meb luminaire.
+pub fn is_luminaire(vid: u16, pid: u16, manufacturer: Option<&str>, product: Option<&str>) -> bool {
+    protocol::usb::is_luminaire(vid, pid, manufacturer, product)
 }
 
 /// Every serial port the OS reports, luminaires marked.
@@ -78,10 +76,16 @@ fn entry_from_info(info: serialport::SerialPortInfo) -> PortEntry {
     let path = PathBuf::from(info.port_name);
     match info.port_type {
         serialport::SerialPortType::UsbPort(usb) => PortEntry {
-            is_luminaire: is_luminaire(usb.vid, usb.pid, usb.product.as_deref()),
+            is_luminaire: is_luminaire(
+                usb.vid,
+                usb.pid,
+                usb.manufacturer.as_deref(),
+                usb.product.as_deref(),
+            ),
             path,
             vid: Some(usb.vid),
             pid: Some(usb.pid),
+            manufacturer: usb.manufacturer,
             product: usb.product,
             serial_number: usb.serial_number,
         },
@@ -89,6 +93,7 @@ fn entry_from_info(info: serialport::SerialPortInfo) -> PortEntry {
             path,
             vid: None,
             pid: None,
+            manufacturer: None,
             product: None,
             serial_number: None,
             is_luminaire: false,
@@ -122,34 +127,59 @@ pub fn choose_luminaire(ports: &[PortEntry]) -> Result<PathBuf, DiscoveryError> 
 mod tests {
     use super::*;
 
-    fn entry(path: &str, vid: u16, pid: u16, product: &str) -> PortEntry {
+    fn entry(path: &str, vid: u16, pid: u16, manufacturer: &str, product: &str) -> PortEntry {
         PortEntry {
             path: PathBuf::from(path),
             vid: Some(vid),
             pid: Some(pid),
+            manufacturer: Some(manufacturer.into()),
             product: Some(product.into()),
             serial_number: None,
-            is_luminaire: is_luminaire(vid, pid, Some(product)),
+            is_luminaire: is_luminaire(vid, pid, Some(manufacturer), Some(product)),
         }
     }
 
     #[test]
-    fn marks_only_matching_ids_and_product() {
-        assert!(is_luminaire(USB_VID, USB_PID, Some("meb luminaire")));
+    fn marks_only_the_full_identity() {
+        assert!(is_luminaire(
+            USB_VID,
+            USB_PID,
+            Some(USB_MANUFACTURER),
+            Some(USB_PRODUCT)
+        ));
+        // Another gadget on the shared test PID, or the old V-USB pair.
         assert!(!is_luminaire(
             USB_VID,
             USB_PID,
-            Some("some other V-USB gadget")
+            Some("someone"),
+            Some(USB_PRODUCT)
         ));
-        assert!(!is_luminaire(USB_VID, USB_PID, None));
-        assert!(!is_luminaire(0x2341, USB_PID, Some("meb luminaire")));
+        assert!(!is_luminaire(
+            0x16c0,
+            0x05e1,
+            Some(USB_MANUFACTURER),
+            Some(USB_PRODUCT)
+        ));
+        assert!(!is_luminaire(USB_VID, USB_PID, None, Some(USB_PRODUCT)));
     }
 
     #[test]
     fn chooses_exactly_one() {
-        let other = entry("/dev/ttyACM0", 0x2341, 0x0043, "Arduino Uno");
-        let a = entry("/dev/ttyACM1", USB_VID, USB_PID, USB_PRODUCT);
-        let b = entry("/dev/ttyACM2", USB_VID, USB_PID, USB_PRODUCT);
+        let other = entry("/dev/ttyACM0", 0x2341, 0x0043, "Arduino", "Arduino Uno");
+        let a = entry(
+            "/dev/ttyACM1",
+            USB_VID,
+            USB_PID,
+            USB_MANUFACTURER,
+            USB_PRODUCT,
+        );
+        let b = entry(
+            "/dev/ttyACM2",
+            USB_VID,
+            USB_PID,
+            USB_MANUFACTURER,
+            USB_PRODUCT,
+        );
         assert!(matches!(
             choose_luminaire(std::slice::from_ref(&other)),
             Err(DiscoveryError::NoLuminaire)
@@ -161,6 +191,17 @@ mod tests {
         let err = choose_luminaire(&[a, other, b]).unwrap_err();
         assert!(matches!(&err, DiscoveryError::SeveralLuminaires(p) if p.len() == 2));
         assert!(err.to_string().contains("/dev/ttyACM2"), "{err}");
+    }
+
+    #[test]
+    fn errors_name_no_command_line_flag() {
+        // The library does not know how its caller lets a user pick a port.
+        for err in [
+            DiscoveryError::NoLuminaire,
+            DiscoveryError::SeveralLuminaires(vec!["/dev/a".into(), "/dev/b".into()]),
+        ] {
+            assert!(!err.to_string().contains("--"), "{err}");
+        }
     }
 
     #[test]

@@ -3,8 +3,11 @@
 //!
 //! It answers byte for byte like the firmware, because it runs the same code; only the
 //! hardware effects differ: `ApplyOutput`/`Start`/`Stop`/`Identify` append to a [`Timeline`]
-//! (optionally mirrored to a JSON file), `Persist` writes the [`ConfigStore`] file and reports
-//! back with `notify_saved`. Restarting on the same storage file is a power cycle.
+//! (optionally mirrored to a JSON file), `Persist` writes the [`ConfigStore`] file (pausing for
+//! [`EmulatorOptions::save_stall`] as the board's CPU stalls during a flash erase) and reports
+//! back with `notify_saved`. [`VirtualLuminaire::inject_output_fault`] plays a DMA fault the way
+//! the firmware's carrier watch reports one. Restarting on the same storage file is a power
+//! cycle.
 
 use std::io::{self, Read, Write};
 use std::path::{Path, PathBuf};
@@ -14,7 +17,7 @@ use std::thread::JoinHandle;
 use std::time::{Duration, Instant};
 
 use protocol::luminaire::{BoardInfo, Effect, Endpoint, Luminaire, OutputPlan, RestoredConfig};
-use protocol::wire::CommandError;
+use protocol::wire::{CommandError, OutputFault};
 
 use super::pty::{PseudoTerminal, PtyError};
 use super::storage::ConfigStore;
@@ -32,6 +35,9 @@ pub struct EmulatorOptions {
     pub rate_error_ppm: f64,
     /// File the light timeline is written to after every change.
     pub timeline: Option<PathBuf>,
+    /// How long serving pauses on every save, like the board whose CPU stalls while a flash
+    /// sector is erased (up to 2 s); zero by default.
+    pub save_stall: Duration,
 }
 
 /// Error starting or running the virtual luminaire.
@@ -47,9 +53,12 @@ pub enum EmulatorError {
     /// The rate error is not a finite number above −10⁶ ppm.
     #[error("rate error {0} ppm is not a usable crystal error")]
     RateError(f64),
-    /// The serving thread could not be started or panicked.
-    #[error("the emulator thread failed: {0}")]
-    Thread(String),
+    /// The serving thread could not be started.
+    #[error("cannot start the emulator thread")]
+    Spawn(#[source] io::Error),
+    /// The serving thread panicked.
+    #[error("the emulator thread panicked")]
+    Panicked,
 }
 
 /// Where the luminaire booted from and what it plays, shared with the serving thread.
@@ -57,6 +66,7 @@ pub enum EmulatorError {
 struct Shared {
     timeline: Mutex<Timeline>,
     stop: AtomicBool,
+    fault: Mutex<Option<OutputFault>>,
 }
 
 /// A running virtual luminaire; stops when shut down or dropped.
@@ -98,6 +108,7 @@ impl VirtualLuminaire {
             shared: Arc::new(Shared {
                 timeline: Mutex::new(Timeline::new(ppm)),
                 stop: AtomicBool::new(false),
+                fault: Mutex::new(None),
             }),
         };
         let shared = Arc::clone(&server.shared);
@@ -105,7 +116,7 @@ impl VirtualLuminaire {
         let thread = std::thread::Builder::new()
             .name("virtual-luminaire".into())
             .spawn(move || server.serve())
-            .map_err(|e| EmulatorError::Thread(e.to_string()))?;
+            .map_err(EmulatorError::Spawn)?;
         Ok(Self {
             port_path,
             restored,
@@ -133,6 +144,17 @@ impl VirtualLuminaire {
             .clone()
     }
 
+    /// Makes the virtual hardware stop its carriers with `fault`, as the firmware does when a
+    /// DMA stream fails: the outputs go off and `GetStatus` reports the fault until the next
+    /// `Start` or `SetConfig`.
+    pub fn inject_output_fault(&self, fault: OutputFault) {
+        *self
+            .shared
+            .fault
+            .lock()
+            .unwrap_or_else(PoisonError::into_inner) = Some(fault);
+    }
+
     /// Whether the serving thread is still running.
     pub fn is_running(&self) -> bool {
         self.thread.as_ref().is_some_and(|t| !t.is_finished())
@@ -148,7 +170,7 @@ impl VirtualLuminaire {
         self.shared.stop.store(true, Ordering::Relaxed);
         match self.thread.take().map(JoinHandle::join) {
             Some(Ok(result)) => result,
-            Some(Err(_)) => Err(EmulatorError::Thread("serving thread panicked".into())),
+            Some(Err(_)) => Err(EmulatorError::Panicked),
             None => Ok(()),
         }
     }
@@ -191,6 +213,7 @@ impl Server {
                 self.endpoint.luminaire.notify_identify_finished();
                 self.record()?;
             }
+            self.watch_carriers()?;
             if !self.pty.wait_readable(Duration::from_millis(20))? {
                 continue;
             }
@@ -222,6 +245,24 @@ impl Server {
         Ok(())
     }
 
+    /// The firmware's carrier watch: an injected fault stops the carriers and is reported.
+    fn watch_carriers(&mut self) -> Result<(), EmulatorError> {
+        let fault = self
+            .shared
+            .fault
+            .lock()
+            .unwrap_or_else(PoisonError::into_inner)
+            .take();
+        if let Some(fault) = fault
+            && self.running
+        {
+            self.running = false;
+            self.endpoint.luminaire.notify_output_fault(fault);
+            self.record()?;
+        }
+        Ok(())
+    }
+
     /// Plays effects on the "hardware", then records the resulting output once.
     fn carry_out(&mut self, effects: impl Iterator<Item = Effect>) -> Result<(), EmulatorError> {
         for effect in effects {
@@ -237,6 +278,8 @@ impl Server {
                     }
                 }
                 Effect::Persist(config) => {
+                    // The board's CPU (and its USB) stalls while flash is erased.
+                    std::thread::sleep(self.options.save_stall);
                     let result = match &self.store {
                         Some(store) => store.save(&config).map_err(|_| CommandError::StorageFailed),
                         None => {
@@ -298,6 +341,7 @@ mod tests {
             reply: Duration::from_millis(300),
             attempts: 3,
             save: Duration::from_secs(5),
+            stall: Duration::from_secs(3),
         }
     }
 
@@ -308,6 +352,7 @@ mod tests {
             storage: Some(dir.path().join("flash.rec")),
             rate_error_ppm: 50.0,
             timeline: Some(dir.path().join("timeline.json")),
+            ..EmulatorOptions::default()
         };
         let emulator = VirtualLuminaire::spawn(options.clone()).unwrap();
         assert_eq!(emulator.restored(), RestoredConfig::Missing);
@@ -339,6 +384,67 @@ mod tests {
             client.status().unwrap().config_source,
             ConfigSource::Restored
         );
+    }
+
+    #[test]
+    fn a_save_that_stalls_the_luminaire_for_two_seconds_still_completes() {
+        let emulator = VirtualLuminaire::spawn(EmulatorOptions {
+            save_stall: Duration::from_secs(2),
+            ..EmulatorOptions::default()
+        })
+        .unwrap();
+        // Three replies of 500 ms each (1.5 s) would give up during the stall; the client
+        // keeps trying for `stall` (3 s by default) around a save.
+        let timeouts = Timeouts::default();
+        assert!(timeouts.stall >= Duration::from_secs(3));
+        let mut client = DeviceClient::open(emulator.port_path(), timeouts).unwrap();
+        let started = Instant::now();
+        assert_eq!(client.save_and_wait().unwrap(), SaveOutcome::Deferred);
+        assert!(started.elapsed() >= Duration::from_secs(2));
+        assert!(!client.status().unwrap().unsaved_changes);
+        // Without that patience the same save fails.
+        drop(client);
+        let impatient = Timeouts {
+            stall: Duration::ZERO,
+            ..Timeouts::default()
+        };
+        let mut client = DeviceClient::open(emulator.port_path(), impatient).unwrap();
+        client
+            .set_config(&LuminaireConfig {
+                led_count: 2,
+                ..LuminaireConfig::DEFAULT
+            })
+            .unwrap();
+        assert!(matches!(
+            client.save_and_wait(),
+            Err(DeviceError::Timeout { .. })
+        ));
+    }
+
+    #[test]
+    fn an_output_fault_stops_the_light_and_shows_in_status_until_start() {
+        let emulator = VirtualLuminaire::spawn(EmulatorOptions::default()).unwrap();
+        let mut client = DeviceClient::open(emulator.port_path(), quick()).unwrap();
+        assert_eq!(client.status().unwrap().output_fault, None);
+        emulator.inject_output_fault(OutputFault::DmaTransferError);
+        let deadline = Instant::now() + Duration::from_secs(5);
+        let status = loop {
+            let status = client.status().unwrap();
+            if status.output_fault.is_some() || Instant::now() > deadline {
+                break status;
+            }
+            std::thread::sleep(Duration::from_millis(20));
+        };
+        assert_eq!(status.output_fault, Some(OutputFault::DmaTransferError));
+        assert!(!status.running);
+        let last = emulator.timeline().segments.last().cloned().unwrap();
+        assert_eq!(last.mode, OutputMode::Off, "the light went off");
+        client.start().unwrap();
+        let status = client.status().unwrap();
+        assert_eq!(status.output_fault, None);
+        assert!(status.running);
+        let last = emulator.timeline().segments.last().cloned().unwrap();
+        assert_eq!(last.mode, OutputMode::Playing);
     }
 
     #[test]
@@ -414,6 +520,7 @@ mod tests {
                 reply: Duration::from_millis(30),
                 attempts: 2,
                 save: Duration::from_secs(1),
+                stall: Duration::ZERO,
             },
         )
         .unwrap();

@@ -1,25 +1,28 @@
 //! Device control: talking to meb luminaires over USB serial, and a virtual luminaire.
 //!
-//! * [`discovery`]: which serial ports are luminaires (USB IDs and product string).
+//! * [`discovery`]: which serial ports are luminaires (USB IDs and strings).
 //! * [`transport`]: the byte link, a `serialport` port with deadlines.
-//! * [`pty`]: a raw pseudo-terminal pair the virtual luminaire serves on.
+//! * [`pty`]: a raw pseudo-terminal pair the virtual luminaire serves on (Unix).
 //! * [`client`]: [`DeviceClient`], one method per protocol command, retries and typed errors.
 //! * [`storage`]: the emulator's record file standing in for flash.
 //! * [`timeline`]: the light a luminaire emits, recorded, as a waveform for the simulator.
-//! * [`emulator`]: [`VirtualLuminaire`], the protocol's state machine served on a pty.
+//! * [`emulator`]: [`VirtualLuminaire`], the protocol's state machine served on a pty (Unix).
 //!
-//! The wire format, the configuration and the luminaire's behaviour all come from the
-//! `protocol` crate (issue 2), so the host, the firmware and the emulator cannot disagree.
+//! The wire format, the configuration, the USB identity and the luminaire's behaviour all come
+//! from the `protocol` crate, so the host, the firmware and the emulator cannot disagree.
 
 pub mod client;
 pub mod discovery;
+#[cfg(unix)]
 pub mod emulator;
+#[cfg(unix)]
 pub mod pty;
 pub mod storage;
 pub mod timeline;
 pub mod transport;
 
 pub use client::{DeviceClient, DeviceError, Timeouts};
-pub use discovery::{USB_PID, USB_PRODUCT, USB_VID};
+pub use discovery::{USB_MANUFACTURER, USB_PID, USB_PRODUCT, USB_VID};
+#[cfg(unix)]
 pub use emulator::{EmulatorOptions, VirtualLuminaire};
 pub use timeline::{Timeline, TimelineWaveform};

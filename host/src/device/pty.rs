@@ -22,16 +22,16 @@ use nix::sys::termios::{SetArg, cfmakeraw, tcgetattr, tcsetattr};
 #[non_exhaustive]
 pub enum PtyError {
     /// `openpty` failed (no free pseudo-terminals, no `/dev/ptmx`).
-    #[error("cannot open a pseudo-terminal: {0}")]
+    #[error("cannot open a pseudo-terminal")]
     Open(#[source] nix::Error),
     /// Switching the slave to raw mode failed.
-    #[error("cannot put the pseudo-terminal into raw mode: {0}")]
+    #[error("cannot put the pseudo-terminal into raw mode")]
     RawMode(#[source] nix::Error),
     /// The slave's device path could not be determined.
-    #[error("cannot name the pseudo-terminal's slave device: {0}")]
+    #[error("cannot name the pseudo-terminal's slave device")]
     SlavePath(#[source] nix::Error),
     /// Reading, writing or waiting on the master failed.
-    #[error("pseudo-terminal I/O failed: {0}")]
+    #[error("pseudo-terminal I/O failed")]
     Io(#[from] io::Error),
 }
 

@@ -17,10 +17,10 @@ use protocol::record::{MAX_RECORD_LEN, RecordError, decode_record, encode_record
 #[non_exhaustive]
 pub enum StorageError {
     /// The configuration does not fit a record (cannot happen for a valid one).
-    #[error("cannot encode the configuration record: {0}")]
-    Encode(RecordError),
+    #[error("cannot encode the configuration record")]
+    Encode(#[source] RecordError),
     /// The file could not be written or renamed.
-    #[error("cannot write {path}: {source}")]
+    #[error("cannot write {path}")]
     Io {
         /// The record file.
         path: PathBuf,

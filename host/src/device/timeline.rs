@@ -20,7 +20,7 @@ use protocol::config::ChipRate;
 use protocol::luminaire::OutputPlan;
 use serde::{Deserialize, Serialize};
 
-use crate::simulate::LedWaveform;
+use crate::led_waveform::LedWaveform;
 
 /// `format` tag of a timeline file.
 pub const TIMELINE_FORMAT: &str = "meb-luminaire-timeline";
@@ -81,7 +81,7 @@ impl TimelineSegment {
 #[non_exhaustive]
 pub enum TimelineError {
     /// The file could not be read or written.
-    #[error("timeline file {path}: {source}")]
+    #[error("timeline file {path}")]
     Io {
         /// The file.
         path: PathBuf,
@@ -89,13 +89,31 @@ pub enum TimelineError {
         #[source]
         source: io::Error,
     },
-    /// The file is not a timeline (bad JSON, wrong format tag or version).
+    /// The file is not JSON of a timeline.
+    #[error("{path} is not a meb luminaire timeline")]
+    Json {
+        /// The file.
+        path: PathBuf,
+        /// What the JSON reader found.
+        #[source]
+        source: serde_json::Error,
+    },
+    /// The file is a timeline of another format tag or version.
     #[error("{path} is not a meb luminaire timeline: {reason}")]
     Format {
         /// The file.
         path: PathBuf,
         /// What is wrong.
         reason: String,
+    },
+    /// A segment's LED count and phases do not make a chip table.
+    #[error("timeline segment {index} is invalid")]
+    Carriers {
+        /// 0-based segment index.
+        index: usize,
+        /// Why the chip table could not be built.
+        #[source]
+        source: protocol::carriers::CarrierError,
     },
     /// A segment is inconsistent (unordered, bad LED count, rate, or list lengths).
     #[error("timeline segment {index} is invalid: {reason}")]
@@ -153,7 +171,10 @@ impl Timeline {
             reason,
         };
         let timeline: Timeline =
-            serde_json::from_str(&text).map_err(|e| format_err(e.to_string()))?;
+            serde_json::from_str(&text).map_err(|source| TimelineError::Json {
+                path: path.to_path_buf(),
+                source,
+            })?;
         if timeline.format != TIMELINE_FORMAT || timeline.version != TIMELINE_VERSION {
             return Err(format_err(format!(
                 "format {:?} version {}, expected {TIMELINE_FORMAT:?} version {TIMELINE_VERSION}",
@@ -265,12 +286,8 @@ impl TimelineWaveform {
         for (index, s) in timeline.segments.iter().enumerate() {
             let mut phases = [0u16; MAX_LEDS];
             phases[..s.phase_chips.len()].copy_from_slice(&s.phase_chips);
-            let table = ChipTable::with_phases(s.led_count, &phases).map_err(|e| {
-                TimelineError::Segment {
-                    index,
-                    reason: e.to_string(),
-                }
-            })?;
+            let table = ChipTable::with_phases(s.led_count, &phases)
+                .map_err(|source| TimelineError::Carriers { index, source })?;
             let mut gain = [0.0; MAX_LEDS];
             for (g, &b) in gain.iter_mut().zip(&s.brightness_permille) {
                 *g = f64::from(b) / 1000.0;
@@ -578,6 +595,14 @@ mod tests {
             Err(TimelineError::BeforeFirstSegment { .. })
         ));
         std::fs::write(&path, "{\"format\":\"x\"}").unwrap();
+        let err = Timeline::read(&path).unwrap_err();
+        assert!(matches!(err, TimelineError::Json { .. }), "{err:?}");
+        // The JSON reader's own error is kept as the source, not copied into the message.
+        assert!(std::error::Error::source(&err).is_some());
+        assert!(!err.to_string().contains("missing field"), "{err}");
+        let mut wrong_version = serde_json::to_value(&timeline).unwrap();
+        wrong_version["version"] = serde_json::json!(99);
+        std::fs::write(&path, wrong_version.to_string()).unwrap();
         assert!(matches!(
             Timeline::read(&path),
             Err(TimelineError::Format { .. })

@@ -30,7 +30,7 @@ pub enum OpenError {
         path: PathBuf,
     },
     /// Any other failure to open or configure the port.
-    #[error("cannot open {path}: {source}")]
+    #[error("cannot open {path}")]
     Other {
         /// The path that was tried.
         path: PathBuf,
@@ -127,10 +127,11 @@ impl Link for SerialLink {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::device::pty::PseudoTerminal;
 
+    #[cfg(unix)]
     #[test]
     fn serial_link_talks_to_a_pty() {
+        use crate::device::pty::PseudoTerminal;
         let mut pty = PseudoTerminal::open().unwrap();
         let mut link = SerialLink::open(pty.slave_path()).unwrap();
         link.send(b"hello").unwrap();

@@ -2,7 +2,7 @@
 //! y up, origin at the image centre), two triangles per grid square whose corners exist, facing
 //! the camera. Written as binary PLY, OBJ or binary STL (via `stl_io`).
 
-use super::{ExportError, write_atomic};
+use super::{ExportError, FilesError};
 use crate::types::DepthMap;
 use std::path::Path;
 
@@ -106,9 +106,9 @@ impl SurfaceMesh {
             })
             .collect();
         let mut out = Vec::new();
-        stl_io::write_stl(&mut out, tris.iter()).map_err(|e| ExportError::Write {
-            path: "(stl)".into(),
-            reason: e.to_string(),
+        stl_io::write_stl(&mut out, tris.iter()).map_err(|e| FilesError::Encode {
+            path: "(STL in memory)".into(),
+            source: Box::new(e),
         })?;
         Ok(out)
     }
@@ -123,7 +123,7 @@ impl SurfaceMesh {
             Some("stl") => self.to_stl()?,
             _ => self.to_ply(),
         };
-        write_atomic(path, &bytes)
+        std::fs::write(path, bytes).map_err(|e| FilesError::write(path, e).into())
     }
 }
 

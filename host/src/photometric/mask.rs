@@ -33,15 +33,9 @@ impl Default for MaskConfig {
     }
 }
 
-/// The `q`-quantile (0..1) of the finite values, or 0 when there are none.
-pub(crate) fn quantile(values: impl Iterator<Item = f32>, q: f64) -> f32 {
-    let mut v: Vec<f32> = values.filter(|x| x.is_finite()).collect();
-    if v.is_empty() {
-        return 0.0;
-    }
-    let idx = ((v.len() - 1) as f64 * q.clamp(0.0, 1.0)).round() as usize;
-    let (_, x, _) = v.select_nth_unstable_by(idx, f32::total_cmp);
-    *x
+/// The `q`-quantile of the finite values, or 0 when there are none.
+fn quantile(values: impl Iterator<Item = f32>, q: f64) -> f32 {
+    crate::stats::quantile(values, q).unwrap_or(0.0)
 }
 
 /// Object mask from LED images, solved albedo, the solved-pixel mask and an optional noise map.

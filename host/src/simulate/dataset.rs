@@ -11,15 +11,15 @@
 use super::SimulateError;
 use super::capture::{SimConfig, SimulatedCapture};
 use super::mesh::TriMesh;
-use super::output::{StagingDir, write_mask};
 use super::scene::{Scene, SceneObject, Shape};
 use super::sensor::NoiseModel;
+use crate::export::files::{FilesError, write_mask, write_npy};
 use crate::rig::Rig;
 use nalgebra::UnitQuaternion;
 use rand::{RngExt, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 use serde::Serialize;
-use std::path::{Path, PathBuf};
+use std::path::Path;
 use std::sync::Arc;
 
 /// Settings of the data set.
@@ -33,8 +33,6 @@ pub struct DatasetConfig {
     pub size_mm: f64,
     /// Seed of the shapes and poses.
     pub seed: u64,
-    /// Replace a non-empty output directory.
-    pub force: bool,
 }
 
 impl DatasetConfig {
@@ -59,7 +57,6 @@ impl DatasetConfig {
             rig,
             size_mm: 120.0,
             seed,
-            force: false,
         }
     }
 }
@@ -85,12 +82,13 @@ struct DatasetIndex {
     objects: Vec<String>,
 }
 
-/// Writes the data set to `out` atomically; `progress(done, total)` after each object.
+/// Writes the data set into the existing folder `dir` (one the caller replaces atomically);
+/// `progress(done, total)` after each object.
 pub fn write_dataset(
     config: &DatasetConfig,
-    out: &Path,
+    dir: &Path,
     progress: &mut dyn FnMut(usize, usize),
-) -> Result<PathBuf, SimulateError> {
+) -> Result<(), SimulateError> {
     if config.count == 0 {
         return Err(SimulateError::Invalid {
             field: "count".into(),
@@ -103,8 +101,6 @@ pub fn write_dataset(
             reason: "must be a positive number".into(),
         });
     }
-    let staging = StagingDir::create(out, config.force)?;
-    let dir = staging.path().to_path_buf();
     let mut rng = ChaCha8Rng::seed_from_u64(config.seed);
     let mut names = Vec::with_capacity(config.count);
     let sim = SimConfig {
@@ -126,17 +122,13 @@ pub fn write_dataset(
         let truth = capture.truth_at(0.0);
         let name = format!("object_{k:04}");
         let odir = dir.join(&name);
-        std::fs::create_dir(&odir).map_err(|e| write(&odir, e))?;
+        std::fs::create_dir(&odir).map_err(|e| FilesError::write(&odir, e))?;
         for (i, image) in truth.led_true.images.iter().enumerate() {
-            let path = odir.join(format!("led{}.npy", i + 1));
-            ndarray_npy::write_npy(&path, image).map_err(|e| write(&path, e))?;
+            write_npy(&odir.join(format!("led{}.npy", i + 1)), image)?;
         }
-        let path = odir.join("depth.npy");
-        ndarray_npy::write_npy(&path, &truth.depth_mm).map_err(|e| write(&path, e))?;
-        let path = odir.join("normals.npy");
-        ndarray_npy::write_npy(&path, &truth.normals).map_err(|e| write(&path, e))?;
-        let path = odir.join("albedo.npy");
-        ndarray_npy::write_npy(&path, &truth.albedo).map_err(|e| write(&path, e))?;
+        write_npy(&odir.join("depth.npy"), &truth.depth_mm)?;
+        write_npy(&odir.join("normals.npy"), &truth.normals)?;
+        write_npy(&odir.join("albedo.npy"), &truth.albedo)?;
         write_mask(&odir.join("mask.png"), &truth.mask)?;
         let gain = capture.info().gain;
         let lights = LightVectors {
@@ -154,7 +146,8 @@ pub fn write_dataset(
         progress(k + 1, config.count);
     }
     let rig_path = dir.join("rig.toml");
-    std::fs::write(&rig_path, config.rig.to_toml_string()).map_err(|e| write(&rig_path, e))?;
+    std::fs::write(&rig_path, config.rig.to_toml_string())
+        .map_err(|e| FilesError::write(&rig_path, e))?;
     let index = DatasetIndex {
         count: config.count,
         seed: config.seed,
@@ -164,20 +157,15 @@ pub fn write_dataset(
         pitch_mm: config.rig.camera.pitch_mm(),
         objects: names,
     };
-    write_json(&dir.join("dataset.json"), &index)?;
-    staging.commit()
-}
-
-fn write(path: &Path, e: impl std::fmt::Display) -> SimulateError {
-    SimulateError::Write {
-        path: path.to_path_buf(),
-        reason: e.to_string(),
-    }
+    write_json(&dir.join("dataset.json"), &index)
 }
 
 fn write_json(path: &Path, value: &impl Serialize) -> Result<(), SimulateError> {
-    let text = serde_json::to_string_pretty(value).map_err(|e| write(path, e))?;
-    std::fs::write(path, text).map_err(|e| write(path, e))
+    let text = serde_json::to_string_pretty(value).map_err(|e| FilesError::Encode {
+        path: path.to_path_buf(),
+        source: Box::new(e),
+    })?;
+    std::fs::write(path, text).map_err(|e| FilesError::write(path, e).into())
 }
 
 #[cfg(test)]
@@ -190,8 +178,8 @@ mod tests {
         config.rig.camera.width = 96;
         config.rig.camera.height = 54;
         let tmp = tempfile::tempdir().unwrap();
-        let out = tmp.path().join("ds");
-        write_dataset(&config, &out, &mut |_, _| {}).unwrap();
+        let out = tmp.path();
+        write_dataset(&config, out, &mut |_, _| {}).unwrap();
         for name in ["object_0000", "object_0001"] {
             let mask = image::open(out.join(name).join("mask.png"))
                 .unwrap()

@@ -2,15 +2,17 @@
 //! `ffmpeg` program) and the ground truth (`depth.npy`, `normals.npy`, `mask.png`,
 //! `albedo.npy`, `led<i>_true.npy`, `rig.toml`, `truth.json`).
 //!
-//! Everything is written into a hidden temporary directory next to the destination and renamed
-//! into place only when complete, so a failed or interrupted run never leaves a half-written
-//! result under the requested name. Frames are rendered and written one at a time (bounded
-//! memory). 10- and 12-bit samples are stored in 16-bit containers scaled to full range
-//! (code · 65535 / (2^b − 1)); MP4 is lossless H.264 (`-qp 0`) in `gray` (8-bit) or `gray10le`.
+//! Everything is written into a folder the caller replaces atomically (an
+//! [`OutputFolder`](crate::export::files::OutputFolder)), so a failed or interrupted run never
+//! leaves a half-written result under the requested name. Frames are rendered and written one
+//! at a time (bounded memory). 10- and 12-bit samples are stored in 16-bit containers scaled to
+//! full range (code · 65535 / (2^b − 1)); MP4 is lossless H.264 (`-qp 0`) in `gray` (8-bit) or
+//! `gray10le`.
 
 use super::SimulateError;
 use super::capture::{GroundTruth, SimulatedCapture, TruthInfo};
 use crate::capture::{Frame, FrameFormat, FrameSource, Samples};
+use crate::export::files::{FilesError, write_mask, write_npy};
 use crate::rig::Rig;
 use image::{ImageBuffer, Luma};
 use serde::Serialize;
@@ -30,87 +32,16 @@ pub enum VideoFormat {
     Mp4,
 }
 
-fn write_err(path: &Path, e: impl std::fmt::Display) -> SimulateError {
-    SimulateError::Write {
+fn write_err(path: &Path, e: std::io::Error) -> SimulateError {
+    FilesError::write(path, e).into()
+}
+
+fn encode_err(path: &Path, e: impl std::error::Error + Send + Sync + 'static) -> SimulateError {
+    FilesError::Encode {
         path: path.to_path_buf(),
-        reason: e.to_string(),
+        source: Box::new(e),
     }
-}
-
-/// A temporary output directory that becomes `target` on [`Self::commit`] and is deleted if
-/// dropped before that.
-#[derive(Debug)]
-pub struct StagingDir {
-    target: PathBuf,
-    temp: PathBuf,
-    force: bool,
-    committed: bool,
-}
-
-impl StagingDir {
-    /// Prepares a staging directory for `target`; refuses a non-empty `target` unless `force`.
-    pub fn create(target: &Path, force: bool) -> Result<Self, SimulateError> {
-        if target.exists() && !force {
-            let empty = std::fs::read_dir(target)
-                .map(|mut d| d.next().is_none())
-                .unwrap_or(false);
-            if !empty {
-                return Err(SimulateError::OutputExists(target.to_path_buf()));
-            }
-        }
-        let name = target
-            .file_name()
-            .map(|n| n.to_string_lossy().into_owned())
-            .unwrap_or_else(|| "out".into());
-        let parent = match target.parent() {
-            Some(p) if !p.as_os_str().is_empty() => p.to_path_buf(),
-            _ => PathBuf::from("."),
-        };
-        std::fs::create_dir_all(&parent).map_err(|e| write_err(&parent, e))?;
-        let temp = parent.join(format!(".{name}.partial-{}", std::process::id()));
-        if temp.exists() {
-            std::fs::remove_dir_all(&temp).map_err(|e| write_err(&temp, e))?;
-        }
-        std::fs::create_dir(&temp).map_err(|e| write_err(&temp, e))?;
-        Ok(Self {
-            target: target.to_path_buf(),
-            temp,
-            force,
-            committed: false,
-        })
-    }
-
-    /// Where to write meanwhile.
-    pub fn path(&self) -> &Path {
-        &self.temp
-    }
-
-    /// Moves the finished directory to its final name.
-    pub fn commit(mut self) -> Result<PathBuf, SimulateError> {
-        if self.target.exists() {
-            if self.target.is_dir() {
-                let removal = if self.force {
-                    std::fs::remove_dir_all(&self.target)
-                } else {
-                    std::fs::remove_dir(&self.target)
-                };
-                removal.map_err(|e| write_err(&self.target, e))?;
-            } else {
-                return Err(SimulateError::OutputExists(self.target.clone()));
-            }
-        }
-        std::fs::rename(&self.temp, &self.target).map_err(|e| write_err(&self.target, e))?;
-        self.committed = true;
-        Ok(self.target.clone())
-    }
-}
-
-impl Drop for StagingDir {
-    fn drop(&mut self) {
-        if !self.committed {
-            let _ = std::fs::remove_dir_all(&self.temp);
-        }
-    }
+    .into()
 }
 
 /// Sample values as stored: 8-bit as is, deeper captures scaled to 16-bit full range.
@@ -197,8 +128,8 @@ impl FrameWriter {
                 match &frame.samples {
                     Samples::U8(v) => {
                         let img = ImageBuffer::<Luma<u8>, _>::from_raw(w, h, v.clone())
-                            .ok_or_else(|| write_err(&path, "frame size mismatch"))?;
-                        img.save(&path).map_err(|e| write_err(&path, e))
+                            .ok_or_else(|| frame_size_err(&path))?;
+                        img.save(&path).map_err(|e| encode_err(&path, e))
                     }
                     samples => {
                         let img = ImageBuffer::<Luma<u16>, _>::from_raw(
@@ -206,8 +137,8 @@ impl FrameWriter {
                             h,
                             stored_u16(format, samples),
                         )
-                        .ok_or_else(|| write_err(&path, "frame size mismatch"))?;
-                        img.save(&path).map_err(|e| write_err(&path, e))
+                        .ok_or_else(|| frame_size_err(&path))?;
+                        img.save(&path).map_err(|e| encode_err(&path, e))
                     }
                 }
             }
@@ -273,37 +204,20 @@ fn rate_fraction(fps: f64) -> (u64, u64) {
 
 /// Writes the ground-truth files into `dir`.
 pub fn write_truth(dir: &Path, truth: &GroundTruth, rig: &Rig) -> Result<(), SimulateError> {
-    let npy = |name: &str, result: Result<(), ndarray_npy::WriteNpyError>| {
-        result.map_err(|e| write_err(&dir.join(name), e))
-    };
-    npy(
-        "depth.npy",
-        ndarray_npy::write_npy(dir.join("depth.npy"), &truth.depth_mm),
-    )?;
-    npy(
-        "normals.npy",
-        ndarray_npy::write_npy(dir.join("normals.npy"), &truth.normals),
-    )?;
-    npy(
-        "albedo.npy",
-        ndarray_npy::write_npy(dir.join("albedo.npy"), &truth.albedo),
-    )?;
+    write_npy(&dir.join("depth.npy"), &truth.depth_mm)?;
+    write_npy(&dir.join("normals.npy"), &truth.normals)?;
+    write_npy(&dir.join("albedo.npy"), &truth.albedo)?;
     for (i, image) in truth.led_true.images.iter().enumerate() {
-        let name = format!("led{}_true.npy", i + 1);
-        npy(&name, ndarray_npy::write_npy(dir.join(&name), image))?;
+        write_npy(&dir.join(format!("led{}_true.npy", i + 1)), image)?;
     }
     write_mask(&dir.join("mask.png"), &truth.mask)?;
     let rig_path = dir.join("rig.toml");
     std::fs::write(&rig_path, rig.to_toml_string()).map_err(|e| write_err(&rig_path, e))
 }
 
-/// Writes a boolean mask as an 8-bit PNG (255 inside).
-pub fn write_mask(path: &Path, mask: &ndarray::Array2<bool>) -> Result<(), SimulateError> {
-    let (h, w) = mask.dim();
-    let pixels: Vec<u8> = mask.iter().map(|&m| if m { 255 } else { 0 }).collect();
-    let img = ImageBuffer::<Luma<u8>, _>::from_raw(w as u32, h as u32, pixels)
-        .ok_or_else(|| write_err(path, "mask size mismatch"))?;
-    img.save(path).map_err(|e| write_err(path, e))
+/// The error of a frame whose samples do not fill its size.
+fn frame_size_err(path: &Path) -> SimulateError {
+    encode_err(path, std::io::Error::other("frame size mismatch"))
 }
 
 /// Contents of `truth.json`.
@@ -328,27 +242,23 @@ pub struct OutputOptions {
     pub video: VideoFormat,
     /// Frame whose start time the ground truth describes.
     pub truth_frame: usize,
-    /// Replace an existing non-empty output directory.
-    pub force: bool,
     /// Scene description stored in `truth.json`.
     pub scene: serde_json::Value,
 }
 
-/// Renders every frame of `capture` and writes frames plus ground truth to `out`
-/// atomically; `progress(done, total)` is called after each frame. Returns the final path.
+/// Renders every frame of `capture` and writes frames plus ground truth into the existing
+/// folder `dir`; `progress(done, total)` is called after each frame.
 pub fn write_capture(
     capture: &mut SimulatedCapture,
-    out: &Path,
+    dir: &Path,
     options: &OutputOptions,
     progress: &mut dyn FnMut(usize, usize),
-) -> Result<PathBuf, SimulateError> {
-    let staging = StagingDir::create(out, options.force)?;
-    let dir = staging.path().to_path_buf();
+) -> Result<(), SimulateError> {
     let format = capture.format().clone();
     let total = capture.info().frames;
-    let mut writer = FrameWriter::open(&dir, options.video, &format)?;
+    let mut writer = FrameWriter::open(dir, options.video, &format)?;
     let mut done = 0;
-    while let Some(frame) = capture.next_frame().map_err(|e| write_err(&dir, e))? {
+    while let Some(frame) = capture.next_frame()? {
         writer.write(&format, &frame)?;
         done += 1;
         progress(done, total);
@@ -356,7 +266,7 @@ pub fn write_capture(
     writer.finish()?;
     let t = capture.frame_time(options.truth_frame);
     let truth = capture.truth_at(t);
-    write_truth(&dir, &truth, capture.rig())?;
+    write_truth(dir, &truth, capture.rig())?;
     let stored_white_level = if format.bit_depth == 8 { 255 } else { 65535 };
     let file = TruthFile {
         info: capture.info(),
@@ -366,7 +276,6 @@ pub fn write_capture(
         scene: &options.scene,
     };
     let json_path = dir.join("truth.json");
-    let text = serde_json::to_string_pretty(&file).map_err(|e| write_err(&json_path, e))?;
-    std::fs::write(&json_path, text).map_err(|e| write_err(&json_path, e))?;
-    staging.commit()
+    let text = serde_json::to_string_pretty(&file).map_err(|e| encode_err(&json_path, e))?;
+    std::fs::write(&json_path, text).map_err(|e| write_err(&json_path, e))
 }

@@ -8,16 +8,8 @@
 //! then integrates `(1 − α_i)·s_i[j + k_i] + α_i·s_i[j + k_i + 1]` (Δ_i = k_i + α_i), exactly the
 //! received-signal formula of SPEC §3.
 
+pub use crate::led_waveform::LedWaveform;
 use protocol::carriers::ChipTable;
-
-/// A source of LED on/off waveforms in camera time.
-pub trait LedWaveform: Send + Sync {
-    /// Number of LEDs the waveform drives.
-    fn led_count(&self) -> usize;
-    /// Fraction in [0, 1] of the window [t0, t1) (seconds) during which LED `led` is on.
-    /// For an empty window (t1 ≤ t0) it is LED `led`'s state at t0 (0 or 1).
-    fn on_fraction(&self, led: usize, t0: f64, t1: f64) -> f64;
-}
 
 /// The MEB-FDMA carriers, each LED at its own chip rate and time shift.
 #[derive(Debug, Clone)]

@@ -6,7 +6,8 @@
 //! held as `f32` (exact up to 2^24 counts per bin).
 
 use super::TofError;
-use ndarray::{Array1, Array3, ArrayD, Axis, Dimension, Ix1, Ix3};
+use crate::export::files::{self, FilesError};
+use ndarray::{Array, Array1, Array3, Axis, Dimension, Ix1, Ix3};
 use std::path::Path;
 
 /// Per-pixel TCSPC histograms: `counts[(row, col, bin)]`.
@@ -41,11 +42,9 @@ impl Histograms {
 
     /// Reads H×W×bins counts from a `.npy` file.
     pub fn read(path: &Path) -> Result<Self, TofError> {
-        let array = read_counts(path)?;
-        let counts = array
-            .into_dimensionality::<Ix3>()
-            .map_err(|e| file_error(path, format!("expected an H×W×bins array ({e})")))?;
-        let histograms = Self { counts };
+        let histograms = Self {
+            counts: read_counts::<Ix3>(path, &[None; 3])?,
+        };
         histograms.validate()?;
         Ok(histograms)
     }
@@ -66,26 +65,12 @@ impl Histograms {
 impl Reference {
     /// Reads a reference: a 1-D `bins` array or an H×W×bins array.
     pub fn read(path: &Path) -> Result<Self, TofError> {
-        let array = read_counts(path)?;
-        let reference = match array.ndim() {
-            1 => Self::Global(
-                array
-                    .into_dimensionality::<Ix1>()
-                    .map_err(|e| file_error(path, e.to_string()))?,
-            ),
-            3 => Self::PerPixel(
-                array
-                    .into_dimensionality::<Ix3>()
-                    .map_err(|e| file_error(path, e.to_string()))?,
-            ),
-            n => {
-                return Err(file_error(
-                    path,
-                    format!("a reference is 1-D (bins) or 3-D (H×W×bins), this one has {n} axes"),
-                ));
+        match read_counts::<Ix1>(path, &[None]) {
+            Err(TofError::Files(FilesError::NpyShape { .. })) => {
+                Ok(Self::PerPixel(read_counts::<Ix3>(path, &[None; 3])?))
             }
-        };
-        Ok(reference)
+            other => other.map(Self::Global),
+        }
     }
 
     /// Number of time bins.
@@ -155,41 +140,26 @@ fn check_counts(what: &str, counts: ndarray::ArrayViewD<f32>) -> Result<(), TofE
     Ok(())
 }
 
-fn file_error(path: &Path, reason: String) -> TofError {
-    TofError::File {
-        path: path.to_path_buf(),
-        reason,
-    }
-}
-
-/// Reads an `.npy` array of counts of any integer or float element type as `f32`.
-fn read_counts(path: &Path) -> Result<ArrayD<f32>, TofError> {
-    use ndarray_npy::ReadNpyError;
-    let bytes = std::fs::read(path).map_err(|e| file_error(path, e.to_string()))?;
+/// Reads an `.npy` array of counts of any integer or float element type as `f32`, through
+/// the shared file layer (same shape and type checks as every other command's inputs).
+fn read_counts<D: Dimension>(
+    path: &Path,
+    shape: &[Option<usize>],
+) -> Result<Array<f32, D>, TofError> {
     macro_rules! attempt {
-        ($t:ty) => {
-            match <ArrayD<$t> as ndarray_npy::ReadNpyExt>::read_npy(&bytes[..]) {
+        ($($t:ty),*) => {
+            $(match files::read_exact::<$t, D>(path, shape) {
                 Ok(a) => return Ok(a.mapv(|v| v as f32)),
-                Err(ReadNpyError::WrongDescriptor(_)) => {}
-                Err(e) => {
-                    return Err(file_error(path, format!("not a readable .npy array: {e}")));
-                }
-            }
+                Err(FilesError::NpyType { .. }) => {}
+                Err(e) => return Err(e.into()),
+            })*
         };
     }
-    attempt!(f32);
-    attempt!(f64);
-    attempt!(u16);
-    attempt!(u32);
-    attempt!(u64);
-    attempt!(u8);
-    attempt!(i16);
-    attempt!(i32);
-    attempt!(i64);
-    Err(file_error(
-        path,
-        "photon counts must be an integer or float32/float64 .npy array".into(),
-    ))
+    attempt!(f32, f64, u16, u32, u64, u8, i16, i32, i64);
+    Err(TofError::File {
+        path: path.to_path_buf(),
+        reason: "photon counts must be an integer or float32/float64 .npy array".into(),
+    })
 }
 
 /// Sums the histograms of all pixels (the summed-board reference of a per-pixel capture).
@@ -210,20 +180,20 @@ mod tests {
         let dir = tempfile::tempdir().unwrap();
         let path = dir.path().join("h.npy");
         let counts = Array::from_shape_fn((2, 3, 8), |(r, c, b)| (r + c + b) as u16);
-        ndarray_npy::write_npy(&path, &counts).unwrap();
+        crate::export::files::write_npy(&path, &counts).unwrap();
         let h = Histograms::read(&path).unwrap();
         assert_eq!(h.counts[(1, 2, 7)], 10.0);
         assert_eq!(h.bins(), 8);
 
         let zeros = dir.path().join("z.npy");
-        ndarray_npy::write_npy(&zeros, &Array3::<u32>::zeros((2, 2, 8))).unwrap();
+        crate::export::files::write_npy(&zeros, &Array3::<u32>::zeros((2, 2, 8))).unwrap();
         let err = Histograms::read(&zeros).unwrap_err();
         assert!(matches!(err, TofError::NoPhotons(_)), "{err}");
 
         let flat = dir.path().join("flat.npy");
-        ndarray_npy::write_npy(&flat, &Array1::<f32>::ones(6)).unwrap();
+        crate::export::files::write_npy(&flat, &Array1::<f32>::ones(6)).unwrap();
         let err = Histograms::read(&flat).unwrap_err().to_string();
-        assert!(err.contains("H×W×bins"), "{err}");
+        assert!(err.contains("3-D") && err.contains("1-D, 6"), "{err}");
 
         let reference = Reference::Global(Array1::ones(6));
         let err = reference.check_against(&h).unwrap_err().to_string();

@@ -122,25 +122,27 @@ pub struct HybridReconstruction {
     pub timings: Vec<StageTiming>,
 }
 
-/// Per-object masks of the scene in camera pixels, snapped to `images`' edges (module docs).
+/// Per-object masks of the range map `range` (mm) in camera pixels (`camera_size` =
+/// [width, height]), snapped to the LED images' edges when `images` are given (module docs).
 pub fn object_masks(
-    images: &LedImages,
-    rig: &Rig,
-    range: &RangeMap,
+    images: Option<&LedImages>,
+    camera_size: [usize; 2],
+    range: &Array2<f32>,
     calibration: &Calibration,
     config: &HybridConfig,
 ) -> Result<Vec<(Layer, Array2<bool>)>, TofError> {
-    let camera_size = [rig.camera.width, rig.camera.height];
-    let (rows, cols) = range.range_mm.dim();
+    let (rows, cols) = range.dim();
     calibration.check_sizes([cols, rows], camera_size)?;
-    let layers = mask::segment(&range.range_mm, &config.mask)?;
-    let mut masks = mask::camera_masks(&layers, &range.range_mm, calibration, camera_size)?;
+    let layers = mask::segment(range, &config.mask)?;
+    let mut masks = mask::camera_masks(&layers, range, calibration, camera_size)?;
     let scale = mask::camera_pixels_per_tof_pixel(calibration, Some(layers[0].median_mm));
-    if config.snap_tof_pixels > 0.0 {
+    if let Some(images) = images
+        && config.snap_tof_pixels > 0.0
+    {
         let band = (config.snap_tof_pixels * scale).round().max(1.0) as usize;
         masks = mask::snap_to_edges(&masks, &images.images, band)?;
     }
-    let radius = (0.25 * scale).round() as usize;
+    let radius = mask::clean_radius(scale);
     let mut objects = Vec::new();
     for (layer, m) in layers.into_iter().zip(masks) {
         if layer.touches_border && !config.include_border_layers {
@@ -157,7 +159,7 @@ pub fn object_masks(
     }
     if objects.is_empty() {
         return Err(TofError::Empty(
-            "the range map holds no object apart from layers touching the image border (the background); pass include_border_layers to reconstruct those".into(),
+            "the range map holds no object apart from layers touching the image border (the background); include the border layers to keep those".into(),
         ));
     }
     Ok(objects)
@@ -266,7 +268,13 @@ pub fn reconstruct_objects(
     }
     let mut timings = Vec::new();
     let start = Instant::now();
-    let found = object_masks(images, rig, range, calibration, hybrid)?;
+    let found = object_masks(
+        Some(images),
+        [rig.camera.width, rig.camera.height],
+        &range.range_mm,
+        calibration,
+        hybrid,
+    )?;
     timings.push(StageTiming {
         stage: "ToF object masks".into(),
         ms: start.elapsed().as_secs_f64() * 1e3,

@@ -272,7 +272,10 @@ pub(crate) fn trace_to_tof(
     (u, s)
 }
 
-/// Camera masks of `layers`: each pixel goes to the layer covering most of it, if over 1/2.
+/// Camera masks of `layers` (sorted nearest first, as [`segment`] gives them): each pixel goes
+/// to the nearest layer covering over half of it. Nearest, not most: the camera sees the near
+/// surface where it stands in front of a far one, while the far layer, traced at its own range,
+/// may cover the same pixel too (the two cameras see past the near object differently).
 pub fn camera_masks(
     layers: &[Layer],
     range: &Array2<f32>,
@@ -287,18 +290,49 @@ pub fn camera_masks(
     let mut masks = vec![Array2::from_elem((height, width), false); layers.len()];
     for r in 0..height {
         for c in 0..width {
-            let best = coverage
-                .iter()
-                .enumerate()
-                .max_by(|a, b| a.1[(r, c)].total_cmp(&b.1[(r, c)]));
-            if let Some((k, cov)) = best
-                && cov[(r, c)] > 0.5
-            {
+            if let Some(k) = coverage.iter().position(|cov| cov[(r, c)] > 0.5) {
                 masks[k][(r, c)] = true;
             }
         }
     }
     Ok(masks)
+}
+
+/// Radius (camera pixels) of the clean-up's opening and closing: a quarter of a ToF pixel.
+pub fn clean_radius(camera_pixels_per_tof_pixel: f64) -> usize {
+    (0.25 * camera_pixels_per_tof_pixel).round() as usize
+}
+
+/// The thesis' selection mapped into the camera: ToF pixels with range in [`lo`, `hi`] mm
+/// ([`interval_layer`]), their camera pixels ([`camera_masks`]), cleaned when `clean_up`.
+pub fn interval_mask(
+    range: &Array2<f32>,
+    lo: f64,
+    hi: f64,
+    calibration: &Calibration,
+    clean_up: bool,
+) -> Result<(Layer, Array2<bool>), TofError> {
+    let (rows, cols) = range.dim();
+    calibration.check_sizes([cols, rows], calibration.camera_size)?;
+    let layer = interval_layer(range, lo, hi)?;
+    let mut masks = camera_masks(
+        std::slice::from_ref(&layer),
+        range,
+        calibration,
+        calibration.camera_size,
+    )?;
+    let mut mask = masks.pop().unwrap_or_default();
+    if clean_up {
+        let scale = camera_pixels_per_tof_pixel(calibration, Some(layer.median_mm));
+        mask = clean(&mask, clean_radius(scale))?;
+    }
+    if !mask.iter().any(|&m| m) {
+        return Err(TofError::Empty(format!(
+            "the {} ToF pixels in {lo}..{hi} mm cover no camera pixel (is the calibration for this scene?)",
+            layer.tof_pixels
+        )));
+    }
+    Ok((layer, mask))
 }
 
 /// Camera pixels per ToF pixel (side length), from the calibration at `range_mm`.

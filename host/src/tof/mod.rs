@@ -88,7 +88,10 @@ pub enum TofError {
     /// A range interval selects nothing.
     #[error("empty selection: {0}")]
     Empty(String),
-    /// Reading or writing a file failed.
+    /// Reading or writing a file through the shared file layer failed.
+    #[error(transparent)]
+    Files(#[from] crate::export::files::FilesError),
+    /// A file's content is not what is needed.
     #[error("{path}: {reason}")]
     File {
         /// The file.

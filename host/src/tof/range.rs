@@ -752,6 +752,8 @@ mod tests {
             mode: TimingMode::Forward,
             max_shift_mm: 400.0,
             min_signal_photons: 1.0,
+            // Exact templates: nothing to smooth (noisy references are the integration tests').
+            reference_smoothing_bins: 0.0,
             ..RangeConfig::default()
         }
     }
@@ -849,4 +851,3 @@ mod tests {
         assert!(matches!(err, TofError::NoReliableRange { .. }), "{err}");
     }
 }
-

@@ -1,29 +1,31 @@
-//! PNG previews: normal map ((n + 1)/2 as RGB), albedo (grey), depth and error maps through
-//! colour maps, masks. Pixels without data are drawn dark grey.
+//! PNG previews: normal map ((n + 1)/2 as RGB), grey images, values through the colour
+//! [`ramp`], signed error maps and masks. Pixels without data (NaN) are drawn dark grey.
 
-use super::{ExportError, write_atomic};
+use super::FilesError;
+use super::colour::ramp;
 use image::{ImageFormat, Rgb, RgbImage};
 use ndarray::{Array2, Array3};
 use std::path::Path;
 
 /// Colour of pixels without data.
-const NO_DATA: Rgb<u8> = Rgb([40, 40, 40]);
+pub const NO_DATA: Rgb<u8> = Rgb([40, 40, 40]);
 
 /// Encodes an RGB image as PNG bytes.
-pub fn png_bytes(image: &RgbImage) -> Result<Vec<u8>, ExportError> {
+pub fn png_bytes(image: &RgbImage) -> Result<Vec<u8>, FilesError> {
     let mut out = std::io::Cursor::new(Vec::new());
     image
         .write_to(&mut out, ImageFormat::Png)
-        .map_err(|e| ExportError::Write {
-            path: "(png)".into(),
-            reason: e.to_string(),
+        .map_err(|source| FilesError::Image {
+            path: "(PNG in memory)".into(),
+            source,
         })?;
     Ok(out.into_inner())
 }
 
 /// Writes an RGB image as a PNG file.
-pub fn write_png(path: &Path, image: &RgbImage) -> Result<(), ExportError> {
-    write_atomic(path, &png_bytes(image)?)
+pub fn write_png(path: &Path, image: &RgbImage) -> Result<(), FilesError> {
+    let bytes = png_bytes(image)?;
+    std::fs::write(path, bytes).map_err(|e| FilesError::write(path, e))
 }
 
 /// Normal map: (n + 1)/2 → RGB.
@@ -40,8 +42,9 @@ pub fn normal_map(normals: &Array3<f32>) -> RgbImage {
 
 /// Grey image of `values` scaled so the 99th percentile is white.
 pub fn grey_map(values: &Array2<f32>) -> RgbImage {
-    let top =
-        crate::photometric::mask::quantile(values.iter().copied(), 0.99).max(f32::MIN_POSITIVE);
+    let top = crate::stats::quantile(values.iter().copied(), 0.99)
+        .unwrap_or(1.0)
+        .max(f32::MIN_POSITIVE);
     let (rows, cols) = values.dim();
     RgbImage::from_fn(cols as u32, rows as u32, |c, r| {
         let v = values[(r as usize, c as usize)];
@@ -53,20 +56,18 @@ pub fn grey_map(values: &Array2<f32>) -> RgbImage {
     })
 }
 
-/// A perceptually ordered colour ramp (dark blue → teal → yellow) at t ∈ [0, 1].
-pub fn ramp(t: f32) -> Rgb<u8> {
-    const STOPS: [[f32; 3]; 5] = [
-        [68.0, 1.0, 84.0],
-        [59.0, 82.0, 139.0],
-        [33.0, 145.0, 140.0],
-        [94.0, 201.0, 98.0],
-        [253.0, 231.0, 37.0],
-    ];
-    let t = t.clamp(0.0, 1.0) * 4.0;
-    let i = (t.floor() as usize).min(3);
-    let f = t - i as f32;
-    let mix = |j: usize| (STOPS[i][j] * (1.0 - f) + STOPS[i + 1][j] * f) as u8;
-    Rgb([mix(0), mix(1), mix(2)])
+/// `values` through [`ramp`], `lo` dark blue and `hi` yellow.
+pub fn ramp_map(values: &Array2<f32>, lo: f32, hi: f32) -> RgbImage {
+    let span = (hi - lo).max(f32::MIN_POSITIVE);
+    let (rows, cols) = values.dim();
+    RgbImage::from_fn(cols as u32, rows as u32, |c, r| {
+        let v = values[(r as usize, c as usize)];
+        if v.is_finite() {
+            ramp((v - lo) / span)
+        } else {
+            NO_DATA
+        }
+    })
 }
 
 /// Depth through [`ramp`] between its min and max.
@@ -77,16 +78,7 @@ pub fn depth_map(depth: &Array2<f32>) -> RgbImage {
         .fold((f32::INFINITY, f32::NEG_INFINITY), |(lo, hi), &v| {
             (lo.min(v), hi.max(v))
         });
-    let span = (hi - lo).max(f32::MIN_POSITIVE);
-    let (rows, cols) = depth.dim();
-    RgbImage::from_fn(cols as u32, rows as u32, |c, r| {
-        let v = depth[(r as usize, c as usize)];
-        if v.is_finite() {
-            ramp((v - lo) / span)
-        } else {
-            NO_DATA
-        }
-    })
+    ramp_map(depth, lo, hi)
 }
 
 /// Signed error map: blue negative, white zero, red positive, saturating at ±`limit`.
@@ -118,4 +110,21 @@ pub fn mask_image(mask: &Array2<bool>) -> RgbImage {
             Rgb([0; 3])
         }
     })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn previews_mark_missing_data_and_use_the_ramp() {
+        let mut depth = Array2::from_shape_fn((2, 3), |(r, c)| (r * 3 + c) as f32);
+        depth[(0, 1)] = f32::NAN;
+        let img = depth_map(&depth);
+        assert_eq!(*img.get_pixel(1, 0), NO_DATA);
+        assert_eq!(*img.get_pixel(0, 0), ramp(0.0));
+        assert_eq!(*img.get_pixel(2, 1), ramp(1.0));
+        let png = png_bytes(&img).unwrap();
+        assert!(png.starts_with(b"\x89PNG"));
+    }
 }

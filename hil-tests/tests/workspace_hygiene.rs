@@ -1,0 +1,122 @@
+//! Rules about the device side of the workspace that no compiler checks: comments cite papers,
+//! equations and the reference manual, never tracker issues; the protocol contract and the
+//! register plan contain no unsafe code; the firmware depends on nothing it does not use; the
+//! host's Unix-only dependency is declared for Unix only.
+
+use std::path::{Path, PathBuf};
+
+use hil_tests::elf_budget::workspace_root;
+
+/// Source trees whose comments these rules cover.
+const DEVICE_SIDE: [&str; 9] = [
+    "firmware/src",
+    "protocol/src",
+    "protocol/tests",
+    "chip-plan/src",
+    "host/src/device",
+    "host/src/cli/device.rs",
+    "host/tests/device_cli.rs",
+    "hil-tests/src",
+    "hil-tests/tests",
+];
+
+fn rust_files(path: &Path, out: &mut Vec<PathBuf>) {
+    if path.is_file() {
+        if path.extension().is_some_and(|e| e == "rs") {
+            out.push(path.to_path_buf());
+        }
+        return;
+    }
+    let mut entries: Vec<_> = std::fs::read_dir(path)
+        .unwrap_or_else(|e| panic!("{}: {e}", path.display()))
+        .map(|entry| entry.unwrap().path())
+        .collect();
+    entries.sort();
+    for entry in entries {
+        rust_files(&entry, out);
+    }
+}
+
+/// Whether a comment line cites a tracker issue: the word followed by a number, `#` or not.
+fn cites_an_issue(comment: &str) -> bool {
+    let lower = comment.to_lowercase();
+    lower.match_indices("issue").any(|(at, _)| {
+        let rest = lower[at + "issue".len()..].trim_start_matches(['s', ' ', '#']);
+        rest.starts_with(|c: char| c.is_ascii_digit())
+    })
+}
+
+#[test]
+fn device_side_comments_cite_no_tracker_issue() {
+    assert!(cites_an_issue("//! flash map (issue 6)."));
+    assert!(cites_an_issue("/// see issue #12"));
+    assert!(!cites_an_issue("/// a DMA issue with 6 streams"));
+    let root = workspace_root();
+    let mut files = Vec::new();
+    for tree in DEVICE_SIDE {
+        rust_files(&root.join(tree), &mut files);
+    }
+    assert!(files.len() > 30, "found only {} files", files.len());
+    let mut citations = Vec::new();
+    for file in &files {
+        let text = std::fs::read_to_string(file).unwrap();
+        for (n, line) in text.lines().enumerate() {
+            let comment = line.trim_start();
+            if comment.starts_with("//") && cites_an_issue(comment) {
+                citations.push(format!("{}:{}: {comment}", file.display(), n + 1));
+            }
+        }
+    }
+    assert!(citations.is_empty(), "{}", citations.join("\n"));
+}
+
+#[test]
+fn contract_and_register_plan_forbid_unsafe_code() {
+    for lib in ["protocol/src/lib.rs", "chip-plan/src/lib.rs"] {
+        let text = std::fs::read_to_string(workspace_root().join(lib)).unwrap();
+        assert!(text.contains("#![forbid(unsafe_code)]"), "{lib}");
+    }
+}
+
+fn manifest(path: &str) -> toml::Table {
+    let text = std::fs::read_to_string(workspace_root().join(path)).unwrap();
+    text.parse::<toml::Table>()
+        .unwrap_or_else(|e| panic!("{path}: {e}"))
+}
+
+#[test]
+fn firmware_depends_on_nothing_it_does_not_use() {
+    // Linked for what they provide, never named in the code (see firmware/Cargo.toml).
+    const LINK_ONLY: [&str; 2] = ["cortex-m", "cortex-m-rt"];
+    let firmware = manifest("firmware/Cargo.toml");
+    let dependencies = firmware["dependencies"].as_table().unwrap();
+    let mut sources = Vec::new();
+    rust_files(&workspace_root().join("firmware/src"), &mut sources);
+    let code: String = sources
+        .iter()
+        .map(|f| std::fs::read_to_string(f).unwrap())
+        .collect();
+    let unused: Vec<&String> = dependencies
+        .keys()
+        .filter(|name| !LINK_ONLY.contains(&name.as_str()))
+        .filter(|name| {
+            let ident = name.replace('-', "_");
+            !code.contains(&format!("{ident}::")) && !code.contains(&format!("use {ident}"))
+        })
+        .collect();
+    assert!(
+        unused.is_empty(),
+        "firmware dependencies never used: {unused:?}"
+    );
+}
+
+#[test]
+fn host_declares_nix_for_unix_only() {
+    let host = manifest("host/Cargo.toml");
+    let everywhere = host["dependencies"].as_table().unwrap();
+    assert!(!everywhere.contains_key("nix"), "nix is Unix-only");
+    let unix = host["target"]["cfg(unix)"]["dependencies"]
+        .as_table()
+        .unwrap();
+    assert!(unix.contains_key("nix"));
+}
