@@ -343,7 +343,7 @@ impl Rig {
         };
         // Thesis Ch. 6: a 192×128 SPAD with a 16° lens, 80 cm from the sphere (which stands
         // 100 mm in front of the scene centre); placed 40 mm beside the phone, aimed at the centre.
-        let tof_camera = (name == "thesis-hybrid").then(|| TofCamera {
+        let tof_camera = (name == "thesis-hybrid").then_some(TofCamera {
             width: 192,
             height: 128,
             fov_deg: 16.0,

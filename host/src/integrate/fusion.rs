@@ -350,7 +350,7 @@ fn solve(
         }
         a.apply(&direction, &mut a_direction);
         let curvature = inner(&direction, &a_direction);
-        if !(curvature > 0.0) {
+        if curvature.is_nan() || curvature <= 0.0 {
             return iteration;
         }
         let step = rz / curvature;

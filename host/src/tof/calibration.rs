@@ -117,7 +117,7 @@ impl Calibration {
                 .collect();
             let rms = (errors.iter().map(|e| e * e).sum::<f64>() / errors.len() as f64).sqrt();
             let max = errors.iter().copied().fold(0.0, f64::max);
-            if !(rms <= MAX_RMS_PX) {
+            if rms.is_nan() || rms > MAX_RMS_PX {
                 return Err(TofError::Calibration(format!(
                     "board {}: corners do not fit one homography (RMS {rms:.2} camera px > {MAX_RMS_PX}); are both images of the same board position, and is the board flat?",
                     i + 1

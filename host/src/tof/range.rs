@@ -90,7 +90,9 @@ pub struct RangeConfig {
     /// Standard deviation (mm) at which the confidence is 1/2: confidence = σ₀²/(σ₀² + σ²).
     pub confidence_sigma_mm: f64,
     /// σ in bins of the Gaussian that smooths the reference (its photon noise would otherwise
-    /// enter the template's slope); keep it well below the pulse's rise time.
+    /// enter the template's slope); keep it well below the pulse's rise time. On the simulated
+    /// thesis capture 3 bins lower the RMSE from 19.5 to 16.2 mm but shift ranges by about
+    /// +1.3 mm; use 0 with a reference of many photons.
     pub reference_smoothing_bins: f64,
 }
 
@@ -537,7 +539,7 @@ impl Correlator {
                 score += ws.weight[t] * e * g;
                 information += ws.weight[t] * g * g;
             }
-            if !(information > 0.0) {
+            if information.is_nan() || information <= 0.0 {
                 break;
             }
             let step = (score / information).clamp(-2.0, 2.0);
@@ -603,7 +605,7 @@ impl Correlator {
 
 /// `values` convolved with a unit-area Gaussian of σ = `sigma` samples (edges held).
 fn smooth(values: &[f64], sigma: f64) -> Vec<f64> {
-    if !(sigma > 0.0) {
+    if sigma.is_nan() || sigma <= 0.0 {
         return values.to_vec();
     }
     let half = (3.0 * sigma).ceil() as i64;
@@ -704,7 +706,7 @@ fn fit_scaled(
     let cov = shg - sh * sg / sw;
     let var_g = sgg - sg * sg / sw;
     let var_h = shh - sh * sh / sw;
-    if !(var_g > 0.0) {
+    if var_g.is_nan() || var_g <= 0.0 {
         return (0.0, sh / sw, f64::NAN);
     }
     let a = cov / var_g;

@@ -178,15 +178,16 @@ impl TofSimConfig {
                 "pulse count, width, spacing and period must be positive",
             );
         }
-        if !positive(p.led_time_constant_ns) || !(p.jitter_ps.is_finite() && p.jitter_ps >= 0.0) {
+        if !(positive(p.led_time_constant_ns) && p.jitter_ps.is_finite() && p.jitter_ps >= 0.0) {
             return bad("pulse", "LED time constant must be positive and jitter ≥ 0");
         }
         if self.gate_start_ns + self.bins as f64 * self.bin_ps * 1e-3 > p.period_ns {
             return bad("bins", "the gate must end within one trigger period");
         }
         if !(self.signal_photons_at_reference.is_finite()
-            && self.signal_photons_at_reference >= 0.0)
-            || !(self.background_photons.is_finite() && self.background_photons >= 0.0)
+            && self.signal_photons_at_reference >= 0.0
+            && self.background_photons.is_finite()
+            && self.background_photons >= 0.0)
         {
             return bad("photons", "photon rates must be ≥ 0");
         }
@@ -234,6 +235,9 @@ struct RayHit {
     label: i32,
 }
 
+/// A ray's hit: (t, unit normal, albedo, label).
+pub type Hit = (f64, Vector3<f64>, f64, i32);
+
 /// The front-most hit of the ray `origin + t·direction` (t > 0): (t, unit normal, albedo,
 /// label), t in units of `direction`. Object k carries label `groups[k]` (several analytic
 /// objects may form one, e.g. a head of ellipsoids); the ground plane is label −1.
@@ -242,7 +246,7 @@ pub fn cast_ray(
     groups: &[usize],
     origin: &Vector3<f64>,
     direction: &Vector3<f64>,
-) -> Result<Option<(f64, Vector3<f64>, f64, i32)>, SimulateError> {
+) -> Result<Option<Hit>, SimulateError> {
     // Rotate the scene so the ray runs along −z through the origin: then the front-most hit is
     // the largest z of the orthographic ray caster.
     let unit = direction.normalize();
