@@ -8,12 +8,12 @@ mod tof_common;
 use common::meb;
 use meb::export::files::{read_float, read_mask, write_npy};
 use meb::rig::Rig;
-use meb::simulate::tof::{TofSimConfig, camera_labels, render_tof, thesis_hybrid_scene};
+use meb::simulate::tof::camera_labels;
 use meb::tof::Calibration;
 use ndarray::{Array1, Array2, Array3, Ix2};
 use std::path::Path;
 use std::process::Output;
-use tof_common::{BOARD_HEIGHTS, board, board_images, board_range, rig};
+use tof_common::{BOARD_HEIGHTS, board, board_images, board_range, hybrid_capture, rig};
 
 fn stderr(out: &Output) -> String {
     String::from_utf8_lossy(&out.stderr).into_owned()
@@ -64,14 +64,7 @@ fn range_calibrate_and_segment_the_hybrid_scene() {
     let dir = tempfile::tempdir().unwrap();
     let rig = rig();
     let tof = rig.tof_camera.clone().unwrap();
-    let hybrid = thesis_hybrid_scene();
-    let capture = render_tof(
-        &hybrid.scene,
-        &hybrid.groups,
-        &tof,
-        &TofSimConfig::default(),
-    )
-    .unwrap();
+    let (hybrid, capture) = hybrid_capture(&tof);
     let histograms = dir.path().join("histograms.npy");
     let reference = dir.path().join("reference.npy");
     write_npy(&histograms, &capture.histograms).unwrap();

@@ -10,7 +10,7 @@ use meb::reconstruct::ReconstructConfig;
 use meb::rig::{Rig, TofCamera};
 use meb::simulate::geometry::SurfaceMap;
 use meb::simulate::lighting::{default_gain, led_images};
-use meb::simulate::tof::{TofSimConfig, camera_labels, render_tof, thesis_hybrid_scene};
+use meb::simulate::tof::camera_labels;
 use meb::tof::calibration::Calibration;
 use meb::tof::hybrid::{HybridConfig, reconstruct_objects};
 use meb::tof::{Histograms, RangeConfig, Reference, TimingMode, estimate_range};
@@ -18,7 +18,7 @@ use meb::types::LedImages;
 use ndarray::Array2;
 use rand::SeedableRng;
 use rand_distr::{Distribution, Normal};
-use tof_common::{BOARD, BOARD_HEIGHTS, board, board_view, rig};
+use tof_common::{BOARD, BOARD_HEIGHTS, board, board_view, hybrid_capture, rig};
 
 fn calibration(rig: &Rig, tof: &TofCamera) -> Calibration {
     let views: Vec<_> = BOARD_HEIGHTS
@@ -40,14 +40,7 @@ fn calibration(rig: &Rig, tof: &TofCamera) -> Calibration {
 fn per_object_depth_beats_the_thesis_with_fusion() {
     let rig = rig();
     let tof = rig.tof_camera.clone().unwrap();
-    let hybrid = thesis_hybrid_scene();
-    let capture = render_tof(
-        &hybrid.scene,
-        &hybrid.groups,
-        &tof,
-        &TofSimConfig::default(),
-    )
-    .unwrap();
+    let (hybrid, capture) = hybrid_capture(&tof);
     let range = estimate_range(
         &Histograms {
             counts: capture.histograms.mapv(|v| v as f32),

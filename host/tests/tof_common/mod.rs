@@ -3,7 +3,9 @@
 #![allow(dead_code)] // each test binary uses a different subset
 
 use meb::rig::{Rig, TofCamera};
-use meb::simulate::tof::Chequerboard;
+use meb::simulate::tof::{
+    Chequerboard, HybridScene, TofCapture, TofSimConfig, render_tof, thesis_hybrid_scene,
+};
 use meb::tof::calibration::BoardView;
 use meb::tof::chequerboard::{BoardSize, find_corners};
 use nalgebra::Vector3;
@@ -61,4 +63,11 @@ pub fn board_view(rig: &Rig, board: &Chequerboard, seed: u64) -> BoardView {
         camera_corners: find_corners(&camera_image, BOARD, "camera").unwrap(),
         range_mm: Some(board_range(rig.tof_camera.as_ref().unwrap(), board)),
     }
+}
+
+/// The thesis' hybrid scene and its SPAD capture at the thesis' settings.
+pub fn hybrid_capture(tof: &TofCamera) -> (HybridScene, TofCapture) {
+    let hybrid = thesis_hybrid_scene();
+    let capture = render_tof(&hybrid.scene, &hybrid.groups, tof, &TofSimConfig::default()).unwrap();
+    (hybrid, capture)
 }
