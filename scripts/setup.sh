@@ -2,7 +2,8 @@
 # Installs what building and testing meb needs on a fresh Debian machine. Idempotent.
 #   - FFmpeg: video capture (meb decode on video files) and its tests;
 #   - Node.js + npm: three.js for report.html's 3-D view, pinned in host/viewer/package-lock.json;
-#   - Chromium: the test that opens report.html headless and checks the 3-D view draws.
+#   - Chromium: the test that opens report.html headless and checks the 3-D view draws;
+#   - OpenCV, clang, libclang: the opencv crate (chequerboard corners for `meb tof calibrate`).
 set -euo pipefail
 cd "$(dirname "$0")/.."
 # The toolchain, its thumbv7em target and llvm-tools come from rust-toolchain.toml.
@@ -12,6 +13,10 @@ missing=()
 if ! command -v ffmpeg >/dev/null || ! command -v ffprobe >/dev/null; then missing+=(ffmpeg); fi
 if ! command -v npm >/dev/null; then missing+=(npm); fi
 if ! command -v chromium >/dev/null; then missing+=(chromium); fi
+# OpenCV (and clang, which the opencv crate's binding generator needs): chequerboard corners.
+for p in libopencv-dev clang libclang-dev; do
+    if ! dpkg -s "$p" >/dev/null 2>&1; then missing+=("$p"); fi
+done
 if [ ${#missing[@]} -gt 0 ]; then
     echo "setup: installing Debian packages: ${missing[*]}" >&2
     $sudo apt-get update -qq

@@ -23,4 +23,5 @@ pub mod rig;
 pub mod simulate;
 pub mod stats;
 pub mod timing;
+pub mod tof;
 pub mod types;

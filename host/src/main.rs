@@ -31,6 +31,8 @@ enum Command {
     Simulate(Box<cli::simulate::SimulateArgs>),
     /// Reconstruct normals, depth and a mesh from a capture or a `meb decode` folder.
     Reconstruct(Box<cli::reconstruct::ReconstructArgs>),
+    /// Time of flight: range maps from SPAD histograms, ToF → camera calibration, object masks.
+    Tof(cli::tof::TofArgs),
 }
 
 fn main() -> ExitCode {
@@ -44,6 +46,7 @@ fn main() -> ExitCode {
         Command::Device(args) => cli::device::run(&args),
         Command::Simulate(args) => cli::simulate::run(&args),
         Command::Reconstruct(args) => cli::reconstruct::run(&args),
+        Command::Tof(args) => cli::tof::run(&args),
     };
     match result {
         Ok(()) => ExitCode::SUCCESS,

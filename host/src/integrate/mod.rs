@@ -21,6 +21,7 @@ pub mod bilateral;
 pub mod coverage;
 pub mod fast_marching;
 pub mod filter;
+pub mod fusion;
 pub mod gradients;
 pub(crate) mod grid;
 pub mod least_squares;

@@ -49,6 +49,7 @@ impl DatasetConfig {
                 intrinsics: None,
             },
             leds: Vec::new(),
+            tof_camera: None,
         });
         rig.camera.width = 480;
         rig.camera.height = 270;

@@ -342,6 +342,7 @@ mod tests {
                     lambert_order: 1.0,
                 })
                 .collect(),
+            tof_camera: None,
         }
     }
 

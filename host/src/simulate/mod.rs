@@ -20,6 +20,7 @@ pub mod mesh;
 pub mod output;
 pub mod scene;
 pub mod sensor;
+pub mod tof;
 pub mod waveform;
 
 pub use crate::mesh::TriMesh;

@@ -1,0 +1,354 @@
+//! Per-object hybrid reconstruction (thesis Ch. 6, beyond it with Nehab et al. 2005): the range
+//! map selects each object, photometric stereo reconstructs it inside its own mask, and its
+//! absolute depth comes from the ToF range.
+//!
+//! 1. Layers of the range map ([`super::mask::segment`]); those touching the ToF image border
+//!    (the background wall) are not objects unless asked for. All layers are mapped into the
+//!    camera together so that each pixel has one owner, the owners' boundaries are snapped to
+//!    the LED images' edges within ±one ToF pixel (watershed), and each object mask is cleaned.
+//! 2. Positions: every camera pixel of an object is traced to the ToF image
+//!    ([`super::mask`]); the axial depth s of the layer's *interior* ToF pixels (all four
+//!    neighbours in the layer: no blended edge pixels) is interpolated there and becomes the
+//!    scene point X = C + s·d(u) on the ToF camera's ray (rig's pose), whose z is the position
+//!    prior, weighted 1/(k·σ²) with σ the range's standard deviation and k the camera pixels
+//!    per ToF pixel (one ToF sample spread over k pixels carries its weight once).
+//! 3. Photometric stereo + integration ([`crate::reconstruct::reconstruct`]) in the rig moved
+//!    so that the object's ToF depth is z = 0 (its near-field light vectors are then right from
+//!    the first pass); the result is *placed* by the weighted mean of prior − depth, and *fused*
+//!    with the positions by [`crate::integrate::fusion`] (depth that follows the normals while
+//!    staying near the ToF range).
+
+use super::TofError;
+use super::calibration::Calibration;
+use super::mask::{self, Layer, MaskConfig, bilinear, trace_to_tof};
+use super::range::RangeMap;
+use crate::integrate::IntegrateError;
+use crate::integrate::fusion::{Fusion, FusionConfig, PositionPrior, fuse_positions_and_normals};
+use crate::reconstruct::{
+    ReconstructConfig, ReconstructError, Reconstruction, StageTiming, reconstruct,
+};
+use crate::rig::Rig;
+use crate::types::LedImages;
+use nalgebra::Vector3;
+use ndarray::Array2;
+use std::time::Instant;
+use thiserror::Error;
+
+/// Settings of the hybrid reconstruction.
+#[derive(Debug, Clone, PartialEq, serde::Serialize, serde::Deserialize)]
+pub struct HybridConfig {
+    /// Layer finding and mask clean-up.
+    pub mask: MaskConfig,
+    /// Position + normal fusion.
+    pub fusion: FusionConfig,
+    /// Snap mask boundaries to the LED images' edges within this many ToF pixels (0: off).
+    pub snap_tof_pixels: f64,
+    /// Also reconstruct layers touching the ToF image border (usually the background).
+    pub include_border_layers: bool,
+}
+
+impl Default for HybridConfig {
+    fn default() -> Self {
+        Self {
+            mask: MaskConfig::default(),
+            fusion: FusionConfig::default(),
+            snap_tof_pixels: 1.0,
+            include_border_layers: false,
+        }
+    }
+}
+
+/// Errors of the hybrid reconstruction.
+#[derive(Debug, Error)]
+#[non_exhaustive]
+pub enum HybridError {
+    /// Range map, calibration or masks.
+    #[error(transparent)]
+    Tof(#[from] TofError),
+    /// Photometric stereo or integration of an object.
+    #[error("object {object}: {source}")]
+    Reconstruct {
+        /// Which object (1-based).
+        object: usize,
+        /// What failed.
+        source: ReconstructError,
+    },
+    /// Fusion of an object.
+    #[error("object {object}: fusing with the ToF range: {source}")]
+    Fusion {
+        /// Which object (1-based).
+        object: usize,
+        /// What failed.
+        source: IntegrateError,
+    },
+    /// The rig has no ToF camera.
+    #[error(
+        "the rig has no [tof_camera]: absolute depth from a range map needs the ToF camera's pose and field of view"
+    )]
+    NoTofCamera,
+}
+
+/// One object's result.
+#[derive(Debug, Clone)]
+pub struct HybridObject {
+    /// Its layer of the range map.
+    pub layer: Layer,
+    /// Its mask in camera pixels.
+    pub mask: Array2<bool>,
+    /// Weighted median of its ToF depth (scene z), mm.
+    pub tof_depth_mm: f64,
+    /// ToF positions on the camera grid.
+    pub prior: PositionPrior,
+    /// Photometric stereo + integration (depth in scene z, placed at `tof_depth_mm` first).
+    pub reconstruction: Reconstruction,
+    /// The reconstruction shifted by the weighted mean of (ToF − depth): scene z, mm.
+    pub placed: Array2<f32>,
+    /// Depth fused with the ToF positions.
+    pub fused: Fusion,
+}
+
+/// All objects of a scene.
+#[derive(Debug, Clone)]
+pub struct HybridReconstruction {
+    /// Per object, nearest first.
+    pub objects: Vec<HybridObject>,
+    /// Object index (0-based) per camera pixel, −1 outside every object.
+    pub labels: Array2<i32>,
+    /// Placed depth of every object, scene z in mm (NaN elsewhere).
+    pub placed: Array2<f32>,
+    /// Fused depth of every object, scene z in mm (NaN elsewhere).
+    pub fused: Array2<f32>,
+    /// Stage timings.
+    pub timings: Vec<StageTiming>,
+}
+
+/// Per-object masks of the range map `range` (mm) in camera pixels (`camera_size` =
+/// [width, height]), snapped to the LED images' edges when `images` are given (module docs).
+pub fn object_masks(
+    images: Option<&LedImages>,
+    camera_size: [usize; 2],
+    range: &Array2<f32>,
+    calibration: &Calibration,
+    config: &HybridConfig,
+) -> Result<Vec<(Layer, Array2<bool>)>, TofError> {
+    let (rows, cols) = range.dim();
+    calibration.check_sizes([cols, rows], camera_size)?;
+    let layers = mask::segment(range, &config.mask)?;
+    let mut masks = mask::camera_masks(&layers, range, calibration, camera_size)?;
+    let scale = mask::camera_pixels_per_tof_pixel(calibration, Some(layers[0].median_mm));
+    if let Some(images) = images
+        && config.snap_tof_pixels > 0.0
+    {
+        let band = (config.snap_tof_pixels * scale).round().max(1.0) as usize;
+        masks = mask::snap_to_edges(&masks, &images.images, band)?;
+    }
+    let radius = mask::clean_radius(scale);
+    let mut objects = Vec::new();
+    for (layer, m) in layers.into_iter().zip(masks) {
+        if layer.touches_border && !config.include_border_layers {
+            continue;
+        }
+        let m = if config.mask.clean {
+            mask::clean(&m, radius)?
+        } else {
+            m
+        };
+        if m.iter().any(|&v| v) {
+            objects.push((layer, m));
+        }
+    }
+    if objects.is_empty() {
+        return Err(TofError::Empty(
+            "the range map holds no object apart from layers touching the image border (the background); include the border layers to keep those".into(),
+        ));
+    }
+    Ok(objects)
+}
+
+/// ToF positions (scene z and weight) on the camera grid for the pixels of `mask`.
+pub fn position_prior(
+    layer: &Layer,
+    mask: &Array2<bool>,
+    range: &RangeMap,
+    calibration: &Calibration,
+    rig: &Rig,
+) -> Result<PositionPrior, HybridError> {
+    let tof = rig.tof_camera.as_ref().ok_or(HybridError::NoTofCamera)?;
+    let (rows, cols) = range.range_mm.dim();
+    let interior = |r: usize, c: usize| {
+        layer.tof_mask[(r, c)]
+            && r > 0
+            && c > 0
+            && r + 1 < rows
+            && c + 1 < cols
+            && layer.tof_mask[(r - 1, c)]
+            && layer.tof_mask[(r + 1, c)]
+            && layer.tof_mask[(r, c - 1)]
+            && layer.tof_mask[(r, c + 1)]
+            && range.range_mm[(r, c)].is_finite()
+            && range.sigma_mm[(r, c)].is_finite()
+    };
+    let k = mask::camera_pixels_per_tof_pixel(calibration, Some(layer.median_mm))
+        .powi(2)
+        .max(1.0);
+    let centre = Vector3::from(tof.position_mm);
+    let mut depth = Array2::from_elem(mask.dim(), f32::NAN);
+    let mut weight = Array2::zeros(mask.dim());
+    for ((r, c), &m) in mask.indexed_iter() {
+        if !m {
+            continue;
+        }
+        let (u, _) = trace_to_tof(layer, &range.range_mm, calibration, [c as f64, r as f64]);
+        let s = bilinear(u, (rows, cols), &|rr, cc| {
+            interior(rr, cc).then(|| f64::from(range.range_mm[(rr, cc)]))
+        });
+        let variance = bilinear(u, (rows, cols), &|rr, cc| {
+            interior(rr, cc).then(|| f64::from(range.sigma_mm[(rr, cc)]).powi(2))
+        });
+        if let (Some(s), Some(variance)) = (s, variance)
+            && variance > 0.0
+        {
+            let x = centre + s * tof.ray(u[1], u[0]);
+            depth[(r, c)] = x.z as f32;
+            weight[(r, c)] = (1.0 / (k * variance)) as f32;
+        }
+    }
+    Ok(PositionPrior {
+        depth_mm: depth,
+        weight,
+    })
+}
+
+/// The weighted median of the prior's depth.
+fn weighted_median(prior: &PositionPrior) -> Option<f64> {
+    let mut pairs: Vec<(f64, f64)> = prior
+        .depth_mm
+        .iter()
+        .zip(&prior.weight)
+        .filter(|(z, w)| z.is_finite() && **w > 0.0)
+        .map(|(&z, &w)| (f64::from(z), f64::from(w)))
+        .collect();
+    pairs.sort_by(|a, b| a.0.total_cmp(&b.0));
+    let total: f64 = pairs.iter().map(|p| p.1).sum();
+    let mut acc = 0.0;
+    pairs
+        .into_iter()
+        .find(|p| {
+            acc += p.1;
+            acc >= 0.5 * total
+        })
+        .map(|p| p.0)
+}
+
+/// The rig seen from an origin moved to z = `z0` (LEDs and camera shifted by −z0, pitch kept).
+fn rig_at_depth(rig: &Rig, z0: f64) -> Rig {
+    let mut moved = rig.clone();
+    moved.camera.pixel_pitch_mm = Some(rig.camera.pitch_mm());
+    moved.camera.distance_mm -= z0;
+    for led in &mut moved.leds {
+        led.position_mm[2] -= z0;
+    }
+    moved.tof_camera = None;
+    moved
+}
+
+/// Reconstructs every object of the scene separately and places/fuses it with the ToF range
+/// (module docs). `noise` is the per-pixel σ of the LED images.
+pub fn reconstruct_objects(
+    images: &LedImages,
+    noise: Option<&Array2<f32>>,
+    rig: &Rig,
+    range: &RangeMap,
+    calibration: &Calibration,
+    config: &ReconstructConfig,
+    hybrid: &HybridConfig,
+) -> Result<HybridReconstruction, HybridError> {
+    if rig.tof_camera.is_none() {
+        return Err(HybridError::NoTofCamera);
+    }
+    let mut timings = Vec::new();
+    let start = Instant::now();
+    let found = object_masks(
+        Some(images),
+        [rig.camera.width, rig.camera.height],
+        &range.range_mm,
+        calibration,
+        hybrid,
+    )?;
+    timings.push(StageTiming {
+        stage: "ToF object masks".into(),
+        ms: start.elapsed().as_secs_f64() * 1e3,
+    });
+    let shape = (rig.camera.height, rig.camera.width);
+    let pitch = rig.camera.pitch_mm();
+    let mut objects = Vec::new();
+    for (index, (layer, mask)) in found.into_iter().enumerate() {
+        let object = index + 1;
+        let start = Instant::now();
+        let prior = position_prior(&layer, &mask, range, calibration, rig)?;
+        let Some(z0) = weighted_median(&prior) else {
+            return Err(TofError::Empty(format!(
+                "object {object}: no interior ToF pixel maps into its mask (is the calibration for this scene?)"
+            ))
+            .into());
+        };
+        let moved = rig_at_depth(rig, z0);
+        let mut reconstruction = reconstruct(images, &moved, Some(&mask), noise, config)
+            .map_err(|source| HybridError::Reconstruct { object, source })?;
+        reconstruction
+            .integration
+            .depth
+            .depth_mm
+            .mapv_inplace(|z| z + z0 as f32);
+        let depth = &reconstruction.integration.depth.depth_mm;
+        let (mut sum_w, mut sum_wd) = (0.0, 0.0);
+        for ((z, &p), &w) in depth.iter().zip(&prior.depth_mm).zip(&prior.weight) {
+            if z.is_finite() && p.is_finite() && w > 0.0 {
+                sum_w += f64::from(w);
+                sum_wd += f64::from(w) * f64::from(p - z);
+            }
+        }
+        let offset = if sum_w > 0.0 { sum_wd / sum_w } else { 0.0 };
+        let placed = depth.mapv(|z| z + offset as f32);
+        let fused = fuse_positions_and_normals(
+            &reconstruction.photometric.field,
+            pitch,
+            &prior,
+            &hybrid.fusion,
+            Some(&placed),
+        )
+        .map_err(|source| HybridError::Fusion { object, source })?;
+        timings.push(StageTiming {
+            stage: format!("object {object}: photometric stereo, integration, fusion"),
+            ms: start.elapsed().as_secs_f64() * 1e3,
+        });
+        objects.push(HybridObject {
+            layer,
+            mask,
+            tof_depth_mm: z0,
+            prior,
+            reconstruction,
+            placed,
+            fused,
+        });
+    }
+    let mut labels = Array2::from_elem(shape, -1);
+    let mut placed = Array2::from_elem(shape, f32::NAN);
+    let mut fused = Array2::from_elem(shape, f32::NAN);
+    for (k, o) in objects.iter().enumerate() {
+        for (p, &m) in o.mask.indexed_iter() {
+            if m {
+                labels[p] = k as i32;
+                placed[p] = o.placed[p];
+                fused[p] = o.fused.depth.depth_mm[p];
+            }
+        }
+    }
+    Ok(HybridReconstruction {
+        objects,
+        labels,
+        placed,
+        fused,
+        timings,
+    })
+}
