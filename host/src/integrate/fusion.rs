@@ -169,7 +169,11 @@ pub fn fuse_positions_and_normals(
         return Err(IntegrateError::EmptyMask);
     }
     Ok(Fusion {
-        depth: DepthMap { depth_mm, pitch_mm },
+        depth: DepthMap {
+            depth_mm,
+            pitch_mm,
+            perspective: None,
+        },
         solved,
         iterations,
         prior_pixels,

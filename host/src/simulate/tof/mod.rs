@@ -41,7 +41,7 @@ pub use scene::{HybridScene, thesis_hybrid_scene};
 
 use super::SimulateError;
 use super::scene::{Scene, Shape, intersect_analytic};
-use crate::rig::{Camera, TofCamera};
+use crate::rig::{Camera, PixelRay, TofCamera};
 use nalgebra::{UnitQuaternion, Vector3};
 use ndarray::{Array1, Array2, Array3};
 use rand::SeedableRng;
@@ -254,6 +254,11 @@ pub fn cast_ray(
         UnitQuaternion::from_axis_angle(&Vector3::x_axis(), std::f64::consts::PI)
     });
     let mut best: Option<(f64, Vector3<f64>, f64, i32)> = None;
+    // In the SPAD-aligned frame the pixel's ray is the z axis through the origin.
+    let axis = PixelRay {
+        base: Vector3::zeros(),
+        slope: Vector3::z(),
+    };
     for (k, object) in scene.objects.iter().enumerate() {
         if matches!(object.shape, Shape::Mesh(_)) {
             return Err(SimulateError::Invalid {
@@ -265,7 +270,7 @@ pub fn cast_ray(
         }
         let centre = q * (object.position_mm - origin);
         let rotation = q * object.rotation;
-        if let Some((z, n)) = intersect_analytic(&object.shape, &centre, &rotation, 0.0, 0.0)
+        if let Some((z, n)) = intersect_analytic(&object.shape, &centre, &rotation, &axis)
             && z < 0.0
         {
             let t = -z;
@@ -286,16 +291,16 @@ pub fn cast_ray(
     Ok(best.map(|(t, n, a, l)| (t / direction.norm(), n, a, l)))
 }
 
-/// Per-pixel object group seen by an orthographic PS camera (−1: ground or nothing).
+/// Per-pixel object group seen by the PS camera (−1: ground or nothing).
 pub fn camera_labels(scene: &Scene, groups: &[usize], camera: &Camera) -> Array2<i32> {
     Array2::from_shape_fn((camera.height, camera.width), |(r, c)| {
-        let (x, y) = camera.pixel_centre_xy(r as f64, c as f64);
+        let ray = camera.ray(r as f64, c as f64);
         let mut best = (f64::NEG_INFINITY, -1);
         if let Some(g) = &scene.ground {
             best = (g.z_mm, -1);
         }
         for (k, o) in scene.objects.iter().enumerate() {
-            if let Some((z, _)) = intersect_analytic(&o.shape, &o.position_mm, &o.rotation, x, y)
+            if let Some((z, _)) = intersect_analytic(&o.shape, &o.position_mm, &o.rotation, &ray)
                 && z > best.0
             {
                 best = (z, groups.get(k).map_or(k as i32, |&g| g as i32));
