@@ -22,3 +22,4 @@ pub mod simulate;
 pub mod stats;
 pub mod timing;
 pub mod types;
+pub mod video;

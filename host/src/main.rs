@@ -31,6 +31,8 @@ enum Command {
     Simulate(Box<cli::simulate::SimulateArgs>),
     /// Reconstruct normals, depth and a mesh from a capture or a `meb decode` folder.
     Reconstruct(Box<cli::reconstruct::ReconstructArgs>),
+    /// Make a 3-D video from a long or live capture: a 3-D frame per window of frames.
+    Video(Box<cli::video::VideoArgs>),
 }
 
 fn main() -> ExitCode {
@@ -44,6 +46,7 @@ fn main() -> ExitCode {
         Command::Device(args) => cli::device::run(&args),
         Command::Simulate(args) => cli::simulate::run(&args),
         Command::Reconstruct(args) => cli::reconstruct::run(&args),
+        Command::Video(args) => cli::video::run(&args),
     };
     match result {
         Ok(()) => ExitCode::SUCCESS,

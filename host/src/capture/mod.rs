@@ -150,8 +150,8 @@ pub enum CaptureError {
     Other(String),
 }
 
-/// A stream of frames.
-pub trait FrameSource {
+/// A stream of frames (`Send`, so a reader thread can run ahead of the consumer).
+pub trait FrameSource: Send {
     /// The stream's format.
     fn format(&self) -> &FrameFormat;
     /// The next frame, or `None` at the end of the stream.
@@ -167,6 +167,7 @@ pub mod images;
 pub mod memory;
 pub mod open;
 pub mod raw;
+pub mod stdin;
 pub mod y4m;
 
 pub use open::{OpenOptions, open};

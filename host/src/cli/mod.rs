@@ -9,3 +9,4 @@ pub mod integrate;
 pub mod photometric;
 pub mod reconstruct;
 pub mod simulate;
+pub mod video;
