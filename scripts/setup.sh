@@ -1,12 +1,24 @@
 #!/usr/bin/env bash
 # Installs what building and testing meb needs on a fresh Debian machine. Idempotent.
+#   - FFmpeg: video capture (meb decode on video files) and its tests;
+#   - Node.js + npm: three.js for report.html's 3-D view, pinned in host/viewer/package-lock.json;
+#   - Chromium: the test that opens report.html headless and checks the 3-D view draws.
 set -euo pipefail
 cd "$(dirname "$0")/.."
 # The toolchain, its thumbv7em target and llvm-tools come from rust-toolchain.toml.
 rustup toolchain install >/dev/null 2>&1 || rustup show active-toolchain >/dev/null
-if ! command -v ffmpeg >/dev/null || ! command -v ffprobe >/dev/null; then
-    echo "setup: installing FFmpeg (Debian package ffmpeg) for video capture" >&2
-    if [ "$(id -u)" = 0 ]; then sudo=""; else sudo="sudo"; fi
+if [ "$(id -u)" = 0 ]; then sudo=""; else sudo="sudo"; fi
+missing=()
+if ! command -v ffmpeg >/dev/null || ! command -v ffprobe >/dev/null; then missing+=(ffmpeg); fi
+if ! command -v npm >/dev/null; then missing+=(npm); fi
+if ! command -v chromium >/dev/null; then missing+=(chromium); fi
+if [ ${#missing[@]} -gt 0 ]; then
+    echo "setup: installing Debian packages: ${missing[*]}" >&2
     $sudo apt-get update -qq
-    DEBIAN_FRONTEND=noninteractive $sudo apt-get install -y -qq ffmpeg >/dev/null
+    DEBIAN_FRONTEND=noninteractive $sudo apt-get install -y -qq "${missing[@]}" >/dev/null
+fi
+# three.js at the version the lock file pins (host/build.rs runs the same when it is missing).
+if [ ! -f host/viewer/node_modules/three/build/three.module.min.js ]; then
+    echo "setup: installing three.js (npm ci in host/viewer)" >&2
+    (cd host/viewer && npm ci --ignore-scripts --no-audit --no-fund >/dev/null)
 fi

@@ -1,6 +1,6 @@
 //! End to end: a virtual luminaire configured over the wire (4 LEDs, 960 Hz) lights a
 //! simulated sphere capture through its recorded timeline; the capture is decoded and
-//! reconstructed, and the depth must meet the product's reconstruction target under its
+//! reconstructed, and the depth must meet the product's accuracy target under the thesis'
 //! conditions (128 frames, σ = 1 %, background at 0 dB SNR, exposure 0.8, gamma 2.2): depth
 //! RMSE ≤ 0.5 mm over ≥ 95 % of the surface lit by ≥ 3 LEDs. The grid is coarser than the
 //! thesis' camera (0.5 mm pixels, 192×128) to keep the test fast.
@@ -20,7 +20,7 @@ use meb::simulate::{
 use ndarray::Array2;
 use protocol::config::{ChipRate, LuminaireConfig};
 
-/// Depth RMSE target of the reconstruction, mm.
+/// Depth RMSE target on the thesis' sphere capture, mm.
 const DEPTH_RMSE_TARGET_MM: f64 = 0.5;
 /// Fraction of the surface lit by ≥ 3 LEDs that must be reconstructed.
 const COVERAGE_TARGET: f64 = 0.95;

@@ -3,6 +3,8 @@
 //! given exactly, report the levels that map them to fractions of full scale, and turn bad
 //! input into a typed error.
 
+mod common;
+use common::ffmpeg_available;
 use meb::capture::ffmpeg::FfmpegSource;
 use meb::capture::images::{ImageSequence, TiffStack};
 use meb::capture::raw::RawLayout;
@@ -266,7 +268,7 @@ fn corrupt_png_in_directory_is_a_format_error() {
     assert!(source.next_frame().unwrap().is_some());
     let error = source.next_frame().unwrap_err();
     assert!(
-        matches!(error, CaptureError::Format { ref path, .. } if path.ends_with("frame_1.png"))
+        matches!(error, CaptureError::Decode { ref path, .. } if path.ends_with("frame_1.png"))
     );
 }
 
@@ -416,7 +418,13 @@ fn not_a_tiff_and_truncated_tiff_are_format_errors() {
     let junk = tmp.path().join("junk.tif");
     std::fs::write(&junk, b"this is not a TIFF file at all").unwrap();
     let error = open(&junk, &options()).err().expect("an error");
-    assert!(matches!(error, CaptureError::Format { .. }), "{error}");
+    assert!(
+        matches!(
+            error,
+            CaptureError::Format { .. } | CaptureError::Decode { .. }
+        ),
+        "{error}"
+    );
 
     let path = tmp.path().join("cut.tif");
     let pages: Vec<_> = (0..4).map(|f| (W, H, pattern16(f, 65535))).collect();
@@ -428,7 +436,10 @@ fn not_a_tiff_and_truncated_tiff_are_format_errors() {
     let result = open(&cut, &options()).and_then(|mut s| read_all(s.as_mut()));
     match result {
         Err(error) => assert!(
-            matches!(error, CaptureError::Format { .. } | CaptureError::Io { .. }),
+            matches!(
+                error,
+                CaptureError::Format { .. } | CaptureError::Decode { .. } | CaptureError::Io { .. }
+            ),
             "{error}"
         ),
         Ok(frames) => {
@@ -769,7 +780,10 @@ fn raw_needs_a_valid_layout() {
     let path = tmp.path().join("frames.raw");
     std::fs::write(&path, pattern8(0)).unwrap();
     let error = open(&path, &options()).err().expect("an error");
-    assert!(error.to_string().contains("--raw"), "{error}");
+    assert!(
+        error.to_string().contains("raw frames need their layout"),
+        "{error}"
+    );
     for layout in [
         RawLayout {
             width: 0,
@@ -811,22 +825,6 @@ fn missing_input_is_an_io_error() {
 
 // ---------------------------------------------------------------------------------------------
 // Video containers through FFmpeg
-
-fn ffmpeg_available() -> bool {
-    let ok = |tool: &str| {
-        Command::new(tool)
-            .arg("-version")
-            .output()
-            .is_ok_and(|o| o.status.success())
-    };
-    if ok("ffmpeg") && ok("ffprobe") {
-        return true;
-    }
-    eprintln!(
-        "SKIPPED: ffmpeg/ffprobe not installed (apt-get install ffmpeg); FFmpeg reader untested"
-    );
-    false
-}
 
 /// Raw 4:2:0 frames: the given luma plane and neutral chroma.
 fn yuv420_8(luma: &[u8]) -> Vec<u8> {

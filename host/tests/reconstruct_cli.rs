@@ -6,6 +6,7 @@
 //! error mean 1.2°; the bound of 0.3 mm is ~4× that, still 2 % of the sphere's 15 mm depth range,
 //! and the distant-light model alone (0.50 mm) fails it.
 
+use meb::export::report::{REPORT_SCHEMA, REPORT_SCHEMA_VERSION, Report};
 use ndarray::{Array2, Array3};
 use std::path::{Path, PathBuf};
 
@@ -71,14 +72,20 @@ impl Setup {
         s(&self.path(name))
     }
 
-    fn report(&self, out: &str) -> serde_json::Value {
+    /// The typed `report.json` of output folder `out` (parsing checks the schema).
+    fn report(&self, out: &str) -> Report {
         let text = std::fs::read_to_string(self.path(out).join("report.json")).unwrap();
-        serde_json::from_str(&text).unwrap()
+        let report: Report = serde_json::from_str(&text).unwrap();
+        assert_eq!(
+            (report.schema.as_str(), report.schema_version),
+            (REPORT_SCHEMA, REPORT_SCHEMA_VERSION)
+        );
+        report
     }
 }
 
-fn depth_rmse(report: &serde_json::Value) -> f64 {
-    report["depth_errors"]["rmse_mm"].as_f64().unwrap()
+fn depth_rmse(report: &Report) -> f64 {
+    report.depth_accuracy.as_ref().unwrap().rmse_mm
 }
 
 #[test]
@@ -112,14 +119,21 @@ fn decode_folder_reconstructs_sphere_within_bound() {
     let rmse = depth_rmse(&report);
     println!(
         "decode folder: depth RMSE {rmse:.3} mm, reconstructed {:.3}, normals mean {:.2}°",
-        report["depth_errors"]["reconstructed_fraction"], report["normal_errors"]["mean_deg"]
+        report
+            .depth_accuracy
+            .as_ref()
+            .unwrap()
+            .reconstructed_fraction,
+        report.normal_accuracy.as_ref().unwrap().mean_deg
     );
     assert!(rmse <= MAX_RMSE_MM, "depth RMSE {rmse} mm");
-    let fraction = report["depth_errors"]["reconstructed_fraction"]
-        .as_f64()
-        .unwrap();
+    let fraction = report
+        .depth_accuracy
+        .as_ref()
+        .unwrap()
+        .reconstructed_fraction;
     assert!(fraction > 0.5, "reconstructed fraction {fraction}");
-    let mean_deg = report["normal_errors"]["mean_deg"].as_f64().unwrap();
+    let mean_deg = report.normal_accuracy.as_ref().unwrap().mean_deg;
     assert!(mean_deg < 3.0, "normal error {mean_deg}°");
     let depth: Array2<f32> = ndarray_npy::read_npy(t.path("rec/depth.npy")).unwrap();
     assert_eq!(depth.dim(), (96, 160));
@@ -164,7 +178,7 @@ fn capture_folder_is_decoded_on_the_fly() {
     let rmse = depth_rmse(&report);
     println!("capture folder: depth RMSE {rmse:.3} mm");
     assert!(rmse <= MAX_RMSE_MM, "depth RMSE {rmse} mm");
-    assert_eq!(report["summary"]["decoded frames"], 64);
+    assert_eq!(report.summary.decoded_frames, Some(64));
     assert!(t.path("rec/surface.ply").is_file());
 }
 

@@ -1,7 +1,6 @@
 //! `meb simulate` end to end on small rigs: files written, formats, determinism, bad input.
 
 use std::path::{Path, PathBuf};
-use std::process::Command;
 
 mod common;
 use common::{OUT_OF_PLANE_LEDS, meb, rig_toml, run_ok};
@@ -273,8 +272,8 @@ fn bad_inputs_fail_clearly() {
 
 #[test]
 fn mp4_goes_through_ffmpeg_when_installed() {
-    if Command::new("ffmpeg").arg("-version").output().is_err() {
-        return; // covered by the error path; nothing to check without FFmpeg
+    if !common::ffmpeg_available() {
+        return;
     }
     let (tmp, rig) = setup();
     let out = path(tmp.path(), "video");

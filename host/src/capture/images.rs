@@ -35,9 +35,9 @@ fn load_still(path: &Path) -> Result<Still, CaptureError> {
             source,
         })?
         .decode()
-        .map_err(|e| CaptureError::Format {
+        .map_err(|e| CaptureError::Decode {
             path: path.to_path_buf(),
-            reason: e.to_string(),
+            source: Box::new(e),
         })?;
     Ok(grey(image))
 }
@@ -251,9 +251,9 @@ impl TiffStack {
             path: path.to_path_buf(),
             source,
         })?;
-        let tiff_error = |e: tiff::TiffError| CaptureError::Format {
+        let tiff_error = |e: tiff::TiffError| CaptureError::Decode {
             path: path.to_path_buf(),
-            reason: e.to_string(),
+            source: Box::new(e),
         };
         let mut decoder = tiff::decoder::Decoder::new(BufReader::new(file)).map_err(tiff_error)?;
         let (w, h) = decoder.dimensions().map_err(tiff_error)?;
@@ -287,9 +287,9 @@ impl FrameSource for TiffStack {
             return Ok(None);
         }
         let path = self.path.clone();
-        let tiff_error = |e: tiff::TiffError| CaptureError::Format {
+        let tiff_error = |e: tiff::TiffError| CaptureError::Decode {
             path: path.clone(),
-            reason: e.to_string(),
+            source: Box::new(e),
         };
         if self.index > 0 {
             if !self.decoder.more_images() {

@@ -131,6 +131,14 @@ pub enum CaptureError {
         /// What is wrong.
         reason: String,
     },
+    /// An image file the codec cannot decode.
+    #[error("{path}: cannot decode the image")]
+    Decode {
+        /// The file.
+        path: std::path::PathBuf,
+        /// The codec's error.
+        source: Box<dyn std::error::Error + Send + Sync>,
+    },
     /// A frame whose size differs from the stream's.
     #[error("frame {index} is {got_width}x{got_height}, expected {width}x{height}")]
     SizeMismatch {

@@ -46,7 +46,7 @@ pub fn open(path: &Path, options: &OpenOptions) -> Result<Box<dyn FrameSource>, 
         "y4m" => Ok(Box::new(Y4mSource::open(path, options.fps)?)),
         "tif" | "tiff" => Ok(Box::new(TiffStack::open(path, fps)?)),
         "raw" | "bin" => Err(CaptureError::Other(format!(
-            "{}: raw frames need their width, height and bit depth (--raw WxHxBITS)",
+            "{}: raw frames need their layout (width, height and bits per sample)",
             path.display()
         ))),
         _ => Ok(Box::new(FfmpegSource::open(path, options.fps)?)),

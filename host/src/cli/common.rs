@@ -5,7 +5,7 @@ use anyhow::{Context, Result};
 use meb::export::files::{
     FilesError, OutputFolder, Replace, read_mask, remove_temporaries_on_signal,
 };
-use meb::export::report::{ReportInputs, WrittenReport, write_report};
+use meb::export::report::{ReportInputs, Summary, WrittenReport, write_report};
 use meb::metrics::{AngularErrors, DepthErrors};
 use meb::timing::StageTiming;
 use meb::types::{DepthMap, NormalField};
@@ -75,7 +75,7 @@ pub fn write_outputs(
     depth_errors: Option<&DepthErrors>,
     angular_errors: Option<&AngularErrors>,
     timings: &[StageTiming],
-    summary: serde_json::Map<String, serde_json::Value>,
+    summary: Summary,
     mesh_formats: Vec<String>,
 ) -> Result<WrittenReport> {
     Ok(write_report(
@@ -92,4 +92,61 @@ pub fn write_outputs(
             mesh_formats,
         },
     )?)
+}
+
+/// The report's name of an integrator, e.g. `least-squares`.
+pub fn integrator_name(integrator: meb::integrate::Integrator) -> String {
+    serde_json::to_value(integrator)
+        .ok()
+        .and_then(|v| v.as_str().map(str::to_string))
+        .unwrap_or_else(|| format!("{integrator:?}"))
+}
+
+/// The report's description of a light model.
+pub fn light_model_name(model: meb::reconstruct::LightModel) -> String {
+    match model {
+        meb::reconstruct::LightModel::Distant => "distant (L_i(0))".into(),
+        meb::reconstruct::LightModel::NearField { refinements } => {
+            format!("near-field ({refinements} refinements)")
+        }
+    }
+}
+
+/// Surface mesh formats written besides `surface.ply`.
+#[derive(clap::ValueEnum, Clone, Copy, Debug, PartialEq, Eq)]
+pub enum MeshFormat {
+    /// Wavefront OBJ (`surface.obj`).
+    Obj,
+    /// Binary STL (`surface.stl`).
+    Stl,
+}
+
+/// The file extensions of `formats`.
+pub fn mesh_extensions(formats: &[MeshFormat]) -> Vec<String> {
+    formats
+        .iter()
+        .map(|f| match f {
+            MeshFormat::Obj => "obj".to_string(),
+            MeshFormat::Stl => "stl".to_string(),
+        })
+        .collect()
+}
+
+/// The report summary every decoded-capture reconstruction shares: LED images, frames,
+/// integrator, light model, object pixels and the artefact filter's share.
+pub fn reconstruction_summary(
+    decoded: &meb::demod::Decoded,
+    config: &meb::reconstruct::ReconstructConfig,
+    reconstruction: &meb::reconstruct::Reconstruction,
+) -> Summary {
+    let mask = &reconstruction.photometric.field.mask;
+    Summary {
+        leds: Some(decoded.leds.images.len()),
+        decoded_frames: Some(decoded.report.frames_used),
+        integrator: Some(integrator_name(config.integrate.integrator)),
+        light_model: Some(light_model_name(config.light_model)),
+        object_pixels: Some(mask.iter().filter(|&&m| m).count()),
+        kept_fraction: Some(reconstruction.integration.kept_fraction),
+        ..Summary::default()
+    }
 }

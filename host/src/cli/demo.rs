@@ -5,6 +5,7 @@ use anyhow::Result;
 use clap::Args;
 use indicatif::{ProgressBar, ProgressStyle};
 use meb::demo::{run as run_demo, thesis_capture_config, thesis_decode_config};
+use meb::export::report::Summary;
 use meb::reconstruct::ReconstructConfig;
 use meb::rig::Rig;
 use meb::simulate::{Scene, SceneObject};
@@ -60,22 +61,13 @@ pub fn run(args: &DemoArgs) -> Result<()> {
         )?;
         bar.finish_and_clear();
         let e = &out.depth_errors;
-        let mut summary = serde_json::Map::new();
-        summary.insert("object".into(), name.into());
-        summary.insert("integrator".into(), "least-squares".into());
-        summary.insert("light model".into(), "near-field".into());
-        summary.insert(
-            "decoded frames".into(),
-            out.decoded.report.frames_used.into(),
-        );
-        summary.insert(
-            "surface lit by ≥3 LEDs (pixels)".into(),
-            out.lit_by_three.iter().filter(|&&m| m).count().into(),
-        );
-        summary.insert(
-            "kept by artefact filter (%)".into(),
-            (100.0 * out.reconstruction.integration.kept_fraction).into(),
-        );
+        let config = ReconstructConfig::decoded_capture();
+        let summary = Summary {
+            rig: Some("thesis-out-of-plane".into()),
+            object: Some(name.into()),
+            lit_by_three_pixels: Some(out.lit_by_three.iter().filter(|&&m| m).count()),
+            ..super::common::reconstruction_summary(&out.decoded, &config, &out.reconstruction)
+        };
         let dir = folder.path().join(name);
         std::fs::create_dir(&dir).map_err(|e| meb::export::files::FilesError::write(&dir, e))?;
         super::common::write_outputs(

@@ -3,6 +3,7 @@
 use anyhow::Result;
 use clap::Args;
 use meb::export::files::read_float;
+use meb::export::report::Summary;
 use meb::integrate::{IntegrateConfig, Integrator, integrate_normals};
 use meb::timing::StageTiming;
 use meb::types::NormalField;
@@ -26,6 +27,9 @@ pub struct IntegrateArgs {
     pub out: PathBuf,
     #[arg(long, help = super::common::FORCE_HELP)]
     pub force: bool,
+    /// Also write the surface in these formats (comma-separated): obj, stl.
+    #[arg(long, value_enum, value_delimiter = ',')]
+    pub mesh: Vec<super::common::MeshFormat>,
     /// Integrator.
     #[arg(long, value_enum, default_value = "least-squares")]
     pub integrator: IntegratorArg,
@@ -76,12 +80,13 @@ pub fn run(args: &IntegrateArgs) -> Result<()> {
     let start = Instant::now();
     let out = integrate_normals(&field, args.pitch, &config, None)?;
     let timings = vec![StageTiming::since("integration", start)];
-    let mut summary = serde_json::Map::new();
-    summary.insert(
-        "integrator".into(),
-        serde_json::to_value(config.integrator)?,
-    );
-    summary.insert("kept_fraction".into(), out.kept_fraction.into());
+    let summary = Summary {
+        input: Some(args.normals.display().to_string()),
+        integrator: Some(super::common::integrator_name(config.integrator)),
+        object_pixels: Some(field.mask.iter().filter(|&&m| m).count()),
+        kept_fraction: Some(out.kept_fraction),
+        ..Summary::default()
+    };
     super::common::write_outputs(
         folder.path(),
         "meb integrate",
@@ -92,7 +97,7 @@ pub fn run(args: &IntegrateArgs) -> Result<()> {
         None,
         &timings,
         summary,
-        vec![],
+        super::common::mesh_extensions(&args.mesh),
     )?;
     let written = super::common::commit(folder)?;
     println!(

@@ -3,6 +3,7 @@
 use anyhow::{Context, Result};
 use clap::Args;
 use meb::datasets::diligent::{ImageSet, load_diligent, load_image_set};
+use meb::export::report::Summary;
 use meb::integrate::{IntegrateConfig, integrate_normals};
 use meb::metrics::compare_normals;
 use meb::photometric::{Lights, PhotometricConfig, estimate_normals};
@@ -71,12 +72,17 @@ pub fn run(args: &PhotometricArgs) -> Result<()> {
         (Some(gt), Some(mask)) => Some(compare_normals(&ps.field.normals, gt, mask)?),
         _ => None,
     };
-    let mut summary = serde_json::Map::new();
-    summary.insert("lights".into(), set.lights.len().into());
-    summary.insert(
-        "solved_pixels".into(),
-        ps.field.mask.iter().filter(|&&m| m).count().into(),
-    );
+    let summary = Summary {
+        input: args.diligent.as_ref().map(|d| d.display().to_string()),
+        leds: Some(set.lights.len()),
+        integrator: Some(super::common::integrator_name(
+            IntegrateConfig::default().integrator,
+        )),
+        light_model: Some("distant (given light vectors)".into()),
+        object_pixels: Some(ps.field.mask.iter().filter(|&&m| m).count()),
+        kept_fraction: Some(integration.kept_fraction),
+        ..Summary::default()
+    };
     super::common::write_outputs(
         folder.path(),
         "meb photometric",

@@ -8,6 +8,7 @@ use clap::Args;
 use meb::demod::Decoded;
 use meb::demod::output::read_decode_dir;
 use meb::export::files::read_float;
+use meb::export::report::Summary;
 use meb::metrics::{
     AngularErrors, DepthErrors, compare_depth, compare_normals, load_mesh_triangles,
     normals_from_depth, render_mesh_depth,
@@ -33,6 +34,9 @@ pub struct ReconstructArgs {
     out: PathBuf,
     #[arg(long, help = super::common::FORCE_HELP)]
     force: bool,
+    /// Also write the surface in these formats (comma-separated): obj, stl.
+    #[arg(long, value_enum, value_delimiter = ',')]
+    mesh: Vec<super::common::MeshFormat>,
     /// Normal integrator.
     #[arg(long, value_enum, default_value = "least-squares")]
     integrator: IntegratorArg,
@@ -90,8 +94,8 @@ pub fn run(args: &ReconstructArgs) -> Result<()> {
         depth_errors.as_ref(),
         angular_errors.as_ref(),
         &reconstruction.timings,
-        summary(args, &inputs, &config, &reconstruction)?,
-        vec![],
+        summary(args, &inputs, &config, &reconstruction),
+        super::common::mesh_extensions(&args.mesh),
     )?;
     let out = super::common::commit(folder)?;
     print_summary(
@@ -195,36 +199,13 @@ fn summary(
     inputs: &Inputs,
     config: &ReconstructConfig,
     reconstruction: &Reconstruction,
-) -> Result<serde_json::Map<String, serde_json::Value>> {
-    let field = &reconstruction.photometric.field;
-    let mut summary = serde_json::Map::new();
-    summary.insert("input".into(), args.input.display().to_string().into());
-    summary.insert("rig".into(), args.rig.clone().into());
-    summary.insert("leds".into(), inputs.decoded.leds.images.len().into());
-    summary.insert(
-        "decoded frames".into(),
-        inputs.decoded.report.frames_used.into(),
-    );
-    summary.insert(
-        "integrator".into(),
-        serde_json::to_value(config.integrate.integrator)?,
-    );
-    summary.insert(
-        "light model".into(),
-        serde_json::to_value(config.light_model)?,
-    );
-    summary.insert(
-        "object pixels".into(),
-        field.mask.iter().filter(|&&m| m).count().into(),
-    );
-    summary.insert(
-        "kept by artefact filter (%)".into(),
-        (100.0 * reconstruction.integration.kept_fraction).into(),
-    );
-    if let Some(path) = &args.ground_truth {
-        summary.insert("ground truth".into(), path.display().to_string().into());
+) -> Summary {
+    Summary {
+        input: Some(args.input.display().to_string()),
+        rig: Some(args.rig.clone()),
+        ground_truth: args.ground_truth.as_ref().map(|p| p.display().to_string()),
+        ..super::common::reconstruction_summary(&inputs.decoded, config, reconstruction)
     }
-    Ok(summary)
 }
 
 /// Prints what was reconstructed and, with ground truth, how well.

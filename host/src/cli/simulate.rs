@@ -340,7 +340,23 @@ fn build_scene(args: &CaptureArgs) -> Result<(Scene, serde_json::Value)> {
                 .mesh
                 .as_ref()
                 .context("--scene mesh needs --mesh FILE.stl|FILE.obj")?;
-            let mut mesh = TriMesh::load(path)?.centred(size);
+            let mesh = TriMesh::load(path)?;
+            let area: f64 = mesh
+                .triangles
+                .iter()
+                .map(|t| {
+                    let [a, b, c] = t.map(|i| mesh.vertices[i]);
+                    0.5 * (b - a).cross(&(c - a)).norm()
+                })
+                .sum();
+            if area.is_nan() || area <= 0.0 {
+                bail!(
+                    "mesh {} has no surface: its {} triangles have zero total area",
+                    path.display(),
+                    mesh.triangles.len()
+                );
+            }
+            let mut mesh = mesh.centred(size);
             if args.smooth_normals {
                 mesh = mesh.with_smooth_normals();
             }

@@ -8,6 +8,7 @@ pub mod files;
 pub mod mesh;
 pub mod render;
 pub mod report;
+pub mod viewer;
 
 pub use files::FilesError;
 

@@ -1,17 +1,144 @@
-//! Writes a reconstruction's full output folder: arrays, previews, surface mesh(es), and the
-//! report as JSON (every metric, per-stage timing) and as one self-contained HTML page.
+//! Writes a reconstruction's files: arrays, previews, surface mesh(es), and the report as JSON
+//! ([`Report`], a versioned schema: every metric, settings, per-stage timing) and as one
+//! self-contained HTML page (previews cropped to the object, one stage-timing table, an
+//! interactive 3-D view of the surface, everything inlined so it works offline).
 
 use super::ExportError;
 use super::files::preview::{depth_map, error_map, grey_map, mask_image, normal_map, png_bytes};
 use super::files::{FilesError, write_npy};
 use super::mesh::SurfaceMesh;
 use super::render::{VIEWS, render_surface};
+use super::viewer;
 use crate::metrics::{AngularErrors, DepthErrors};
 use crate::timing::StageTiming;
 use crate::types::{DepthMap, NormalField};
 use base64::Engine;
-use serde_json::{Value, json};
+use image::RgbImage;
+use serde::{Deserialize, Serialize};
 use std::path::{Path, PathBuf};
+
+/// Name of the `report.json` layout.
+pub const REPORT_SCHEMA: &str = "meb-report";
+/// Version of the `report.json` layout; raised whenever a field changes meaning or goes away.
+pub const REPORT_SCHEMA_VERSION: u32 = 1;
+
+/// Settings and counts of a run, each shown in the report when present.
+#[derive(Debug, Clone, Default, PartialEq, Serialize, Deserialize)]
+pub struct Summary {
+    /// The input file or folder.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub input: Option<String>,
+    /// The rig (file or preset name).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub rig: Option<String>,
+    /// The simulated object (`meb demo`).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub object: Option<String>,
+    /// Number of LED images (lights).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub leds: Option<usize>,
+    /// Frames the decoder used.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub decoded_frames: Option<usize>,
+    /// The normal integrator, e.g. `least-squares`.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub integrator: Option<String>,
+    /// The light model, e.g. `near-field (3 refinements)`.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub light_model: Option<String>,
+    /// Pixels photometric stereo solved (the object mask).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub object_pixels: Option<usize>,
+    /// Fraction (0..1) of the object pixels the integrator's artefact filter kept.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub kept_fraction: Option<f64>,
+    /// Object pixels lit by at least three LEDs in the ground truth (where accuracy is measured).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub lit_by_three_pixels: Option<usize>,
+    /// The ground-truth file.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub ground_truth: Option<String>,
+}
+
+/// Depth accuracy against ground truth (see [`DepthErrors`]).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct DepthAccuracy {
+    /// RMSE in mm after removing the best constant offset.
+    pub rmse_mm: f64,
+    /// RMSE / depth range of the truth; `null` when the truth is flat.
+    pub nrmse: Option<f64>,
+    /// Fraction (0..1) of the true surface with an estimate.
+    pub reconstructed_fraction: f64,
+    /// Pixels compared.
+    pub compared_pixels: usize,
+    /// The offset removed (mean of estimate − truth), mm.
+    pub offset_mm: f64,
+}
+
+/// Normal accuracy against ground truth (see [`AngularErrors`]).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct NormalAccuracy {
+    /// Mean angle between estimated and true normals, degrees.
+    pub mean_deg: f64,
+    /// Median angle, degrees.
+    pub median_deg: f64,
+    /// Pixels compared.
+    pub compared_pixels: usize,
+}
+
+/// Total time of one stage over all its passes.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct StageTotal {
+    /// Stage name, without the pass number.
+    pub stage: String,
+    /// How many times it ran.
+    pub passes: usize,
+    /// Milliseconds over all passes.
+    pub ms: f64,
+}
+
+/// Image size in pixels.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+pub struct ImageSize {
+    /// Rows (height).
+    pub rows: usize,
+    /// Columns (width).
+    pub cols: usize,
+}
+
+/// The contents of `report.json` (schema [`REPORT_SCHEMA`], version
+/// [`REPORT_SCHEMA_VERSION`]).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct Report {
+    /// Always [`REPORT_SCHEMA`].
+    pub schema: String,
+    /// [`REPORT_SCHEMA_VERSION`] of the writer.
+    pub schema_version: u32,
+    /// Page title, e.g. "meb reconstruct".
+    pub title: String,
+    /// Where the data came from.
+    pub source: String,
+    /// Size of the camera grid.
+    pub image: ImageSize,
+    /// Grid pitch, mm per pixel.
+    pub pitch_mm: f64,
+    /// Pixels with a depth.
+    pub reconstructed_pixels: usize,
+    /// Depth accuracy, when ground truth was given.
+    pub depth_accuracy: Option<DepthAccuracy>,
+    /// Normal accuracy, when ground truth was given.
+    pub normal_accuracy: Option<NormalAccuracy>,
+    /// Settings and counts.
+    pub summary: Summary,
+    /// Each stage's total time, in the order the stages first ran.
+    pub stages: Vec<StageTotal>,
+    /// Every timed step in order (one row per pass).
+    pub timings: Vec<StageTiming>,
+    /// Sum of all timings, ms.
+    pub total_ms: f64,
+    /// The preview files written.
+    pub files: Vec<String>,
+}
 
 /// Everything that goes into an output folder.
 #[derive(Debug, Clone)]
@@ -30,8 +157,8 @@ pub struct ReportInputs<'a> {
     pub angular_errors: Option<&'a AngularErrors>,
     /// Per-stage timing.
     pub timings: &'a [StageTiming],
-    /// Further named figures for the report (settings, counts, fractions).
-    pub summary: serde_json::Map<String, Value>,
+    /// Settings and counts for the report.
+    pub summary: Summary,
     /// Extra mesh formats besides PLY ("obj", "stl").
     pub mesh_formats: Vec<String>,
 }
@@ -43,8 +170,17 @@ pub struct WrittenReport {
     pub json: PathBuf,
     /// `report.html`.
     pub html: PathBuf,
-    /// The JSON value written.
-    pub value: Value,
+    /// The report written.
+    pub report: Report,
+}
+
+/// A preview image: caption, file name, image.
+struct Preview {
+    caption: String,
+    file: String,
+    image: RgbImage,
+    /// Whether the image is on the camera grid (and is cropped to the object in the page).
+    on_grid: bool,
 }
 
 /// Writes the reconstruction's files into the existing folder `dir` (normally an
@@ -62,88 +198,156 @@ pub fn write_report(dir: &Path, inputs: &ReportInputs) -> Result<WrittenReport, 
     write_npy(&dir.join("albedo.npy"), &inputs.normals.albedo)?;
     write_npy(&dir.join("depth.npy"), &inputs.depth.depth_mm)?;
     let mask = inputs.depth.depth_mm.mapv(f32::is_finite);
-    let mut previews: Vec<(String, String, Vec<u8>)> = vec![
-        (
-            "normal map".into(),
-            "normals.png".into(),
-            png_bytes(&normal_map(&inputs.normals.normals))?,
-        ),
-        (
-            "albedo".into(),
-            "albedo.png".into(),
-            png_bytes(&grey_map(&inputs.normals.albedo))?,
-        ),
-        (
-            "depth".into(),
-            "depth.png".into(),
-            png_bytes(&depth_map(&inputs.depth.depth_mm))?,
-        ),
-        (
-            "mask".into(),
-            "mask.png".into(),
-            png_bytes(&mask_image(&mask))?,
-        ),
-    ];
-    if let Some(e) = inputs.depth_errors {
-        let limit = (3.0 * e.rmse_mm as f32).max(1e-3);
-        previews.push((
-            format!("depth error (±{limit:.2} mm)"),
-            "depth_error.png".into(),
-            png_bytes(&error_map(&e.error_map, limit))?,
-        ));
-    }
-    if let Some(a) = inputs.angular_errors {
-        previews.push((
-            "normal error (0–10°)".into(),
-            "normal_error.png".into(),
-            png_bytes(&grey_map(
-                &a.error_map
-                    .mapv(|d| if d.is_nan() { d } else { d.min(10.0) }),
-            ))?,
-        ));
-    }
-    for view in VIEWS {
-        previews.push((
-            format!("render: {}", view.name),
-            format!("render_{}.png", view.name),
-            png_bytes(&render_surface(inputs.depth, view, 480))?,
-        ));
-    }
-    for (_, name, bytes) in &previews {
-        write(&dir.join(name), bytes)?;
+    let previews = previews(inputs, &mask);
+    for preview in &previews {
+        write(&dir.join(&preview.file), &png_bytes(&preview.image)?)?;
     }
     let mesh = SurfaceMesh::from_depth(inputs.depth);
     mesh.write(&dir.join("surface.ply"))?;
     for ext in &inputs.mesh_formats {
         mesh.write(&dir.join(format!("surface.{ext}")))?;
     }
-    let total_ms: f64 = inputs.timings.iter().map(|t| t.ms).sum();
-    let value = json!({
-        "title": inputs.title,
-        "source": inputs.source,
-        "image": { "rows": inputs.depth.depth_mm.nrows(), "cols": inputs.depth.depth_mm.ncols() },
-        "pitch_mm": inputs.depth.pitch_mm,
-        "reconstructed_pixels": mask.iter().filter(|&&m| m).count(),
-        "depth_errors": inputs.depth_errors,
-        "normal_errors": inputs.angular_errors,
-        "summary": inputs.summary,
-        "timings_ms": inputs.timings,
-        "total_ms": total_ms,
-        "files": previews.iter().map(|(_, n, _)| n.clone()).collect::<Vec<_>>(),
-    });
+    let report = Report {
+        schema: REPORT_SCHEMA.into(),
+        schema_version: REPORT_SCHEMA_VERSION,
+        title: inputs.title.clone(),
+        source: inputs.source.clone(),
+        image: ImageSize {
+            rows: inputs.depth.depth_mm.nrows(),
+            cols: inputs.depth.depth_mm.ncols(),
+        },
+        pitch_mm: inputs.depth.pitch_mm,
+        reconstructed_pixels: mask.iter().filter(|&&m| m).count(),
+        depth_accuracy: inputs.depth_errors.map(|e| DepthAccuracy {
+            rmse_mm: e.rmse_mm,
+            nrmse: e.nrmse,
+            reconstructed_fraction: e.reconstructed_fraction,
+            compared_pixels: e.compared_pixels,
+            offset_mm: e.offset_mm,
+        }),
+        normal_accuracy: inputs.angular_errors.map(|a| NormalAccuracy {
+            mean_deg: a.mean_deg,
+            median_deg: a.median_deg,
+            compared_pixels: a.compared_pixels,
+        }),
+        summary: inputs.summary.clone(),
+        stages: stage_totals(inputs.timings),
+        timings: inputs.timings.to_vec(),
+        total_ms: inputs.timings.iter().map(|t| t.ms).sum(),
+        files: previews.iter().map(|p| p.file.clone()).collect(),
+    };
     let json_path = dir.join("report.json");
-    let text = serde_json::to_string_pretty(&value).map_err(|e| FilesError::Encode {
+    let text = serde_json::to_string_pretty(&report).map_err(|e| FilesError::Encode {
         path: json_path.clone(),
         source: Box::new(e),
     })?;
     write(&json_path, text.as_bytes())?;
     let html_path = dir.join("report.html");
-    write(&html_path, html_page(inputs, &value, &previews).as_bytes())?;
+    let page = html_page(
+        &report,
+        &text,
+        &previews,
+        &mask,
+        &viewer::viewer_mesh(inputs.depth),
+    )?;
+    write(&html_path, page.as_bytes())?;
     Ok(WrittenReport {
         json: json_path,
         html: html_path,
-        value,
+        report,
     })
+}
+
+/// The preview images of a reconstruction.
+fn previews(inputs: &ReportInputs, mask: &ndarray::Array2<bool>) -> Vec<Preview> {
+    let grid = |caption: &str, file: &str, image: RgbImage| Preview {
+        caption: caption.into(),
+        file: file.into(),
+        image,
+        on_grid: true,
+    };
+    let mut previews = vec![
+        grid(
+            "normal map",
+            "normals.png",
+            normal_map(&inputs.normals.normals),
+        ),
+        grid("albedo", "albedo.png", grey_map(&inputs.normals.albedo)),
+        grid("depth", "depth.png", depth_map(&inputs.depth.depth_mm)),
+        grid("mask", "mask.png", mask_image(mask)),
+    ];
+    if let Some(e) = inputs.depth_errors {
+        let limit = (3.0 * e.rmse_mm as f32).max(1e-3);
+        previews.push(grid(
+            &format!("depth error (±{limit:.2} mm)"),
+            "depth_error.png",
+            error_map(&e.error_map, limit),
+        ));
+    }
+    if let Some(a) = inputs.angular_errors {
+        let capped = a
+            .error_map
+            .mapv(|d| if d.is_nan() { d } else { d.min(10.0) });
+        previews.push(grid(
+            "normal error (0–10°)",
+            "normal_error.png",
+            grey_map(&capped),
+        ));
+    }
+    for view in VIEWS {
+        previews.push(Preview {
+            caption: format!("render: {}", view.name),
+            file: format!("render_{}.png", view.name),
+            image: render_surface(inputs.depth, view, 480),
+            on_grid: false,
+        });
+    }
+    previews
+}
+
+/// Per-stage totals: "integration (pass 2)" counts towards "integration".
+pub fn stage_totals(timings: &[StageTiming]) -> Vec<StageTotal> {
+    let mut totals: Vec<StageTotal> = Vec::new();
+    for t in timings {
+        let stage = match t.stage.rsplit_once(" (pass ") {
+            Some((name, rest)) if rest.ends_with(')') => name,
+            _ => t.stage.as_str(),
+        };
+        match totals.iter_mut().find(|s| s.stage == stage) {
+            Some(total) => {
+                total.passes += 1;
+                total.ms += t.ms;
+            }
+            None => totals.push(StageTotal {
+                stage: stage.to_string(),
+                passes: 1,
+                ms: t.ms,
+            }),
+        }
+    }
+    totals
+}
+
+/// Rows, columns (inclusive ranges) of the `mask`'s bounding box grown by a margin of 10 % of
+/// its size (at least 4 pixels), clipped to the image; the whole image when `mask` is empty.
+pub fn crop_box(mask: &ndarray::Array2<bool>) -> ([usize; 2], [usize; 2]) {
+    let (rows, cols) = mask.dim();
+    let mut lo = [usize::MAX; 2];
+    let mut hi = [0usize; 2];
+    for ((r, c), &m) in mask.indexed_iter() {
+        if m {
+            lo = [lo[0].min(r), lo[1].min(c)];
+            hi = [hi[0].max(r), hi[1].max(c)];
+        }
+    }
+    if lo[0] == usize::MAX {
+        return ([0, rows.saturating_sub(1)], [0, cols.saturating_sub(1)]);
+    }
+    let grow = |lo: usize, hi: usize, len: usize| {
+        let margin = ((hi - lo + 1) / 10).max(4);
+        [lo.saturating_sub(margin), (hi + margin).min(len - 1)]
+    };
+    (grow(lo[0], hi[0], rows), grow(lo[1], hi[1], cols))
 }
 
 /// Escapes text for HTML.
@@ -151,76 +355,181 @@ fn escape(s: &str) -> String {
     s.replace('&', "&amp;")
         .replace('<', "&lt;")
         .replace('>', "&gt;")
+        .replace('"', "&quot;")
 }
 
-/// The self-contained HTML page.
-fn html_page(
-    inputs: &ReportInputs,
-    value: &Value,
-    previews: &[(String, String, Vec<u8>)],
-) -> String {
+/// The report's key figures as (label, value) rows.
+fn figure_rows(report: &Report) -> Vec<(String, String)> {
     let mut rows = Vec::new();
-    if let Some(e) = inputs.depth_errors {
-        rows.push(("depth RMSE".to_string(), format!("{:.3} mm", e.rmse_mm)));
+    if let Some(e) = &report.depth_accuracy {
+        rows.push(("depth RMSE".into(), format!("{:.3} mm", e.rmse_mm)));
         rows.push((
-            "depth NRMSE".to_string(),
+            "depth NRMSE".into(),
             e.nrmse
                 .map_or_else(|| "n/a".into(), |n| format!("{:.2} %", 100.0 * n)),
         ));
         rows.push((
-            "surface reconstructed".to_string(),
+            "surface reconstructed".into(),
             format!("{:.1} %", 100.0 * e.reconstructed_fraction),
         ));
     }
-    if let Some(a) = inputs.angular_errors {
+    if let Some(a) = &report.normal_accuracy {
         rows.push((
-            "normal error mean / median".to_string(),
+            "normal error mean / median".into(),
             format!("{:.2}° / {:.2}°", a.mean_deg, a.median_deg),
         ));
     }
-    for (k, v) in &inputs.summary {
-        let shown = match v {
-            Value::String(s) => s.clone(),
-            Value::Number(n) => n.as_f64().map_or(n.to_string(), |f| {
-                if f.fract() == 0.0 {
-                    format!("{f}")
-                } else {
-                    format!("{f:.4}")
-                }
-            }),
-            other => other.to_string(),
-        };
-        rows.push((k.clone(), shown));
+    let s = &report.summary;
+    let mut text = |label: &str, value: &Option<String>| {
+        if let Some(v) = value {
+            rows.push((label.into(), v.clone()));
+        }
+    };
+    text("input", &s.input);
+    text("rig", &s.rig);
+    text("object", &s.object);
+    text("integrator", &s.integrator);
+    text("light model", &s.light_model);
+    text("ground truth", &s.ground_truth);
+    let mut count = |label: &str, value: Option<usize>| {
+        if let Some(v) = value {
+            rows.push((label.into(), v.to_string()));
+        }
+    };
+    count("LED images", s.leds);
+    count("decoded frames", s.decoded_frames);
+    count("object pixels", s.object_pixels);
+    count("surface lit by ≥ 3 LEDs (pixels)", s.lit_by_three_pixels);
+    count("reconstructed pixels", Some(report.reconstructed_pixels));
+    if let Some(k) = s.kept_fraction {
+        rows.push((
+            "kept by the artefact filter".into(),
+            format!("{:.1} %", 100.0 * k),
+        ));
     }
-    for t in inputs.timings {
-        rows.push((format!("time: {}", t.stage), format!("{:.1} ms", t.ms)));
-    }
-    let table: String = rows
+    rows.push((
+        "image".into(),
+        format!(
+            "{}×{} px at {:.3} mm/px",
+            report.image.cols, report.image.rows, report.pitch_mm
+        ),
+    ));
+    rows
+}
+
+/// The self-contained HTML page.
+fn html_page(
+    report: &Report,
+    json_text: &str,
+    previews: &[Preview],
+    mask: &ndarray::Array2<bool>,
+    mesh: &SurfaceMesh,
+) -> Result<String, ExportError> {
+    let table: String = figure_rows(report)
         .iter()
         .map(|(k, v)| format!("<tr><th>{}</th><td>{}</td></tr>\n", escape(k), escape(v)))
         .collect();
-    let figures: String = previews
+    let stages: String = report
+        .stages
         .iter()
-        .map(|(caption, _, bytes)| {
+        .map(|s| {
             format!(
-                "<figure><img src=\"data:image/png;base64,{}\" alt=\"{c}\"><figcaption>{c}</figcaption></figure>\n",
-                base64::engine::general_purpose::STANDARD.encode(bytes),
-                c = escape(caption)
+                "<tr><th>{}</th><td>{}</td><td>{:.1} ms</td></tr>\n",
+                escape(&s.stage),
+                s.passes,
+                s.ms
             )
         })
         .collect();
-    let json_text = serde_json::to_string_pretty(value).unwrap_or_default();
-    format!(
+    let (rows, cols) = crop_box(mask);
+    let mut figures = String::new();
+    for p in previews {
+        let image = if p.on_grid {
+            image::imageops::crop_imm(
+                &p.image,
+                cols[0] as u32,
+                rows[0] as u32,
+                (cols[1] - cols[0] + 1) as u32,
+                (rows[1] - rows[0] + 1) as u32,
+            )
+            .to_image()
+        } else {
+            p.image.clone()
+        };
+        figures.push_str(&format!(
+            "<figure><img src=\"data:image/png;base64,{}\" alt=\"{c}\"><figcaption>{c}</figcaption></figure>\n",
+            base64::engine::general_purpose::STANDARD.encode(png_bytes(&image)?),
+            c = escape(&p.caption)
+        ));
+    }
+    let crop_note = format!(
+        "Previews on the camera grid are cropped to the object (columns {}–{}, rows {}–{} of {}×{}); the PNG files in the folder are full frame.",
+        cols[0], cols[1], rows[0], rows[1], report.image.cols, report.image.rows
+    );
+    Ok(format!(
         "<!DOCTYPE html>\n<html lang=\"en\"><head><meta charset=\"utf-8\"><title>{title}</title>\n<style>\n\
          body{{font-family:system-ui,sans-serif;margin:2em;background:#fafafa;color:#222}}\n\
          table{{border-collapse:collapse;margin:1em 0}} th,td{{padding:4px 12px;border-bottom:1px solid #ddd;text-align:left}}\n\
          .grid{{display:flex;flex-wrap:wrap;gap:12px}} figure{{margin:0;background:#fff;padding:8px;border:1px solid #ddd}}\n\
-         figure img{{max-width:360px;max-height:360px;image-rendering:pixelated}} figcaption{{font-size:90%;color:#555}}\n\
+         figure img{{width:300px;max-height:360px;object-fit:contain;image-rendering:pixelated}} figcaption{{font-size:90%;color:#555}}\n\
          pre{{background:#fff;border:1px solid #ddd;padding:8px;overflow:auto;max-height:300px}}\n</style></head><body>\n\
-         <h1>{title}</h1><p>{source}</p>\n<table>{table}</table>\n<div class=\"grid\">{figures}</div>\n\
+         <h1>{title}</h1><p>{source}</p>\n<table>{table}</table>\n\
+         <h2>Surface</h2>\n{viewer}\n\
+         <h2>Stage timing</h2>\n<table><tr><th>stage</th><th>passes</th><th>time</th></tr>\n{stages}<tr><th>total</th><td></td><td>{total:.1} ms</td></tr></table>\n\
+         <h2>Previews</h2><p>{crop_note}</p>\n<div class=\"grid\">{figures}</div>\n\
          <h2>report.json</h2><pre>{json}</pre>\n</body></html>\n",
-        title = escape(&inputs.title),
-        source = escape(&inputs.source),
-        json = escape(&json_text),
-    )
+        title = escape(&report.title),
+        source = escape(&report.source),
+        viewer = viewer::surface_viewer(mesh),
+        total = report.total_ms,
+        crop_note = escape(&crop_note),
+        json = escape(json_text),
+    ))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn passes_collapse_into_one_row_per_stage() {
+        let t = |stage: &str, ms: f64| StageTiming {
+            stage: stage.into(),
+            ms,
+        };
+        let totals = stage_totals(&[
+            t("photometric stereo (pass 1)", 2.0),
+            t("integration (pass 1)", 3.0),
+            t("photometric stereo (pass 2)", 4.0),
+            t("integration (pass 2)", 5.0),
+            t("render frames + decode", 7.0),
+        ]);
+        let rows: Vec<(&str, usize, f64)> = totals
+            .iter()
+            .map(|s| (s.stage.as_str(), s.passes, s.ms))
+            .collect();
+        assert_eq!(
+            rows,
+            [
+                ("photometric stereo", 2, 6.0),
+                ("integration", 2, 8.0),
+                ("render frames + decode", 1, 7.0)
+            ]
+        );
+    }
+
+    #[test]
+    fn crop_box_frames_the_object_with_a_margin() {
+        let mut mask = ndarray::Array2::from_elem((100, 200), false);
+        for r in 40..60 {
+            for c in 90..140 {
+                mask[(r, c)] = true;
+            }
+        }
+        assert_eq!(crop_box(&mask), ([36, 63], [85, 144]));
+        mask[(0, 0)] = true;
+        assert_eq!(crop_box(&mask), ([0, 65], [0, 153]));
+        let empty = ndarray::Array2::from_elem((10, 20), false);
+        assert_eq!(crop_box(&empty), ([0, 9], [0, 19]));
+    }
 }

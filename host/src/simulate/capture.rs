@@ -179,6 +179,7 @@ impl SimulatedCapture {
             reason,
         };
         rig.validate().map_err(|e| bad("rig", e.to_string()))?;
+        super::check_camera_size(rig.camera.width, rig.camera.height, rig.leds.len())?;
         validate(&config, &scene)?;
         let leds = rig.leds.len();
         let table = ChipTable::new(leds as u8).map_err(|e| bad("rig", e.to_string()))?;

@@ -51,3 +51,24 @@ pub fn rig_toml(width: usize, height: usize, pitch_mm: f64, leds: &[[f64; 3]]) -
     }
     toml
 }
+
+/// Whether FFmpeg (`ffmpeg` and `ffprobe`) can run. Without it, a test that needs it must
+/// return early and say so; under `CI=true` a missing FFmpeg fails the test instead, because
+/// CI installs it (`scripts/setup.sh`) and a quiet skip there would hide a broken setup.
+pub fn ffmpeg_available() -> bool {
+    let ok = |tool: &str| {
+        Command::new(tool)
+            .arg("-version")
+            .output()
+            .is_ok_and(|o| o.status.success())
+    };
+    if ok("ffmpeg") && ok("ffprobe") {
+        return true;
+    }
+    assert!(
+        std::env::var("CI").as_deref() != Ok("true"),
+        "ffmpeg/ffprobe are not installed but CI=true: scripts/setup.sh must install FFmpeg"
+    );
+    eprintln!("SKIPPED: ffmpeg/ffprobe not installed (apt-get install ffmpeg); FFmpeg untested");
+    false
+}

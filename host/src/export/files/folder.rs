@@ -129,8 +129,13 @@ impl OutputFolder {
         };
         let lock_path = folder.temp.join(LOCK);
         let lock = File::create(&lock_path).map_err(|e| FilesError::write(&lock_path, e))?;
-        lock.try_lock()
-            .map_err(|e| FilesError::write(&lock_path, std::io::Error::other(e.to_string())))?;
+        lock.try_lock().map_err(|e| {
+            let source = match e {
+                std::fs::TryLockError::Error(e) => e,
+                std::fs::TryLockError::WouldBlock => std::io::ErrorKind::WouldBlock.into(),
+            };
+            FilesError::write(&lock_path, source)
+        })?;
         folder.lock = Some(lock);
         Ok(folder)
     }

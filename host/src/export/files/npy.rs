@@ -95,7 +95,7 @@ fn decode<T: ReadableElement>(path: &Path, bytes: &[u8]) -> Result<ArrayD<T>, Fi
         #[allow(unreachable_patterns)]
         other => FilesError::NpyData {
             path,
-            source: Box::new(std::io::Error::other(other.to_string())),
+            source: Box::new(other),
         },
     })
 }
