@@ -72,6 +72,10 @@ pub struct VideoArgs {
     /// Normal integrator.
     #[arg(long, value_enum, default_value = "least-squares")]
     integrator: IntegratorArg,
+    /// Fit the waveform's exposure and rate ratio in every window on its own, instead of
+    /// carrying the best fit so far from window to window.
+    #[arg(long)]
+    fit_every_window: bool,
     /// Use distant light vectors L_i(0) (the thesis' model) instead of near-field refinement.
     #[arg(long)]
     no_near_field: bool,
@@ -249,6 +253,7 @@ fn video_config(args: &VideoArgs, rig: &Rig) -> Result<VideoConfig> {
     let mut config = VideoConfig::thesis(rig.leds.len());
     config.decode = decode;
     config.max_frames = max_frames;
+    config.carry_timing = !args.fit_every_window;
     config.schedule = WindowSchedule::new(
         args.window,
         args.drop,

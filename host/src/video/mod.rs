@@ -15,6 +15,7 @@
 //! succeeds is an error. A stream that ends inside a frame ends the video after the windows
 //! before the cut, and [`VideoSummary::input_error`] says where.
 
+pub mod carry;
 pub mod decode;
 pub mod encode;
 pub mod motion;
@@ -24,6 +25,7 @@ pub mod schedule;
 pub mod stream;
 pub mod truth;
 
+pub use carry::{TimingCarry, TimingSource};
 pub use motion::{MotionConfig, MotionEstimate, MotionPolicy, detect_motion};
 pub use schedule::{ScheduleError, WindowSchedule};
 pub use stream::{FrameStream, StreamEnd};
@@ -56,6 +58,9 @@ pub struct VideoConfig {
     pub read_ahead: Option<usize>,
     /// Stop after this many camera frames (a live stream).
     pub max_frames: Option<usize>,
+    /// Decode windows with the exposure and rate ratio of the best fit so far ([`carry`]);
+    /// `false` fits every window on its own.
+    pub carry_timing: bool,
 }
 
 impl VideoConfig {
@@ -72,6 +77,7 @@ impl VideoConfig {
             motion: MotionConfig::default(),
             read_ahead: None,
             max_frames: None,
+            carry_timing: true,
         }
     }
 }
@@ -249,6 +255,8 @@ pub struct FrameRecord {
     pub reason: Option<String>,
     /// Frames the window was moved to find the object still ([`MotionPolicy::Place`]).
     pub placed_by: usize,
+    /// Where the decoder's waveform timing came from.
+    pub timing_source: TimingSource,
     /// Motion in the decoded frames.
     pub motion: Option<MotionEstimate>,
     /// Decoder figures.
@@ -317,6 +325,7 @@ pub struct VideoSummary {
 struct Try {
     start: usize,
     decoded: Result<Decoded, DemodError>,
+    timing_source: TimingSource,
     motion: Option<MotionEstimate>,
 }
 
@@ -366,6 +375,7 @@ pub fn process(
         frames_per_second: 0.0,
     };
     let mut first_failure: Option<String> = None;
+    let mut carry = TimingCarry::new(config.carry_timing);
     'windows: for k in 0.. {
         let scheduled = base + k * schedule.hop;
         let mut timing = FrameTiming::default();
@@ -384,8 +394,8 @@ pub fn process(
                 break;
             };
             let time = Instant::now();
-            let decoded =
-                decode::decode_frames(&window.samples[..decoded_len], &format, &config.decode);
+            let (decoded, timing_source) =
+                carry.decode(&window.samples[..decoded_len], &format, &config.decode);
             timing.decode_ms += time.elapsed().as_secs_f64() * 1e3;
             timing.read_ms += stream.take_waited().as_secs_f64() * 1e3;
             // A setting wrong for the stream fails every window alike: stop at once.
@@ -404,6 +414,7 @@ pub fn process(
             let attempt = Try {
                 start,
                 decoded,
+                timing_source,
                 motion,
             };
             let still = attempt.motion.is_some_and(|m| !m.moving);
@@ -524,6 +535,7 @@ fn reconstruct_window(
         status: FrameStatus::Failed,
         reason: None,
         placed_by: chosen.start - scheduled,
+        timing_source: chosen.timing_source,
         motion: chosen.motion,
         decode: None,
         reconstruction: None,
