@@ -108,9 +108,9 @@ impl TimingCarry {
         };
         let first = super::decode::decode_frames(frames, format, &with_carried);
         let trusted = self.windows > FREE_WINDOWS
-            && first.as_ref().is_ok_and(|d| {
-                d.report.median_noise <= SUSPICIOUS_RATIO * carried.median_noise
-            });
+            && first
+                .as_ref()
+                .is_ok_and(|d| d.report.median_noise <= SUSPICIOUS_RATIO * carried.median_noise);
         if trusted {
             return (first, TimingSource::Carried);
         }
