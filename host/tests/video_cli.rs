@@ -349,6 +349,23 @@ fn motion_is_found_while_the_object_turns_and_not_once_it_stops() {
         serde_json::to_value(FrameStatus::Skipped).unwrap(),
         "skipped"
     );
+
+    // Placed: windows every 48 frames; window 2 (frames 96..128) catches the turn, and moving
+    // it 4 frames at a time finds the object still from frame 128 on.
+    let out = tmp.path().join("placed");
+    let mut placed: Vec<String> = args(&out, "place").to_vec();
+    placed.extend(["--hop".into(), "48".into()]);
+    run_ok(&placed.iter().map(String::as_str).collect::<Vec<_>>());
+    let json = video_json(&out);
+    let window = &frames(&json)[2];
+    assert_eq!(window["placed_by"], 32, "{window}");
+    assert_eq!(window["frames"][0], 128);
+    assert_eq!(window["motion"]["moving"], false);
+    assert_eq!(
+        frames(&json)[0]["motion"]["moving"],
+        true,
+        "no still frames before 128"
+    );
 }
 
 #[test]
