@@ -107,21 +107,7 @@ impl<R: Read> RawSource<R> {
 
     /// Fills `buf` from the stream; returns the bytes read before its end.
     fn fill(&mut self, buf: &mut [u8]) -> Result<usize, CaptureError> {
-        let mut filled = 0;
-        while filled < buf.len() {
-            match self.reader.read(&mut buf[filled..]) {
-                Ok(0) => break,
-                Ok(n) => filled += n,
-                Err(e) if e.kind() == std::io::ErrorKind::Interrupted => {}
-                Err(source) => {
-                    return Err(CaptureError::Io {
-                        path: self.path.clone(),
-                        source,
-                    });
-                }
-            }
-        }
-        Ok(filled)
+        super::read_up_to(&mut self.reader, buf, &self.path)
     }
 }
 

@@ -202,7 +202,7 @@ pub fn run(args: &VideoArgs) -> Result<()> {
     );
     println!(
         "per 3-D frame: read {:.1} ms, decode {:.1} ms, reconstruct {:.1} ms, write {:.1} ms",
-        mean.read_ms, mean.decode_ms, mean.reconstruct_ms, mean.write_ms
+        mean.mean.read_ms, mean.mean.decode_ms, mean.mean.reconstruct_ms, mean.mean.write_ms
     );
     for video in [&written.depth_video, &written.shaded_video]
         .into_iter()

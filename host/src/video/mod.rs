@@ -235,6 +235,7 @@ pub struct FrameTiming {
     /// Writing the outputs (filled in by the writer).
     pub write_ms: f64,
     /// The reconstruction's own stages.
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
     pub stages: Vec<StageTiming>,
 }
 

@@ -15,7 +15,7 @@
 
 use super::encode::{VideoContainer, VideoEncoder};
 use super::render::{PictureSize, blank_picture, depth_picture, depth_range, shaded_picture};
-use super::{FrameRecord, FrameStatus, VideoError, VideoFrame, VideoSummary};
+use super::{FrameRecord, FrameStatus, FrameTiming, VideoError, VideoFrame, VideoSummary};
 use crate::export::files::{FilesError, write_npy};
 use serde::{Deserialize, Serialize};
 use std::io::{BufRead, BufWriter, Write};
@@ -73,31 +73,26 @@ pub struct WrittenVideo {
 pub struct MeanTiming {
     /// Windows averaged.
     pub windows: usize,
-    /// Waiting for frames.
-    pub read_ms: f64,
-    /// Decoding.
-    pub decode_ms: f64,
-    /// Motion detection.
-    pub motion_ms: f64,
-    /// Reconstruction.
-    pub reconstruct_ms: f64,
-    /// Comparison with the truth.
-    pub compare_ms: f64,
-    /// Writing.
-    pub write_ms: f64,
+    /// The mean of every stage (the reconstruction's own stages are left out).
+    #[serde(flatten)]
+    pub mean: FrameTiming,
 }
 
 impl MeanTiming {
     fn add(&mut self, record: &FrameRecord) {
         let t = &record.timing;
         let n = self.windows as f64;
-        let mean = |m: &mut f64, x: f64| *m = (*m * n + x) / (n + 1.0);
-        mean(&mut self.read_ms, t.read_ms);
-        mean(&mut self.decode_ms, t.decode_ms);
-        mean(&mut self.motion_ms, t.motion_ms);
-        mean(&mut self.reconstruct_ms, t.reconstruct_ms);
-        mean(&mut self.compare_ms, t.compare_ms);
-        mean(&mut self.write_ms, t.write_ms);
+        let m = &mut self.mean;
+        for (mean, x) in [
+            (&mut m.read_ms, t.read_ms),
+            (&mut m.decode_ms, t.decode_ms),
+            (&mut m.motion_ms, t.motion_ms),
+            (&mut m.reconstruct_ms, t.reconstruct_ms),
+            (&mut m.compare_ms, t.compare_ms),
+            (&mut m.write_ms, t.write_ms),
+        ] {
+            *mean = (*mean * n + x) / (n + 1.0);
+        }
         self.windows += 1;
     }
 }
