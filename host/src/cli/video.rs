@@ -66,7 +66,8 @@ pub struct VideoArgs {
     /// Write animated PNGs instead of MP4 (the default when FFmpeg is missing).
     #[arg(long)]
     apng: bool,
-    /// Stop after this many camera frames (a live stream).
+    /// Stop after this many camera frames (a live stream: the output folder is put in place
+    /// when the stream ends; an interrupt discards it, as for every command).
     #[arg(long)]
     max_frames: Option<usize>,
     /// Normal integrator.
