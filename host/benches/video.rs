@@ -8,7 +8,22 @@
 //! stages. `decode_carried_timing` decodes with the exposure and rate ratio carried from an
 //! earlier window, as every window after the first few does.
 //!
-//! Measured numbers: see the report in the `video` branch's merge (and README's speed notes).
+//! Measured on the shared 2-core machine while other helpers were building (criterion, 10
+//! samples; medians with the low–high estimates), far from the 40 ms target:
+//!
+//! | case                   | before          | after m = 1 falloff without powf |
+//! |------------------------|-----------------|----------------------------------|
+//! | window (whole 3-D frame)| 1.46 s (1.22–1.69) | 0.96 s (0.89–1.05)            |
+//! | decode                 | 21.6 ms         | 19.8 ms                          |
+//! | decode_carried_timing  | 26.7 ms         | 19.0 ms                          |
+//! | reconstruct            | 1.54 s (1.48–1.60) | 1.08 s (0.90–1.28)            |
+//!
+//! (The machine's load fell between the two runs, so part of the change is load.) Where the
+//! time goes (perf, `meb video` on the 1280×720 ellipsoid): the near-field loop — light
+//! vectors per pixel and LED (`Led::light_vector_at`, `Lights::at`, and before the change
+//! `pow` at 20 % of all samples), the per-pixel solve (`solve_pixel`, 10–13 %) and the
+//! closures of the depth-offset search — ≈ 70 %; integration (multigrid) ≈ 5 %; decoding
+//! ≈ 3 %; per pass, the offset search costs 220–280 ms against 60–100 ms of integration.
 
 use criterion::{BatchSize, Criterion, criterion_group, criterion_main};
 use meb::capture::memory::MemorySource;

@@ -18,13 +18,19 @@ use common::{OUT_OF_PLANE_LEDS, meb, run_ok};
 
 /// The thesis' dynamic rig at 160×90 pixels.
 fn small_dynamic_rig(dir: &Path) -> String {
-    let mut toml = "[camera]\nwidth = 160\nheight = 90\nfps = 1000.0\ndistance_mm = 420.0\n\
-                    fov_deg = 43.0\n"
-        .to_string();
+    dynamic_rig(dir, 160, 90)
+}
+
+/// The thesis' dynamic rig with a `width` × `height` camera.
+fn dynamic_rig(dir: &Path, width: usize, height: usize) -> String {
+    let mut toml = format!(
+        "[camera]\nwidth = {width}\nheight = {height}\nfps = 1000.0\ndistance_mm = 420.0\n\
+         fov_deg = 43.0\n"
+    );
     for [x, y, z] in OUT_OF_PLANE_LEDS {
         toml.push_str(&format!("[[led]]\nposition_mm = [{x:?}, {y:?}, {z:?}]\n"));
     }
-    let path = dir.join("dynamic.toml");
+    let path = dir.join(format!("dynamic-{width}x{height}.toml"));
     std::fs::write(&path, toml).unwrap();
     path.display().to_string()
 }
@@ -34,10 +40,24 @@ fn s(path: &Path) -> String {
 }
 
 /// Simulates `frames` of the 100×60×60 mm ellipsoid turning at `rpm` about `axis` as a y4m
-/// clip with the true depth every 20 frames; returns the capture folder.
+/// clip with the true depth every 20 frames and LED phases 3, 7, 11, 5 chips; returns the
+/// capture folder.
 fn ellipsoid(dir: &Path, rig: &str, name: &str, frames: usize, rpm: f64, axis: &str) -> PathBuf {
+    ellipsoid_with(dir, rig, name, frames, rpm, axis, &["--phases", "3,7,11,5"])
+}
+
+/// [`ellipsoid`] with other simulator options.
+fn ellipsoid_with(
+    dir: &Path,
+    rig: &str,
+    name: &str,
+    frames: usize,
+    rpm: f64,
+    axis: &str,
+    options: &[&str],
+) -> PathBuf {
     let out = dir.join(name);
-    run_ok(&[
+    let mut args = vec![
         "simulate",
         "--rig",
         rig,
@@ -55,11 +75,11 @@ fn ellipsoid(dir: &Path, rig: &str, name: &str, frames: usize, rpm: f64, axis: &
         "y4m",
         "--truth-every",
         "20",
-        "--phases",
-        "3,7,11,5",
         "--out",
         &s(&out),
-    ]);
+    ];
+    args.extend(options);
+    run_ok(&args);
     out
 }
 
@@ -84,8 +104,11 @@ fn run_err(args: &[&str]) -> String {
 #[test]
 fn the_turning_ellipsoid_is_scored_frame_by_frame_within_the_thesis_accuracy() {
     let tmp = tempfile::tempdir().unwrap();
-    let rig = small_dynamic_rig(tmp.path());
-    let clip = ellipsoid(tmp.path(), &rig, "ellipsoid", 200, 7.5, "0,1,0");
+    // 320×180 with the simulator's seed-0 phases: fitted on its own, window 1's waveform
+    // timing goes astray (rate ratio 0.984, 38 mm RMSE); the timing carried from window 0
+    // decodes it right.
+    let rig = dynamic_rig(tmp.path(), 320, 180);
+    let clip = ellipsoid_with(tmp.path(), &rig, "ellipsoid", 200, 7.5, "0,1,0", &[]);
     let out = tmp.path().join("video");
     let stdout = run_ok(&[
         "video",
@@ -128,10 +151,10 @@ fn the_turning_ellipsoid_is_scored_frame_by_frame_within_the_thesis_accuracy() {
         assert!(fraction > 0.35, "3-D frame {k}: {fraction} of the surface");
         assert!(record["timing"]["reconstruct_ms"].as_f64().unwrap() > 0.0);
         assert!(record["decode"]["led_snr_db"].as_array().unwrap().len() == 4);
-        assert_eq!(depth(&out, k).dim(), (90, 160));
+        assert_eq!(depth(&out, k).dim(), (180, 320));
         let normals: Array3<f32> =
             ndarray_npy::read_npy(out.join(format!("normals_{k:05}.npy"))).unwrap();
-        assert_eq!(normals.dim(), (90, 160, 3));
+        assert_eq!(normals.dim(), (180, 320, 3));
         assert!(out.join(format!("albedo_{k:05}.npy")).exists());
     }
     assert_eq!(json["accuracy"]["frames"], 5);
@@ -154,7 +177,7 @@ fn the_turning_ellipsoid_is_scored_frame_by_frame_within_the_thesis_accuracy() {
             .output()
             .unwrap();
         let text = String::from_utf8_lossy(&probe.stdout);
-        assert_eq!(text.trim(), "160,90,25/1,5", "{text}");
+        assert_eq!(text.trim(), "320,180,25/1,5", "{text}");
     }
 
     // Sliding windows every 8 frames: window 5 covers the same frames as window 1 above and
