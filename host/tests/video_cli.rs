@@ -57,6 +57,7 @@ fn ellipsoid_with(
     options: &[&str],
 ) -> PathBuf {
     let out = dir.join(name);
+    let (rpm, frames, out_arg) = (rpm.to_string(), frames.to_string(), s(&out));
     let mut args = vec![
         "simulate",
         "--rig",
@@ -66,17 +67,17 @@ fn ellipsoid_with(
         "--axes-mm",
         "100,60,60",
         "--rpm",
-        &rpm.to_string(),
+        &rpm,
         "--spin-axis",
         axis,
         "--frames",
-        &frames.to_string(),
+        &frames,
         "--format",
         "y4m",
         "--truth-every",
         "20",
         "--out",
-        &s(&out),
+        &out_arg,
     ];
     args.extend(options);
     run_ok(&args);
