@@ -188,7 +188,7 @@ pub trait FrameSource: Send {
     fn format(&self) -> &FrameFormat;
     /// The next frame, or `None` at the end of the stream.
     fn next_frame(&mut self) -> Result<Option<Frame>, CaptureError>;
-    /// Total number of frames, when the source knows it.
+    /// Number of frames not yet read, when the source knows it.
     fn frame_count_hint(&self) -> Option<usize> {
         None
     }

@@ -6,7 +6,10 @@ use indicatif::{ProgressBar, ProgressStyle};
 use meb::capture::raw::RawLayout;
 use meb::capture::{OpenOptions, open};
 use meb::demod::output::write_decode_dir;
-use meb::demod::{DecodeConfig, Decoded, Estimator, LedCount, Linearize, Roi, decode};
+use meb::demod::{
+    DecodeConfig, DecodeReport, Decoded, DemodError, Estimator, LedCount, Linearize, OnImplausible,
+    Roi, VerdictStatus, decode,
+};
 use std::path::{Path, PathBuf};
 
 /// Arguments of `meb decode`.
@@ -53,9 +56,16 @@ pub struct DecodeOptions {
     /// Known chips per frame (chip rate / frame rate) instead of estimating it.
     #[arg(long)]
     rate_ratio: Option<f64>,
-    /// Row bands with their own LED phases (rolling shutter).
-    #[arg(long, default_value_t = 1)]
-    row_bands: usize,
+    /// Largest |chips per frame − 1| searched when the rate ratio is estimated.
+    #[arg(long, default_value_t = 0.06)]
+    max_rate_mismatch: f64,
+    /// Known exposure as a fraction of the frame period instead of estimating it.
+    #[arg(long)]
+    exposure: Option<f64>,
+    /// Known rolling-shutter line time in microseconds (0 = global shutter); fitted from
+    /// the video when absent.
+    #[arg(long)]
+    line_time_us: Option<f64>,
     /// Raw input layout WxHxBITS (e.g. 1280x720x8).
     #[arg(long)]
     raw: Option<String>,
@@ -77,8 +87,9 @@ fn parse_roi(text: &str) -> Result<Roi> {
     })
 }
 
-/// Builds the decoder settings; `default_leds` applies when --leds is absent.
-pub fn config(args: &DecodeOptions, default_leds: usize) -> Result<DecodeConfig> {
+/// Builds the decoder settings; `default_leds` applies when --leds is absent, `force` keeps
+/// a result the quality verdict finds implausible (recorded as overridden).
+pub fn config(args: &DecodeOptions, default_leds: usize, force: bool) -> Result<DecodeConfig> {
     let leds = match args.leds.as_deref() {
         None => LedCount::Fixed(default_leds),
         Some("auto") => LedCount::Auto,
@@ -106,8 +117,15 @@ pub fn config(args: &DecodeOptions, default_leds: usize) -> Result<DecodeConfig>
         roi: args.roi.as_deref().map(parse_roi).transpose()?,
         fps: args.fps,
         rate_ratio: args.rate_ratio,
-        row_bands: args.row_bands,
+        max_rate_mismatch: args.max_rate_mismatch,
+        exposure: args.exposure,
+        line_time_s: args.line_time_us.map(|us| us * 1e-6),
         check_led_count: !args.no_led_check,
+        on_implausible: if force {
+            OnImplausible::Keep
+        } else {
+            OnImplausible::Refuse
+        },
         ..DecodeConfig::default()
     })
 }
@@ -134,13 +152,14 @@ pub fn open_options(options: &DecodeOptions) -> Result<OpenOptions> {
 }
 
 /// Opens and decodes `input` with `options`, showing a progress bar; `default_leds` applies
-/// when --leds is absent.
+/// when --leds is absent, `force` keeps a result the verdict finds implausible.
 pub fn decode_capture(
     input: &Path,
     options: &DecodeOptions,
     default_leds: usize,
+    force: bool,
 ) -> Result<Decoded> {
-    let config = config(options, default_leds)?;
+    let config = config(options, default_leds, force)?;
     let mut source = open(input, &open_options(options)?)
         .with_context(|| format!("cannot open {}", input.display()))?;
     let bar = ProgressBar::new(0);
@@ -151,33 +170,99 @@ pub fn decode_capture(
     let decoded = decode(source.as_mut(), &config, &mut |done, total| {
         bar.set_length(total as u64);
         bar.set_position(done as u64);
-    })
-    .with_context(|| format!("cannot decode {}", input.display()))?;
+    });
     bar.finish_and_clear();
+    let decoded = decoded.map_err(|e| match flag_hint(&e) {
+        // These errors carry no source: the message with the flags to try is all there is.
+        Some(hint) => anyhow::anyhow!("cannot decode {}: {e} {hint}", input.display()),
+        None => anyhow::Error::new(e).context(format!("cannot decode {}", input.display())),
+    })?;
+    warn_if_overridden(&decoded.report);
     Ok(decoded)
+}
+
+/// The command-line flags that address a decode error (for errors without a source).
+fn flag_hint(error: &DemodError) -> Option<String> {
+    Some(match error {
+        DemodError::LedCountMismatch { detected, .. } => {
+            format!("(use --leds {detected} or --leds auto; --no-led-check skips the check)")
+        }
+        DemodError::Implausible { .. } => "(flags: --rate-ratio, --exposure, --line-time-us, \
+             --linearize, --frames, --max-rate-mismatch; --force keeps the result with the \
+             verdict recorded)"
+            .into(),
+        DemodError::NoModulation => "(check --leds, --fps and --max-rate-mismatch)".into(),
+        DemodError::StartBeyondEnd { .. } => "(lower --start)".into(),
+        _ => return None,
+    })
+}
+
+/// Prints the verdict's problems when an implausible result was kept on request.
+fn warn_if_overridden(report: &DecodeReport) {
+    if report.verdict.status == VerdictStatus::Overridden {
+        eprintln!(
+            "warning: kept an implausible decode (--force): {}",
+            report.verdict.problems.join("; ")
+        );
+    }
+}
+
+/// Refuses a decode folder whose verdict is not plausible unless `force` (then warns).
+pub fn check_folder_verdict(report: &DecodeReport, folder: &Path, force: bool) -> Result<()> {
+    let verdict = &report.verdict;
+    if verdict.status == VerdictStatus::Plausible {
+        return Ok(());
+    }
+    let what = match verdict.status {
+        VerdictStatus::Unchecked => {
+            "was decoded without a quality verdict (an older meb); decode it again".to_string()
+        }
+        _ => format!(
+            "holds a decode its quality verdict found implausible ({})",
+            verdict.problems.join("; ")
+        ),
+    };
+    if force {
+        eprintln!(
+            "warning: {} {what}; using it anyway (--force)",
+            folder.display()
+        );
+        return Ok(());
+    }
+    bail!(
+        "{} {what}; use --force to reconstruct from it anyway",
+        folder.display()
+    )
 }
 
 /// Runs `meb decode`.
 pub fn run(args: &DecodeArgs) -> Result<()> {
     let folder = super::common::output_folder(&args.out, "decode", args.force)?;
-    let decoded = decode_capture(&args.input, &args.options, 4)?;
+    let decoded = decode_capture(&args.input, &args.options, 4, args.force)?;
     write_decode_dir(folder.path(), &decoded)?;
     let out = super::common::commit(folder)?;
     let report = &decoded.report;
     println!(
-        "decoded {} LEDs from {} frames ({}x{}), rate ratio {:.5}, exposure {:.2}, median noise {:.4}",
+        "decoded {} LEDs from {} frames ({}x{}), rate ratio {:.5}, exposure {:.2}, \
+         line time {:.2} µs, median noise {:.4}, verdict {:?}",
         report.leds,
         report.frames_used,
         report.width,
         report.height,
         report.rate_ratio,
         report.exposure,
-        report.median_noise
+        report.line_time_us,
+        report.median_noise,
+        report.verdict.status
     );
     for led in &report.per_led {
         println!(
-            "  LED {}: phase {:.3} chips, mean level {:.4}, SNR {:.1} dB",
-            led.led, led.phase_chips, led.mean_level, led.snr_db
+            "  LED {}: phase {:.3} chips, mean level {:.4}, SNR {:.1} dB, gain ±{:.2} %",
+            led.led,
+            led.phase_chips,
+            led.mean_level,
+            led.snr_db,
+            100.0 * led.quality.gain_uncertainty
         );
     }
     println!("wrote {}", out.display());

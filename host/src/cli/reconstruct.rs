@@ -1,7 +1,7 @@
 //! `meb reconstruct`: a capture (decoded on the fly) or a `meb decode` folder + a rig →
 //! normals, albedo, depth, mesh and report (SPEC §5–§6), optionally compared with ground truth.
 
-use super::decode::{DecodeOptions, decode_capture};
+use super::decode::{DecodeOptions, check_folder_verdict, decode_capture};
 use super::integrate::IntegratorArg;
 use anyhow::{Context, Result, bail, ensure};
 use clap::Args;
@@ -119,9 +119,11 @@ fn read_inputs(args: &ReconstructArgs) -> Result<Inputs> {
     );
     let from_folder = args.input.join("decode.json").is_file();
     let decoded: Decoded = if from_folder {
-        read_decode_dir(&args.input)?
+        let decoded = read_decode_dir(&args.input)?;
+        check_folder_verdict(&decoded.report, &args.input, args.force)?;
+        decoded
     } else {
-        decode_capture(&args.input, &args.decode, rig.leds.len())?
+        decode_capture(&args.input, &args.decode, rig.leds.len(), args.force)?
     };
     let leds = decoded.leds.images.len();
     ensure!(

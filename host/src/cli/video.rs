@@ -246,7 +246,7 @@ fn progress_message(frame: &VideoFrame, done: usize, seconds: f64) -> String {
 
 /// The library settings from the command line.
 fn video_config(args: &VideoArgs, rig: &Rig) -> Result<VideoConfig> {
-    let mut decode = super::decode::config(&args.decode, rig.leds.len())?;
+    let mut decode = super::decode::config(&args.decode, rig.leds.len(), args.force)?;
     let mut max_frames = args.max_frames;
     if let Some(frames) = decode.frames.take() {
         max_frames = Some(max_frames.map_or(frames, |m| m.min(frames)));

@@ -10,7 +10,7 @@
 #[derive(Debug, Clone)]
 pub struct TemplateBasis {
     /// Q: K rows of F values, orthonormal (a row is zero where T was rank deficient).
-    pub rows: Vec<Vec<f32>>,
+    pub rows: Vec<Vec<f64>>,
     /// R⁻¹ (K×K, upper triangular, row-major), zero where T was rank deficient.
     pub r_inverse: Vec<f64>,
     /// K: number of model columns.
@@ -44,10 +44,7 @@ impl TemplateBasis {
         }
         let r_inverse = upper_inverse(&r, k_count);
         Self {
-            rows: q
-                .iter()
-                .map(|row| row.iter().map(|&x| x as f32).collect())
-                .collect(),
+            rows: q,
             r_inverse,
             columns: k_count,
         }
@@ -109,7 +106,7 @@ mod tests {
         let b: Vec<f64> = basis
             .rows
             .iter()
-            .map(|q| q.iter().zip(&r).map(|(a, b)| f64::from(*a) * b).sum())
+            .map(|q| q.iter().zip(&r).map(|(a, b)| a * b).sum())
             .collect();
         let mut c = [0.0; 3];
         basis.coefficients(&b, &mut c);

@@ -72,14 +72,26 @@ pub struct DecodeConfig {
     pub max_rate_mismatch: f64,
     /// Known exposure as a fraction of the frame period instead of estimating it.
     pub exposure: Option<f64>,
-    /// Row bands with their own LED phases (rolling shutter); 1 for a global shutter.
-    pub row_bands: usize,
+    /// Known rolling-shutter line time in seconds (0 = global shutter) instead of fitting it.
+    pub line_time_s: Option<f64>,
     /// Memory budget for the frames of one decoding window, in bytes.
     pub window_bytes: usize,
     /// A pixel whose brightest frame stays below this fraction of full scale is under-exposed.
     pub underexposed_below: f32,
     /// Fail when the capture's modulated LED count differs from a fixed `leds`.
     pub check_led_count: bool,
+    /// What to do with a decode the verdict finds implausible.
+    pub on_implausible: OnImplausible,
+}
+
+/// What [`crate::demod::decode`] does with a decode the quality verdict finds implausible.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize)]
+pub enum OnImplausible {
+    /// Return an error saying what looks wrong and what to try.
+    #[default]
+    Refuse,
+    /// Return the result with the verdict recorded as overridden.
+    Keep,
 }
 
 impl Default for DecodeConfig {
@@ -95,10 +107,11 @@ impl Default for DecodeConfig {
             rate_ratio: None,
             max_rate_mismatch: 0.06,
             exposure: None,
-            row_bands: 1,
+            line_time_s: None,
             window_bytes: 128 << 20,
             underexposed_below: 0.02,
             check_led_count: true,
+            on_implausible: OnImplausible::Refuse,
         }
     }
 }

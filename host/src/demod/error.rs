@@ -20,10 +20,18 @@ pub enum DemodError {
         /// LED count.
         leds: usize,
     },
+    /// The start frame lies at or beyond the end of the capture.
+    #[error("cannot start at frame {start}: the capture has only {available} frames")]
+    StartBeyondEnd {
+        /// Frames to skip.
+        start: usize,
+        /// Frames the capture holds.
+        available: usize,
+    },
     /// The capture carries a different number of modulated LEDs than requested.
     #[error(
-        "--leds {requested} requested but the video shows {detected} modulated LED(s) \
-         (use --leds {detected} or --leds auto)"
+        "{requested} LEDs requested but the video shows {detected} modulated LED(s) \
+         (decode {detected}, or let the decoder detect the count)"
     )]
     LedCountMismatch {
         /// Requested LEDs.
@@ -32,7 +40,10 @@ pub enum DemodError {
         detected: usize,
     },
     /// No LED modulation at all in the capture.
-    #[error("no MEB-FDMA modulation found in the video (is the luminaire on and the rate right?)")]
+    #[error(
+        "no MEB-FDMA modulation found in the video (is the luminaire on, in view, and its \
+         chip rate within the searched range of the frame rate?)"
+    )]
     NoModulation,
     /// A setting is out of range.
     #[error("invalid decode setting: {0}")]
@@ -40,4 +51,15 @@ pub enum DemodError {
     /// Every pixel is saturated or under-exposed.
     #[error("every pixel of the region is {0}: nothing to decode")]
     NothingToDecode(&'static str),
+    /// The decoded images would not be trustworthy.
+    #[error("the decode looks implausible: {problems}; try: {advice}")]
+    Implausible {
+        /// What looks wrong.
+        problems: String,
+        /// What to try.
+        advice: String,
+    },
+    /// An image could not be assembled from the decoded values.
+    #[error("cannot assemble the decoded images")]
+    Shape(#[from] ndarray::ShapeError),
 }

@@ -1,17 +1,73 @@
-//! Fitting each LED's received waveform to the spatial mean of the frames (SPEC §4, "better
-//! estimators").
+//! The timing fit: rate ratio ρ, exposure e, shifts Δ_i and rolling-shutter line delay, by
+//! least squares over the pixel sample, started from the signal-space seeds.
 //!
-//! The carriers stay orthogonal under any shift, so the mean over all pixels of a frame
-//! sequence is the sum of every LED's waveform with the scene-averaged on-level as its gain.
-//! Because the shift Δ_i, the exposure e and the rate ratio ρ are the same for every pixel of a
-//! global-shutter frame, they are fitted once here: a coarse grid over ρ (with per-LED best
-//! shifts, which decouple by orthogonality), a grid over e, then a joint coordinate search that
-//! maximises the variance the K = N+1 column least-squares model explains. The per-pixel
-//! amplitudes are then a linear matched filter ([`super::basis`]).
+//! Model (SPEC §3 with the exposure and rolling shutter of [`super::waveform`]): row r of frame j
+//! sees LED i's carrier from chip time `(j + λ·r)·ρ + Δ_i` for `e·ρ` chips, λ the line delay in
+//! frame periods per row (0 for a global shutter), so pixel p in row r reads
+//! `r_j = B_p + Σ_i A_i(p)·u_i(j; r)`. For given timing θ = (ρ, e, λ, Δ) the best B, A of every
+//! pixel are linear least squares, so θ maximises the energy the template span explains
+//! (variable projection: Golub & Pereyra, SIAM J. Numer. Anal. 1973) and the residual to
+//! minimise is `(I − Q_rQ_rᵀ)·X_rᵀ` summed over rows, Q_r an orthonormal basis of the
+//! templates at row r. The data enter compressed without loss of signal: a global shutter's
+//! signal is the span of the sample's Gram eigenvectors ([`super::spectrum`]), scaled by the
+//! square roots of their eigenvalues; a rolling shutter's rows each keep their own N leading
+//! singular directions (one row of the sample has one set of templates).
+//!
+//! Phases ([`fit_timing`]): (1) each seed of [`super::seed`] is refined with λ = 0 and the best
+//! kept; (2) unless the line delay is given, row bands of the sample get their own shifts, the
+//! shifts' trend across the bands seeds λ, and a band-wise refinement (several exposures, then
+//! a grid re-search of each LED's shift, then again least squares) decides whether the rows
+//! disagree: when λ explains significantly more than noise would, (3) the fit is redone row by
+//! row. Finally each carrier's sign is chosen so that the sample's on-levels are positive (a
+//! half-period shift negates a carrier, SPEC §2).
 
 use super::basis::TemplateBasis;
+use super::levenberg::{Freedom, Residuals, Solution, minimise, minimise_within};
+use super::sample::PixelSample;
+use super::seed::{Start, starts};
+use super::spectrum::SignalSpace;
 use super::waveform::{ReceivedWaveform, Timing};
-use rayon::prelude::*;
+use nalgebra::{DMatrix, SVD};
+
+/// Position of ρ, e and λ in the parameter vector; the shifts follow.
+const RATE: usize = 0;
+/// Position of the exposure.
+const EXPOSURE: usize = 1;
+/// Position of the line delay.
+const LINE_DELAY: usize = 2;
+/// Position of the first shift.
+const SHIFTS: usize = 3;
+/// Shortest exposure the fit allows, frame periods.
+const MIN_EXPOSURE: f64 = 0.02;
+/// Largest readout time of the region the fit allows, frame periods: |λ|·height.
+const MAX_READOUT: f64 = 1.5;
+/// Largest number of row bands of the rolling-shutter test.
+const TEST_BANDS: usize = 8;
+/// Fewest rows per band of the rolling-shutter test.
+const ROWS_PER_TEST_BAND: usize = 8;
+/// Smallest phase ramp over the region, chips, that counts as a rolling shutter.
+const MIN_RAMP_CHIPS: f64 = 0.01;
+/// A line delay is kept when it lowers the band-wise cost by this many noise variances.
+const RAMP_SIGNIFICANCE: f64 = 25.0;
+/// The rows agree (no rolling-shutter search) when letting each band's shifts move lowers
+/// the band-wise cost by less than this many noise variances per shift and the bands' shift
+/// trend stays below [`MIN_RAMP_CHIPS`].
+const AGREEMENT: f64 = 4.0;
+/// Least-squares steps of each band's own shifts in that test.
+const SCREEN_ITERATIONS: usize = 4;
+/// Exposures tried as starting points of the band-wise and row-wise refinements.
+const RAMP_EXPOSURES: [f64; 3] = [1.0, 0.5, 0.25];
+/// Shift grid step, chips, of the re-search of each LED's shift.
+const BACKFIT_STEP: f64 = 0.25;
+/// Half-width, chips, of that re-search around the current shift.
+const BACKFIT_REACH: f64 = 2.0;
+/// Sweeps over the LEDs of that re-search.
+const BACKFIT_SWEEPS: usize = 2;
+/// Exposures the row-wise refinement starts from besides the band-wise fit's.
+const ROW_EXPOSURES: [f64; 1] = [1.0];
+/// A sample row takes part in the row-wise fit when its leading singular value² exceeds the
+/// noise-only edge (√pixels + √F)²·σ² by this factor.
+const ROW_SIGNAL_FACTOR: f64 = 1.5;
 
 /// What the fit may vary.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -22,6 +78,8 @@ pub struct FitLimits {
     pub rate_ratio: Option<f64>,
     /// A known exposure fraction instead of estimating it.
     pub exposure: Option<f64>,
+    /// A known line delay λ (frame periods per row; 0 = global shutter) instead of fitting it.
+    pub line_delay: Option<f64>,
 }
 
 impl Default for FitLimits {
@@ -30,471 +88,633 @@ impl Default for FitLimits {
             max_rate_mismatch: 0.06,
             rate_ratio: None,
             exposure: None,
+            line_delay: None,
         }
     }
 }
 
-/// The fitted received waveforms.
+/// The timing of every LED's received waveform.
 #[derive(Debug, Clone, PartialEq)]
-pub struct WaveformFit {
+pub struct TimingModel {
     /// Shared camera timing.
     pub timing: Timing,
-    /// Δ_i per LED in chips, in `[0, period_i)`.
+    /// λ: rolling-shutter line delay, frame periods per row (0 = global shutter).
+    pub line_delay: f64,
+    /// Δ_i per LED in chips at region row 0, in `[0, period_i)`.
     pub shifts: Vec<f64>,
-    /// Least-squares on-level of each LED in the mean signal (its scene average).
-    pub amplitudes: Vec<f64>,
-    /// RMS of the fit residual of the mean signal.
-    pub residual_rms: f64,
 }
 
-/// Builds the K = N+1 template columns `[1, t_0, …]` over `frames` frames.
-pub fn template_columns(
-    waves: &[ReceivedWaveform],
-    timing: Timing,
-    shifts: &[f64],
+impl TimingModel {
+    /// From a parameter vector [ρ, e, λ, Δ…].
+    fn from_params(params: &[f64]) -> Self {
+        Self {
+            timing: Timing {
+                rate_ratio: params[RATE],
+                exposure: params[EXPOSURE],
+            },
+            line_delay: params[LINE_DELAY],
+            shifts: params[SHIFTS..].to_vec(),
+        }
+    }
+
+    /// As a parameter vector [ρ, e, λ, Δ…].
+    fn params(&self) -> Vec<f64> {
+        let mut p = vec![
+            self.timing.rate_ratio,
+            self.timing.exposure,
+            self.line_delay,
+        ];
+        p.extend(&self.shifts);
+        p
+    }
+
+    /// Phase ramp over `rows` rows, chips.
+    pub fn ramp_chips(&self, rows: usize) -> f64 {
+        self.line_delay * rows as f64 * self.timing.rate_ratio
+    }
+
+    /// The K = N+1 template columns `[1, t_0, …]` (t_i = u_i − ½) of region row `row`.
+    pub fn columns(&self, waves: &[ReceivedWaveform], row: f64, frames: usize) -> Vec<Vec<f64>> {
+        let offset = self.line_delay * row * self.timing.rate_ratio;
+        let mut columns = vec![vec![1.0; frames]];
+        for (wave, &shift) in waves.iter().zip(&self.shifts) {
+            let mut column = vec![0.0; frames];
+            self.timing.fill_template(wave, shift + offset, &mut column);
+            columns.push(column);
+        }
+        columns
+    }
+
+    /// The least-squares basis of region row `row`.
+    pub fn basis(&self, waves: &[ReceivedWaveform], row: f64, frames: usize) -> TemplateBasis {
+        TemplateBasis::new(&self.columns(waves, row, frames))
+    }
+}
+
+/// The fitted timing and how well the data pin it down.
+#[derive(Debug, Clone, PartialEq)]
+pub struct TimingFit {
+    /// The model.
+    pub model: TimingModel,
+    /// Whether the rows disagree (a line delay was fitted significant, or given non-zero).
+    pub rolling: bool,
+    /// Relative 1σ uncertainty of each LED's gain caused by the timing's uncertainty.
+    pub gain_uncertainty: Vec<f64>,
+    /// Noise variance of one pixel sample, fraction² of full scale (σ²_G / pixels).
+    pub pixel_noise: f64,
+    /// The fitted rate ratio sits at the edge of the searched range.
+    pub rate_at_limit: bool,
+    /// The fitted line delay sits at the largest one searched.
+    pub line_delay_at_limit: bool,
+}
+
+/// A compressed block of sample data sharing one set of templates.
+#[derive(Debug, Clone)]
+struct FitGroup {
+    /// Region row the templates are evaluated at.
+    row: f64,
+    /// F × k data directions, scaled by their singular values.
+    data: DMatrix<f64>,
+}
+
+/// The variable-projection residual over groups.
+struct Projection<'a> {
+    waves: &'a [ReceivedWaveform],
+    groups: &'a [FitGroup],
     frames: usize,
-) -> Vec<Vec<f64>> {
-    let mut columns = vec![vec![1.0; frames]];
-    for (wave, &shift) in waves.iter().zip(shifts) {
-        columns.push(
-            (0..frames)
-                .map(|j| timing.template(wave, shift, j))
-                .collect(),
-        );
-    }
-    columns
 }
 
-/// Variance of `signal` explained by the joint least-squares model, and its coefficients.
-fn explained(
-    waves: &[ReceivedWaveform],
-    timing: Timing,
-    shifts: &[f64],
-    signal: &[f64],
-) -> (f64, Vec<f64>) {
-    let basis = TemplateBasis::new(&template_columns(waves, timing, shifts, signal.len()));
-    let projections: Vec<f64> = basis
-        .rows
-        .iter()
-        .map(|q| q.iter().zip(signal).map(|(a, b)| f64::from(*a) * b).sum())
-        .collect();
-    let mut coefficients = vec![0.0; basis.columns];
-    basis.coefficients(&projections, &mut coefficients);
-    let explained = projections.iter().skip(1).map(|b| b * b).sum();
-    (explained, coefficients)
-}
-
-/// Variance of `signal` explained by the joint least-squares model (what [`explained`]
-/// returns first), without allocating: modified Gram–Schmidt of the centred templates in
-/// `work` (resized to K·F), summing the squared projections of the signal.
-fn explained_variance(
-    waves: &[ReceivedWaveform],
-    timing: Timing,
-    shifts: &[f64],
-    signal: &[f64],
-    work: &mut Vec<f64>,
-) -> f64 {
-    let f = signal.len();
-    work.resize(waves.len() * f, 0.0);
-    let mut total = 0.0;
-    for (k, (wave, &shift)) in waves.iter().zip(shifts).enumerate() {
-        let (done, rest) = work.split_at_mut(k * f);
-        let Some(v) = rest.get_mut(..f) else {
-            return total;
-        };
-        timing.fill_template(wave, shift, v);
-        let scale = v.iter().map(|x| x * x).sum::<f64>().sqrt().max(1e-300);
-        // Orthogonal to the constant column: subtract the mean.
-        let mean = v.iter().sum::<f64>() / f.max(1) as f64;
-        v.iter_mut().for_each(|x| *x -= mean);
-        for q in done.chunks_exact(f) {
-            let d: f64 = q.iter().zip(v.iter()).map(|(a, b)| a * b).sum();
-            v.iter_mut().zip(q).for_each(|(x, y)| *x -= d * y);
-        }
-        let norm = v.iter().map(|x| x * x).sum::<f64>().sqrt();
-        if norm > 1e-7 * scale {
-            v.iter_mut().for_each(|x| *x /= norm);
-            let d: f64 = v.iter().zip(signal).map(|(a, b)| a * b).sum();
-            total += d * d;
-        } else {
-            v.iter_mut().for_each(|x| *x = 0.0);
-        }
-    }
-    total
-}
-
-/// Score of one LED alone: squared correlation of its centred template with the centred signal.
-fn led_score(
-    wave: &ReceivedWaveform,
-    timing: Timing,
-    shift: f64,
-    centred: &[f64],
-    template: &mut [f64],
-) -> f64 {
-    let f = centred.len();
-    timing.fill_template(wave, shift, template);
-    let mut sum = 0.0;
-    let mut template_sum = 0.0;
-    let mut template_sq = 0.0;
-    for (&t, &m) in template.iter().zip(centred) {
-        sum += t * m;
-        template_sum += t;
-        template_sq += t * t;
-    }
-    let energy = template_sq - template_sum * template_sum / f as f64;
-    if energy <= 1e-12 {
-        0.0
-    } else {
-        sum * sum / energy
-    }
-}
-
-/// Best shift of one LED on a grid of `steps` per chip. Only the first half period is
-/// searched: a half-period shift negates every MEB carrier (s[m + P/2] = −s[m], SPEC §2), which
-/// leaves the squared correlation unchanged; [`finish`] picks the sign.
-fn best_shift(
-    wave: &ReceivedWaveform,
-    timing: Timing,
-    centred: &[f64],
-    steps: usize,
-) -> (f64, f64) {
-    best_shift_in(
-        wave,
-        timing,
-        centred,
-        steps,
-        0..(wave.period() / 2 * steps) as i64,
-    )
-}
-
-/// Best shift `k / steps` for k in `grid` (the first on ties).
-fn best_shift_in(
-    wave: &ReceivedWaveform,
-    timing: Timing,
-    centred: &[f64],
-    steps: usize,
-    grid: std::ops::Range<i64>,
-) -> (f64, f64) {
-    let mut template = vec![0.0; centred.len()];
-    grid.map(|k| {
-        let shift = k as f64 / steps as f64;
-        (
-            shift,
-            led_score(wave, timing, shift, centred, &mut template),
-        )
-    })
-    .fold((0.0, f64::NEG_INFINITY), |best, cand| {
-        if cand.1 > best.1 { cand } else { best }
-    })
-}
-
-/// Sum over LEDs of each LED's best grid score, and the shifts: over the whole half period,
-/// or within [`NEAR_CHIPS`] of `near[i]`.
-fn grid_score(
-    waves: &[ReceivedWaveform],
-    timing: Timing,
-    centred: &[f64],
-    steps: usize,
-    near: Option<&[f64]>,
-) -> (f64, Vec<f64>) {
-    let mut total = 0.0;
-    let mut shifts = Vec::with_capacity(waves.len());
-    for (i, wave) in waves.iter().enumerate() {
-        let (shift, score) = match near.and_then(|n| n.get(i)) {
-            Some(&centre) => {
-                let k = (centre * steps as f64).round() as i64;
-                let reach = (NEAR_CHIPS * steps as f64).ceil() as i64;
-                best_shift_in(wave, timing, centred, steps, k - reach..k + reach + 1)
-            }
-            None => best_shift(wave, timing, centred, steps),
-        };
-        total += score;
-        shifts.push(shift);
-    }
-    (total, shifts)
-}
-
-/// The candidate timing with the highest grid score (the first on ties), with its shifts;
-/// candidates are scored in parallel.
-fn best_timing(
-    waves: &[ReceivedWaveform],
-    candidates: &[(Timing, Option<Vec<f64>>)],
-    centred: &[f64],
-    steps: usize,
-) -> Option<(Timing, Vec<f64>, f64)> {
-    let scored: Vec<(f64, Vec<f64>)> = candidates
-        .par_iter()
-        .map(|(timing, near)| grid_score(waves, *timing, centred, steps, near.as_deref()))
-        .collect();
-    let mut best: Option<(usize, f64)> = None;
-    for (index, (score, _)) in scored.iter().enumerate() {
-        if best.is_none_or(|(_, b)| *score > b) {
-            best = Some((index, *score));
-        }
-    }
-    best.and_then(|(index, score)| {
-        let (_, shifts) = scored.into_iter().nth(index)?;
-        Some((candidates.get(index)?.0, shifts, score))
-    })
-}
-
-/// Relative gain in explained variance a candidate must bring to be taken: below it, a move
-/// only chases rounding (at full exposure with whole-chip shifts the exposure is unobservable
-/// and its objective is flat, so ties go to the earlier candidate: the full exposure).
-const MIN_GAIN: f64 = 1e-9;
-
-/// Half-width, in chips, of the shift search at the shorter exposures of the coarse grid.
-const NEAR_CHIPS: f64 = 1.0;
-
-/// Fits timing and per-LED shifts of `leds` LEDs to the mean signal (one value per frame).
-pub fn fit_waveforms(mean: &[f64], leds: usize, limits: &FitLimits) -> WaveformFit {
-    let frames = mean.len();
-    let waves: Vec<ReceivedWaveform> = (0..leds).map(ReceivedWaveform::new).collect();
-    let average = mean.iter().sum::<f64>() / frames.max(1) as f64;
-    let centred: Vec<f64> = mean.iter().map(|m| m - average).collect();
-    let rate_step = 0.5 / frames.max(1) as f64;
-
-    // Coarse rate ratio with full exposure.
-    let mut rate = limits.rate_ratio.unwrap_or(1.0);
-    let exposure = limits.exposure.unwrap_or(1.0);
-    if limits.rate_ratio.is_none() {
-        // Every other grid rate first (a drift of ≤ ½ chip over the window at the true rate
-        // keeps its score well above the wrong rates'), then the two between around the best.
-        let steps = ((limits.max_rate_mismatch / rate_step).ceil() as i64).min(400);
-        let candidates = |ks: &mut dyn Iterator<Item = i64>| -> Vec<(Timing, Option<Vec<f64>>)> {
-            ks.map(|k| {
-                let timing = Timing {
-                    rate_ratio: 1.0 + k as f64 * rate_step,
-                    exposure,
-                };
-                (timing, None)
-            })
-            .collect()
-        };
-        let coarse = candidates(&mut (-steps..=steps).filter(|k| k % 2 == 0));
-        if let Some((best, _, score)) = best_timing(&waves, &coarse, &centred, 2) {
-            rate = best.rate_ratio;
-            let k = ((rate - 1.0) / rate_step).round() as i64;
-            let fine = candidates(&mut [k - 1, k + 1].into_iter().filter(|k| k.abs() <= steps));
-            if let Some((candidate, _, fine_score)) = best_timing(&waves, &fine, &centred, 2)
-                && fine_score > score * (1.0 + MIN_GAIN)
-            {
-                rate = candidate.rate_ratio;
-            }
-        }
-    }
-    // Coarse exposure.
-    let mut timing = Timing {
-        rate_ratio: rate,
-        exposure,
-    };
-    let (best_score, mut shifts) = grid_score(&waves, timing, &centred, 4, None);
-    if limits.exposure.is_none() {
-        // A shorter exposure keeps the window centred where the full one was: Δ moves by
-        // (e₀ − e)·ρ/2, so each LED is searched near that shift only.
-        let candidates: Vec<(Timing, Option<Vec<f64>>)> = (1..10)
-            .map(|k| {
-                let candidate = Timing {
-                    exposure: k as f64 * 0.1,
-                    ..timing
-                };
-                let offset = (timing.exposure - candidate.exposure) * rate / 2.0;
-                let near = shifts.iter().map(|s| s + offset).collect();
-                (candidate, Some(near))
-            })
-            .collect();
-        if let Some((candidate, candidate_shifts, score)) =
-            best_timing(&waves, &candidates, &centred, 4)
-            && score > best_score * (1.0 + MIN_GAIN)
-        {
-            shifts = candidate_shifts;
-            timing = candidate;
-        }
-    }
-    backfit(&waves, timing, &mut shifts, mean);
-    // Joint refinement by coordinate search with shrinking steps.
-    let mut work = Vec::new();
-    let mut objective = explained_variance(&waves, timing, &shifts, mean, &mut work);
-    let mut step_rate = if limits.rate_ratio.is_none() {
-        rate_step
-    } else {
-        0.0
-    };
-    let mut step_exposure = if limits.exposure.is_none() { 0.05 } else { 0.0 };
-    let mut step_shift = 0.125;
-    for _ in 0..200 {
-        let mut improved = false;
-        for parameter in 0..leds + 2 {
-            for sign in [-1.0, 1.0] {
-                let mut candidate_timing = timing;
-                let mut candidate_shifts = shifts.clone();
-                match parameter {
-                    0 if step_rate > 0.0 => {
-                        candidate_timing.rate_ratio += sign * step_rate;
-                        // Keep the phase at the middle frame: decouples ρ from the shifts.
-                        let pivot = sign * step_rate * frames as f64 / 2.0;
-                        candidate_shifts.iter_mut().for_each(|s| *s -= pivot);
-                        if (candidate_timing.rate_ratio - 1.0).abs()
-                            > limits.max_rate_mismatch + rate_step
-                        {
-                            continue;
-                        }
-                    }
-                    1 if step_exposure > 0.0 => {
-                        candidate_timing.exposure += sign * step_exposure;
-                        if !(0.02..=1.0).contains(&candidate_timing.exposure) {
-                            continue;
-                        }
-                    }
-                    p if p >= 2 => candidate_shifts[p - 2] += sign * step_shift,
-                    _ => continue,
-                }
-                let value = explained_variance(
-                    &waves,
-                    candidate_timing,
-                    &candidate_shifts,
-                    mean,
-                    &mut work,
+impl Residuals for Projection<'_> {
+    fn residuals(&self, params: &[f64], out: &mut Vec<f64>) {
+        out.clear();
+        let model = TimingModel::from_params(params);
+        let mut projection = Vec::new();
+        for group in self.groups {
+            let basis = model.basis(self.waves, group.row, self.frames);
+            for column in group.data.column_iter() {
+                projection.clear();
+                projection.extend(
+                    basis
+                        .rows
+                        .iter()
+                        .map(|q| q.iter().zip(column.iter()).map(|(a, b)| a * b).sum::<f64>()),
                 );
-                if value > objective * (1.0 + MIN_GAIN) {
-                    objective = value;
-                    timing = candidate_timing;
-                    shifts = candidate_shifts;
-                    improved = true;
+                out.extend(column.iter().enumerate().map(|(j, &d)| {
+                    d - basis
+                        .rows
+                        .iter()
+                        .zip(&projection)
+                        .map(|(q, c)| q[j] * c)
+                        .sum::<f64>()
+                }));
+            }
+        }
+    }
+}
+
+/// Fits the timing of `leds` LEDs to the sample (module docs).
+pub fn fit_timing(
+    sample: &PixelSample,
+    space: &SignalSpace,
+    leds: usize,
+    height: usize,
+    limits: &FitLimits,
+) -> TimingFit {
+    let frames = sample.frames();
+    let waves: Vec<ReceivedWaveform> = (0..leds).map(ReceivedWaveform::new).collect();
+    let pixel_noise = space.noise / sample.len().max(1) as f64;
+    let fitter = Fitter {
+        waves: &waves,
+        frames,
+        height,
+        limits,
+    };
+    let global = fitter.global(space);
+    let (solution, rolling) = match limits.line_delay {
+        Some(delay) if delay != 0.0 => {
+            let start = fitter.pivot(&global.params, delay, mean_row(sample));
+            (fitter.rows(sample, pixel_noise, &start, false), true)
+        }
+        Some(_) => (global, false),
+        None => match fitter.band_fit(sample, &global, pixel_noise) {
+            Some(banded) => (fitter.rows(sample, pixel_noise, &banded.params, true), true),
+            None => (global, false),
+        },
+    };
+    fitter.finish(sample, solution, rolling, pixel_noise)
+}
+
+/// Refines an earlier fit of more LEDs (the LED-count check's) for the first `leds` of them,
+/// without new seeds.
+pub fn refit_timing(
+    sample: &PixelSample,
+    space: &SignalSpace,
+    leds: usize,
+    height: usize,
+    limits: &FitLimits,
+    previous: &TimingFit,
+) -> TimingFit {
+    let frames = sample.frames();
+    let waves: Vec<ReceivedWaveform> = (0..leds).map(ReceivedWaveform::new).collect();
+    let pixel_noise = space.noise / sample.len().max(1) as f64;
+    let fitter = Fitter {
+        waves: &waves,
+        frames,
+        height,
+        limits,
+    };
+    let mut start = previous.model.params();
+    start.truncate(SHIFTS + leds);
+    let solution = if previous.rolling {
+        fitter.rows(sample, pixel_noise, &start, limits.line_delay.is_none())
+    } else {
+        fitter.solve(
+            &global_groups(space, frames),
+            &start,
+            &fitter.freedom(false),
+        )
+    };
+    fitter.finish(sample, solution, previous.rolling, pixel_noise)
+}
+
+/// The global-shutter data: the signal eigenvectors scaled by √eigenvalue.
+fn global_groups(space: &SignalSpace, frames: usize) -> [FitGroup; 1] {
+    let rank = space.rank.max(1).min(space.vectors.ncols());
+    let data = DMatrix::from_fn(frames, rank, |j, k| {
+        space.vectors[(j, k)] * space.values[k].max(0.0).sqrt()
+    });
+    [FitGroup { row: 0.0, data }]
+}
+
+/// The fit's shared settings.
+struct Fitter<'a> {
+    waves: &'a [ReceivedWaveform],
+    frames: usize,
+    height: usize,
+    limits: &'a FitLimits,
+}
+
+impl Fitter<'_> {
+    /// The orientation, gain uncertainty, limit checks and packaging of a solution.
+    fn finish(
+        &self,
+        sample: &PixelSample,
+        solution: Solution,
+        rolling: bool,
+        pixel_noise: f64,
+    ) -> TimingFit {
+        let mut model = TimingModel::from_params(&solution.params);
+        orient(sample, self.waves, &mut model);
+        let reference = if rolling { mean_row(sample) } else { 0.0 };
+        let gain_uncertainty = gain_uncertainty(
+            self.waves,
+            &model,
+            &solution,
+            reference,
+            self.frames,
+            pixel_noise,
+        );
+        let rate_at_limit = self.limits.rate_ratio.is_none()
+            && (model.timing.rate_ratio - 1.0).abs() > self.limits.max_rate_mismatch;
+        let line_delay_at_limit = rolling
+            && self.limits.line_delay.is_none()
+            && model.line_delay.abs() * self.height as f64 >= MAX_READOUT * (1.0 - 1e-6);
+        TimingFit {
+            model,
+            rolling,
+            gain_uncertainty,
+            pixel_noise,
+            rate_at_limit,
+            line_delay_at_limit,
+        }
+    }
+
+    /// Which parameters move: ρ and e unless given, λ when `line_delay`, every shift.
+    fn freedom(&self, line_delay: bool) -> Freedom {
+        let mismatch = self.limits.max_rate_mismatch + 1.0 / self.frames.max(1) as f64;
+        let mut free = vec![
+            self.limits.rate_ratio.is_none(),
+            self.limits.exposure.is_none(),
+            line_delay,
+        ];
+        let mut bounds = vec![(1.0 - mismatch, 1.0 + mismatch), (MIN_EXPOSURE, 1.0), {
+            let most = MAX_READOUT / self.height.max(1) as f64;
+            (-most, most)
+        }];
+        for _ in self.waves {
+            free.push(true);
+            bounds.push((f64::NEG_INFINITY, f64::INFINITY));
+        }
+        if let Some(rate) = self.limits.rate_ratio {
+            bounds[RATE] = (rate, rate);
+        }
+        if let Some(exposure) = self.limits.exposure {
+            bounds[EXPOSURE] = (exposure, exposure);
+        }
+        if let Some(delay) = self.limits.line_delay {
+            free[LINE_DELAY] = false;
+            bounds[LINE_DELAY] = (delay, delay);
+        }
+        Freedom { free, bounds }
+    }
+
+    /// Least squares over `groups` from `start`.
+    fn solve(&self, groups: &[FitGroup], start: &[f64], freedom: &Freedom) -> Solution {
+        let problem = Projection {
+            waves: self.waves,
+            groups,
+            frames: self.frames,
+        };
+        minimise(&problem, start, freedom)
+    }
+
+    /// Phase (1): every seed refined with a global shutter; the lowest cost wins.
+    fn global(&self, space: &SignalSpace) -> Solution {
+        let groups = global_groups(space, self.frames);
+        let freedom = self.freedom(false);
+        let seeds = starts(space.basis(), self.waves, self.frames, self.limits);
+        let mut best: Option<Solution> = None;
+        for Start { timing, shifts } in seeds {
+            let mut params = vec![timing.rate_ratio, timing.exposure, 0.0];
+            params.extend(shifts);
+            let solution = self.solve(&groups, &params, &freedom);
+            if best.as_ref().is_none_or(|b| solution.cost < b.cost) {
+                best = Some(solution);
+            }
+        }
+        best.unwrap_or_else(|| Solution {
+            params: {
+                let mut p = vec![self.limits.rate_ratio.unwrap_or(1.0), 1.0, 0.0];
+                p.extend(std::iter::repeat_n(0.0, self.waves.len()));
+                p
+            },
+            cost: f64::INFINITY,
+            information: DMatrix::zeros(0, 0),
+            free: Vec::new(),
+        })
+    }
+
+    /// Parameters with line delay `delay` whose shifts equal `params`' at region row `row`.
+    fn pivot(&self, params: &[f64], delay: f64, row: f64) -> Vec<f64> {
+        let mut p = params.to_vec();
+        p[LINE_DELAY] = delay;
+        let offset = delay * row * p[RATE];
+        p[SHIFTS..].iter_mut().for_each(|s| *s -= offset);
+        p
+    }
+
+    /// Phase (2): the band-wise test for a rolling shutter; the band-wise solution when the
+    /// rows disagree significantly.
+    fn band_fit(
+        &self,
+        sample: &PixelSample,
+        global: &Solution,
+        pixel_noise: f64,
+    ) -> Option<Solution> {
+        let height = self.height;
+        let bands = (height / ROWS_PER_TEST_BAND).clamp(1, TEST_BANDS);
+        if bands < 2 {
+            return None;
+        }
+        let mut members: Vec<Vec<usize>> = vec![Vec::new(); bands];
+        for (p, &row) in sample.rows().iter().enumerate() {
+            members[(row * bands / height).min(bands - 1)].push(p);
+        }
+        let groups: Vec<FitGroup> = members
+            .iter()
+            .filter(|m| m.len() >= 2)
+            .filter_map(|m| compress(sample, m, 2 * self.waves.len()))
+            .collect();
+        if groups.len() < 2 {
+            return None;
+        }
+        // Each band's own shifts (timing held, a few steps), and their trend across the bands.
+        let mut shifts_only = self.freedom(false);
+        shifts_only.free[RATE] = false;
+        shifts_only.free[EXPOSURE] = false;
+        let (mut sxy, mut sxx, mut sw, mut swx) = (0.0, 0.0, 0.0, 0.0);
+        let mut trend = Vec::new();
+        let mut gained = 0.0;
+        let mut residual = Vec::new();
+        for group in &groups {
+            let single = std::slice::from_ref(group);
+            let problem = Projection {
+                waves: self.waves,
+                groups: single,
+                frames: self.frames,
+            };
+            problem.residuals(&global.params, &mut residual);
+            let before: f64 = residual.iter().map(|r| r * r).sum();
+            let solution =
+                minimise_within(&problem, &global.params, &shifts_only, SCREEN_ITERATIONS);
+            gained += before - solution.cost;
+            let weight = group.data.norm_squared();
+            for (i, wave) in self.waves.iter().enumerate() {
+                let half = wave.period() as f64 / 2.0;
+                let offset = (solution.params[SHIFTS + i] - global.params[SHIFTS + i] + half / 2.0)
+                    .rem_euclid(half)
+                    - half / 2.0;
+                trend.push((group.row, offset, weight));
+            }
+        }
+        for &(row, _, w) in &trend {
+            sw += w;
+            swx += w * row;
+        }
+        let centre = swx / sw.max(f64::MIN_POSITIVE);
+        for &(row, offset, w) in &trend {
+            sxy += w * (row - centre) * offset;
+            sxx += w * (row - centre) * (row - centre);
+        }
+        let chips_per_row = if sxx > 0.0 { sxy / sxx } else { 0.0 };
+        let shifts = (groups.len() * self.waves.len()) as f64;
+        if gained < AGREEMENT * shifts * pixel_noise
+            && (chips_per_row * height as f64).abs() < MIN_RAMP_CHIPS
+        {
+            return None;
+        }
+        let delay = chips_per_row / global.params[RATE];
+        // The band-wise optimum without a line delay: what λ has to improve on.
+        let base = self
+            .solve(&groups, &global.params, &self.freedom(false))
+            .cost;
+        let freedom = self.freedom(true);
+        let mut best: Option<Solution> = None;
+        for exposure in self.exposures(global.params[EXPOSURE], &RAMP_EXPOSURES) {
+            let mut start = self.pivot(&global.params, delay, centre);
+            start[EXPOSURE] = exposure;
+            let solution = self.solve(&groups, &start, &freedom);
+            if best.as_ref().is_none_or(|b| solution.cost < b.cost) {
+                best = Some(solution);
+            }
+        }
+        let first = best?;
+        let searched = self.backfit(&groups, first.params.clone());
+        let second = self.solve(&groups, &searched, &freedom);
+        let best = if second.cost < first.cost {
+            second
+        } else {
+            first
+        };
+        let ramp = TimingModel::from_params(&best.params)
+            .ramp_chips(height)
+            .abs();
+        (ramp >= MIN_RAMP_CHIPS && base - best.cost > RAMP_SIGNIFICANCE * pixel_noise)
+            .then_some(best)
+    }
+
+    /// The exposures to start a refinement from: `fitted` and `spread` (only the known
+    /// exposure when it is given).
+    fn exposures(&self, fitted: f64, spread: &[f64]) -> Vec<f64> {
+        if self.limits.exposure.is_some() {
+            return vec![fitted];
+        }
+        let mut exposures = vec![fitted];
+        for &e in spread {
+            if exposures.iter().all(|x| (x - e).abs() > 0.05) {
+                exposures.push(e);
+            }
+        }
+        exposures
+    }
+
+    /// Re-searches each LED's shift on a grid with the rest held (escapes a shift caught a
+    /// chip away, which the least-squares steps cannot cross).
+    fn backfit(&self, groups: &[FitGroup], mut params: Vec<f64>) -> Vec<f64> {
+        let problem = Projection {
+            waves: self.waves,
+            groups,
+            frames: self.frames,
+        };
+        let mut residual = Vec::new();
+        for _ in 0..BACKFIT_SWEEPS {
+            for (i, wave) in self.waves.iter().enumerate() {
+                let reach = (wave.period() as f64 / 4.0).min(BACKFIT_REACH);
+                let steps = (reach / BACKFIT_STEP).round() as i64;
+                let centre = params[SHIFTS + i];
+                let mut best = (f64::INFINITY, centre);
+                for k in -steps..steps {
+                    params[SHIFTS + i] = centre + k as f64 * BACKFIT_STEP;
+                    problem.residuals(&params, &mut residual);
+                    let cost: f64 = residual.iter().map(|r| r * r).sum();
+                    if cost < best.0 {
+                        best = (cost, params[SHIFTS + i]);
+                    }
                 }
+                params[SHIFTS + i] = best.1;
             }
         }
-        if !improved {
-            step_rate *= 0.5;
-            step_exposure *= 0.5;
-            step_shift *= 0.5;
-            if step_shift < 1e-4 {
-                break;
-            }
-        }
+        params
     }
-    finish(&waves, timing, shifts, mean)
-}
 
-/// Re-searches each LED's shift on the grid against the signal minus the other LEDs' fitted
-/// contributions (undoes the small cross-talk of the independent coarse search when ρ ≠ 1).
-fn backfit(waves: &[ReceivedWaveform], timing: Timing, shifts: &mut [f64], mean: &[f64]) {
-    for _ in 0..2 {
-        for led in 0..waves.len() {
-            let (_, coefficients) = explained(waves, timing, shifts, mean);
-            let residual: Vec<f64> = (0..mean.len())
-                .map(|j| {
-                    mean[j]
-                        - waves
-                            .iter()
-                            .enumerate()
-                            .filter(|(k, _)| *k != led)
-                            .map(|(k, wave)| {
-                                coefficients[k + 1] * timing.template(wave, shifts[k], j)
-                            })
-                            .sum::<f64>()
-                })
-                .collect();
-            let average = residual.iter().sum::<f64>() / residual.len().max(1) as f64;
-            let centred: Vec<f64> = residual.iter().map(|r| r - average).collect();
-            shifts[led] = best_shift(&waves[led], timing, &centred, 8).0;
+    /// Phase (3): the row-by-row fit from `start` (several exposures unless `spread` is off
+    /// or the exposure is given).
+    fn rows(
+        &self,
+        sample: &PixelSample,
+        pixel_noise: f64,
+        start: &[f64],
+        fit_delay: bool,
+    ) -> Solution {
+        let groups = row_groups(sample, self.waves.len(), pixel_noise);
+        let freedom = self.freedom(fit_delay);
+        let mut best: Option<Solution> = None;
+        for exposure in self.exposures(start[EXPOSURE], &ROW_EXPOSURES) {
+            let mut params = start.to_vec();
+            params[EXPOSURE] = exposure;
+            let solution = self.solve(&groups, &params, &freedom);
+            if best.as_ref().is_none_or(|b| solution.cost < b.cost) {
+                best = Some(solution);
+            }
         }
+        best.unwrap_or_else(|| self.solve(&groups, start, &freedom))
     }
 }
 
-/// Refits only the shifts (e.g. per row band of a rolling shutter), starting from `start`.
-pub fn refit_shifts(mean: &[f64], timing: Timing, start: &[f64]) -> WaveformFit {
-    let waves: Vec<ReceivedWaveform> = (0..start.len()).map(ReceivedWaveform::new).collect();
-    let mut shifts = start.to_vec();
-    let mut work = Vec::new();
-    let mut objective = explained_variance(&waves, timing, &shifts, mean, &mut work);
-    let mut step = 0.25;
-    while step >= 1e-4 {
-        let mut improved = false;
-        for led in 0..shifts.len() {
-            for sign in [-1.0, 1.0] {
-                let mut candidate = shifts.clone();
-                candidate[led] += sign * step;
-                let value = explained_variance(&waves, timing, &candidate, mean, &mut work);
-                if value > objective * (1.0 + MIN_GAIN) {
-                    objective = value;
-                    shifts = candidate;
-                    improved = true;
-                }
-            }
-        }
-        if !improved {
-            step *= 0.5;
-        }
-    }
-    finish(&waves, timing, shifts, mean)
+/// The sample's mean region row.
+fn mean_row(sample: &PixelSample) -> f64 {
+    let rows = sample.rows();
+    rows.iter().sum::<usize>() as f64 / rows.len().max(1) as f64
 }
 
-/// Chooses each carrier's sign (a half-period shift negates it) so that the amplitudes are
-/// positive, wraps shifts into one period and computes the residual.
-fn finish(
-    waves: &[ReceivedWaveform],
-    timing: Timing,
-    mut shifts: Vec<f64>,
-    mean: &[f64],
-) -> WaveformFit {
-    let (_, coefficients) = explained(waves, timing, &shifts, mean);
-    for ((shift, wave), c) in shifts.iter_mut().zip(waves).zip(&coefficients[1..]) {
+/// The `keep` leading singular directions (scaled) of the sample pixels `members`, at their
+/// mean row.
+fn compress(sample: &PixelSample, members: &[usize], keep: usize) -> Option<FitGroup> {
+    let frames = sample.frames();
+    let x = DMatrix::from_fn(members.len(), frames, |r, j| sample.pixel(members[r])[j]);
+    let row =
+        members.iter().map(|&p| sample.rows()[p]).sum::<usize>() as f64 / members.len() as f64;
+    let (directions, values) = leading_directions(x, keep)?;
+    Some(FitGroup {
+        row,
+        data: scale_columns(directions, &values),
+    })
+}
+
+/// Right singular vectors (F × k) and singular values of `x`, the `keep` largest.
+fn leading_directions(x: DMatrix<f64>, keep: usize) -> Option<(DMatrix<f64>, Vec<f64>)> {
+    let svd = SVD::new(x, false, true);
+    let v_t = svd.v_t?;
+    let mut order: Vec<usize> = (0..svd.singular_values.len()).collect();
+    order.sort_by(|&a, &b| svd.singular_values[b].total_cmp(&svd.singular_values[a]));
+    order.truncate(keep);
+    let directions = DMatrix::from_fn(v_t.ncols(), order.len(), |j, c| v_t[(order[c], j)]);
+    let values = order.iter().map(|&k| svd.singular_values[k]).collect();
+    Some((directions, values))
+}
+
+/// Columns of `m` times `scale`.
+fn scale_columns(mut m: DMatrix<f64>, scale: &[f64]) -> DMatrix<f64> {
+    for (mut column, s) in m.column_iter_mut().zip(scale) {
+        column *= *s;
+    }
+    m
+}
+
+/// One group per sample row with signal: its N leading directions.
+fn row_groups(sample: &PixelSample, leds: usize, pixel_noise: f64) -> Vec<FitGroup> {
+    let frames = sample.frames() as f64;
+    sample
+        .row_runs()
+        .into_iter()
+        .filter_map(|run| {
+            let pixels = run.len() as f64;
+            let x = sample.matrix(run.clone());
+            let (directions, values) = leading_directions(x, leds)?;
+            let edge = (pixels.sqrt() + frames.sqrt()).powi(2) * pixel_noise;
+            let strongest = values.first().copied().unwrap_or(0.0);
+            (strongest * strongest > ROW_SIGNAL_FACTOR * edge).then(|| FitGroup {
+                row: sample.rows()[run.start] as f64,
+                data: scale_columns(directions, &values),
+            })
+        })
+        .collect()
+}
+
+/// Chooses each carrier's sign so that the sample's summed on-levels are positive, and wraps
+/// each shift into one period.
+fn orient(sample: &PixelSample, waves: &[ReceivedWaveform], model: &mut TimingModel) {
+    let frames = sample.frames();
+    let mut sums = vec![0.0; waves.len()];
+    let mut coefficients = vec![0.0; waves.len() + 1];
+    for run in sample.row_runs() {
+        let row = sample.rows()[run.start] as f64;
+        let mut total = vec![0.0; frames];
+        for p in run {
+            total
+                .iter_mut()
+                .zip(sample.pixel(p))
+                .for_each(|(t, x)| *t += x);
+        }
+        let basis = model.basis(waves, row, frames);
+        let projections: Vec<f64> = basis
+            .rows
+            .iter()
+            .map(|q| q.iter().zip(&total).map(|(a, b)| a * b).sum())
+            .collect();
+        basis.coefficients(&projections, &mut coefficients);
+        sums.iter_mut()
+            .zip(&coefficients[1..])
+            .for_each(|(s, c)| *s += c);
+    }
+    for ((shift, wave), sum) in model.shifts.iter_mut().zip(waves).zip(&sums) {
         let period = wave.period() as f64;
-        if *c < 0.0 {
+        if *sum < 0.0 {
             *shift += period / 2.0;
         }
         *shift = shift.rem_euclid(period);
     }
-    let columns = template_columns(waves, timing, &shifts, mean.len());
-    let (_, coefficients) = explained(waves, timing, &shifts, mean);
-    let residual: f64 = (0..mean.len())
-        .map(|j| {
-            let model: f64 = columns
-                .iter()
-                .zip(&coefficients)
-                .map(|(c, k)| c[j] * k)
-                .sum();
-            (mean[j] - model).powi(2)
-        })
-        .sum();
-    WaveformFit {
-        timing,
-        shifts,
-        amplitudes: coefficients[1..].to_vec(),
-        residual_rms: (residual / mean.len().max(1) as f64).sqrt(),
-    }
 }
 
-#[cfg(test)]
-mod tests {
-    use super::*;
-
-    fn synth(amps: &[f64], shifts: &[f64], timing: Timing, frames: usize) -> Vec<f64> {
-        let waves: Vec<ReceivedWaveform> = (0..amps.len()).map(ReceivedWaveform::new).collect();
-        (0..frames)
-            .map(|j| {
-                0.3 + (0..amps.len())
-                    .map(|i| amps[i] * timing.template(&waves[i], shifts[i], j))
-                    .sum::<f64>()
-            })
-            .collect()
+/// Relative 1σ gain uncertainty of each LED: the timing's covariance σ²·(JᵀJ)⁻¹ carried into
+/// the matched filter's coefficients, δg_i = (T⁺·∂T/∂θ_k)_ii·δθ_k, at region row `row`.
+fn gain_uncertainty(
+    waves: &[ReceivedWaveform],
+    model: &TimingModel,
+    solution: &Solution,
+    row: f64,
+    frames: usize,
+    pixel_noise: f64,
+) -> Vec<f64> {
+    let n = solution.free.len();
+    if n == 0 {
+        return vec![0.0; waves.len()];
     }
-
-    #[test]
-    fn recovers_amplitudes_rate_and_exposure() {
-        let timing = Timing {
-            rate_ratio: 1.03,
-            exposure: 0.6,
-        };
-        let amps = [0.2, 0.15, 0.1, 0.12];
-        let shifts = [1.3, 5.7, 9.2, 20.45];
-        let mean = synth(&amps, &shifts, timing, 64);
-        let fit = fit_waveforms(&mean, 4, &FitLimits::default());
-        assert!((fit.timing.rate_ratio - 1.03).abs() < 1e-3, "{fit:?}");
-        for (a, b) in fit.amplitudes.iter().zip(&amps) {
-            assert!((a - b).abs() < 2e-3 * b.max(0.1), "{fit:?}");
+    let covariance = solution
+        .information
+        .clone()
+        .pseudo_inverse(1e-12)
+        .unwrap_or_else(|_| DMatrix::zeros(n, n))
+        * pixel_noise;
+    let params = model.params();
+    let basis = model.basis(waves, row, frames);
+    let base = model.columns(waves, row, frames);
+    let step = 1e-6;
+    let mut sensitivity = DMatrix::zeros(waves.len(), n);
+    let mut coefficients = vec![0.0; waves.len() + 1];
+    for (a, &k) in solution.free.iter().enumerate() {
+        let mut shifted = params.clone();
+        shifted[k] += step;
+        let columns = TimingModel::from_params(&shifted).columns(waves, row, frames);
+        for i in 0..waves.len() {
+            let derivative: Vec<f64> = columns[i + 1]
+                .iter()
+                .zip(&base[i + 1])
+                .map(|(x, y)| (x - y) / step)
+                .collect();
+            let projections: Vec<f64> = basis
+                .rows
+                .iter()
+                .map(|q| q.iter().zip(&derivative).map(|(a, b)| a * b).sum())
+                .collect();
+            basis.coefficients(&projections, &mut coefficients);
+            sensitivity[(i, a)] = coefficients[i + 1];
         }
-        assert!(fit.residual_rms < 1e-4, "{fit:?}");
     }
+    (0..waves.len())
+        .map(|i| {
+            let s = sensitivity.row(i);
+            (s * &covariance * s.transpose())[(0, 0)].max(0.0).sqrt()
+        })
+        .collect()
 }

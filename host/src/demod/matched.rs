@@ -198,7 +198,7 @@ fn run<const K: usize, T: Code>(
                 .map(|j| {
                     let mut w = [0.0f32; K];
                     for (c, q) in basis.rows.iter().enumerate().take(K) {
-                        w[c] = q.get(j).copied().unwrap_or(0.0);
+                        w[c] = q.get(j).copied().unwrap_or(0.0) as f32;
                     }
                     w
                 })

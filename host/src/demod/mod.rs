@@ -1,24 +1,67 @@
 //! MEB-FDMA demodulation: a captured video → one image per LED (SPEC §3–§4).
 //!
-//! [`decode`] reads frames in windows (native 8/16-bit, bounded memory), fits every LED's
-//! received waveform — shift, exposure and camera/chip rate ratio — once per window from the
-//! spatial mean ([`fit`]), then estimates each pixel's on-level A_i by least squares against
-//! those waveforms ([`Estimator::Waveform`], a matched filter: unbiased because it models the
-//! integration window instead of taking a maximum, and less noisy because it projects on one
-//! waveform per LED instead of its whole 2^(i+1)-dimensional subspace). The thesis decoder
-//! ([`thesis`], Eqs. 3.25–3.30) is kept as [`Estimator::Thesis`]. Windows are averaged.
+//! Every pixel p of a window of F frames reads (SPEC §3, notation of `docs/SPEC.md`)
 //!
-//! Per-pixel noise: the residual of the least-squares fit, i.e. the energy in every DFT bin no
-//! LED uses (bin 2^N and the bins beyond one carrier frame), as σ per frame sample. The thesis
-//! estimator reports the power of bin 2^N instead.
+//! ```text
+//! r_j(p) = B(p) + Σ_i A_i(p)·u_i(j) + noise,   u_i(j) = ½ + ½·g_i(j·ρ + Δ_i),
+//! ```
+//!
+//! u_i LED i's on-fraction in frame j: its carrier s_i (period 2^(i+2) chips inside the
+//! n = 2^(N+1)-chip table) box-averaged over the exposure e·ρ chips (g_i, [`waveform`]),
+//! shifted by Δ_i = k_i + α_i chips and sampled at ρ chips per frame; a rolling shutter adds
+//! λ·r frame periods to row r's start. The timing (ρ, e, Δ_i, λ) is the same for every pixel,
+//! so it is estimated once per window from the pixels that carry modulation, and each pixel's
+//! A_i is then a linear least-squares fit against the N received waveforms (a matched
+//! filter, [`Estimator::Waveform`]): unbiased, because it models the integration instead of
+//! taking a maximum, and far less noisy than the thesis' subspace maximum, which is kept as
+//! [`Estimator::Thesis`] (Eqs. 3.25–3.30, [`thesis`]).
+//!
+//! The timing estimate is global, not a local search on the frame mean:
+//!
+//! 1. [`sample`]: the window's most modulated pixels (strided candidates ranked by temporal
+//!    variance), so a small object in a wide, dark view drives the estimate rather than the
+//!    unlit background. X is that sample, centred (pixels × F).
+//! 2. [`spectrum`]: the leading eigenvectors V of G = XᵀX span every LED's waveform, because
+//!    X = A·Tᵀ + noise with T = [u_0 … u_{N−1}] (F × N); per LED this is the rank-1 structure
+//!    of SPEC §4: the projection of the window onto LED i's subspace is, across pixels,
+//!    A_i(p)·(projected u_i)ᵀ. The eigenvalues beyond the signal give the noise energy σ²_G.
+//!    Randomised subspace iteration keeps it cheap.
+//! 3. [`seed`]: each LED's waveform is found in V on its own — the fraction |Vᵀt|²/|t|² of a
+//!    candidate template t that V holds is 1 for the true (ρ, e, Δ_i) and does not depend on
+//!    the A_i, so neither other LEDs nor a dark background bias it, and the scale and sign
+//!    ambiguity of singular vectors never arises (templates are scored, not read off V).
+//!    ρ comes from a one-dimensional scan, e from a scan at that ρ with Δ_i refined per LED.
+//! 4. [`fit`]: those seeds start a least-squares refinement of (ρ, e, Δ_i) on the sample
+//!    (variable projection), which pins the templates' amplitude — and with it each LED's
+//!    gain — to the physics of the integration; a rolling shutter is detected when row bands
+//!    disagree and fitted as a per-row phase ramp (λ, or given). The per-pixel filter then uses
+//!    one basis per row band narrow enough that the ramp moves the phase < 0.004 chip inside.
+//! 5. [`quality`]: the energy each LED's template explains against what noise alone would
+//!    give, the energy left unexplained in its subspace, and the uncertainty the timing's noise
+//!    puts on its gain; an implausible decode is refused (or kept with the verdict recorded,
+//!    [`OnImplausible`]).
+//!
+//! The LED-count check fits one LED more than requested (or the most the window allows, for
+//! [`LedCount::Auto`]) and counts the LEDs with signal above noise. Long captures are decoded
+//! in windows of bounded memory ([`window`]), each with its own timing fit, and averaged.
+//! [`WindowDecoder`] is that per-window core: template estimate + matched filter on a window of
+//! frames, returning per-LED images, noise and fit quality.
+//!
+//! Per-pixel noise: the residual of the per-pixel least-squares fit, as σ per frame sample.
+//! The thesis estimator reports the power of DFT bin 2^N instead.
 
 mod basis;
 pub mod config;
 mod error;
 pub mod fit;
+mod levenberg;
 mod matched;
 pub mod output;
+pub mod quality;
 mod report;
+mod sample;
+mod seed;
+mod spectrum;
 mod stats;
 #[cfg(test)]
 mod synthetic;
@@ -28,17 +71,21 @@ pub mod thesis;
 pub mod waveform;
 mod window;
 
-pub use config::{DecodeConfig, Estimator, LedCount, Linearize, Roi};
+pub use config::{DecodeConfig, Estimator, LedCount, Linearize, OnImplausible, Roi};
 pub use error::DemodError;
+pub use matched::WindowAmplitudes;
+pub use quality::{FitQuality, LedQuality, Verdict, VerdictStatus};
 pub use report::{DecodeReport, LedReport};
 
 use crate::capture::{FrameFormat, FrameSource, Samples};
 use crate::types::LedImages;
-use basis::TemplateBasis;
-use fit::{FitLimits, WaveformFit, fit_waveforms, refit_shifts, template_columns};
-use matched::{CodeLimits, WindowAmplitudes};
+use fit::{FitLimits, TimingFit, fit_timing, refit_timing};
+use matched::CodeLimits;
+use nalgebra::DMatrix;
 use ndarray::Array2;
 use rayon::prelude::*;
+use sample::PixelSample;
+use spectrum::SignalSpace;
 use stats::PixelStats;
 use waveform::ReceivedWaveform;
 use window::{CodeMap, Region, read_window};
@@ -47,14 +94,14 @@ use window::{CodeMap, Region, read_window};
 pub const MAX_LEDS: usize = 8;
 /// Largest LED count `LedCount::Auto` looks for.
 const AUTO_MAX_LEDS: usize = 6;
-/// Largest decoding window, frames (bounds the cost of the waveform fit).
+/// Largest decoding window, frames (bounds the cost of the timing fit).
 const MAX_WINDOW_FRAMES: usize = 256;
 /// Largest number of pixels the reported median noise is computed from.
 const MEDIAN_SAMPLE: usize = 1 << 16;
-/// An LED is modulated when its scene-mean on-level exceeds this fraction of the strongest.
+/// An LED counts as present when its mean on-level exceeds this fraction of the strongest's.
 const SIGNIFICANT_FRACTION: f64 = 0.03;
-/// … and this fraction of full scale.
-const SIGNIFICANT_LEVEL: f64 = 1e-3;
+/// Largest phase change, chips, of the rolling-shutter ramp inside one row band.
+const BAND_PHASE_STEP: f64 = 0.004;
 
 /// The result of a decode.
 #[derive(Debug, Clone)]
@@ -78,137 +125,183 @@ pub fn decode(
     config: &DecodeConfig,
     progress: &mut dyn FnMut(usize, usize),
 ) -> Result<Decoded, DemodError> {
-    let mut format = source.format().clone();
-    if let Some(fps) = config.fps {
-        if !(fps.is_finite() && fps > 0.0) {
-            return Err(DemodError::InvalidConfig(format!(
-                "fps {fps} is not positive"
-            )));
-        }
-        format.fps = fps;
+    let format = stream_format(source, config)?;
+    let decoder = WindowDecoder::new(&format, config)?;
+    skip_start(source, config.start)?;
+    if config.start > 0 && source.frame_count_hint() == Some(0) {
+        // The start skipped exactly every frame.
+        return Err(DemodError::StartBeyondEnd {
+            start: config.start,
+            available: config.start,
+        });
     }
-    let region = validate(config, &format)?;
-    let map = CodeMap::new(&format, config.linearize)?;
-    let code_limits = CodeLimits::new(&format, config.underexposed_below);
-    for _ in 0..config.start {
-        if source.next_frame()?.is_none() {
-            return Err(DemodError::TooFewFrames {
-                got: 0,
-                need: 1,
-                leds: requested_leds(config),
-            });
-        }
-    }
-    let hint = source
-        .frame_count_hint()
-        .map(|n| n.saturating_sub(config.start));
-    let total = match (config.frames, hint) {
-        (Some(f), Some(h)) => Some(f.min(h)),
-        (Some(f), None) => Some(f),
-        (None, h) => h,
-    };
-    let sample_bytes = if format.bit_depth > 8 { 2 } else { 1 };
-    let frame_bytes = (region.roi.width * region.roi.height * sample_bytes).max(1);
-    let budget_frames = (config.window_bytes / frame_bytes).clamp(1, MAX_WINDOW_FRAMES);
-    let min_chips = match config.leds {
-        LedCount::Fixed(n) => 1usize << (n + 1),
-        LedCount::Auto => 4,
-    };
-    let mut window_len = budget_frames.max(min_chips);
-    if let Some(t) = total {
-        window_len = window_len.min(t.max(1));
-    }
-    if let LedCount::Fixed(_) = config.leds
-        && window_len > min_chips
-    {
-        window_len -= window_len % min_chips;
-    }
-    let progress_total = config.frames.or(hint).unwrap_or(window_len);
-
+    let plan = WindowPlan::new(config, &format, decoder.roi, source.frame_count_hint());
     let mut state = Accumulated::default();
     let mut read = 0usize;
     loop {
-        let want = match total {
-            Some(t) => window_len.min(t - read.min(t)),
-            None => window_len,
-        };
+        let want = plan.next_window(read);
         if want == 0 {
             break;
         }
-        let window = read_window(source, &format, region, &map, want, || {
+        let window = read_window(source, &format, decoder.roi, want, || {
             read += 1;
-            progress(read, progress_total.max(read));
+            progress(read, plan.progress_total.max(read));
         })?;
         let got = window.frames.len();
-        let leds = match state.leds {
-            Some(n) => n,
+        let sample = decoder.sample(&window.frames);
+        let (leds, seed) = match state.leds {
+            Some(n) => (n, None),
             None => {
-                let (n, probe) = choose_led_count(config, &window.mean)?;
-                state.leds = Some(n);
-                state.detected = probe.as_ref().map(|(d, _)| *d);
-                state.probe_fit = probe.map(|(_, fit)| fit);
-                n
+                let count = decoder.count_leds(&sample, config.leds, config.check_led_count)?;
+                state.leds = Some(count.leds);
+                state.detected = count.detected;
+                (count.leds, count.fit)
             }
         };
-        let chips = 1usize << (leds + 1);
-        if got < chips {
+        if got < 1usize << (leds + 1) {
+            if state.windows == 0 && got == 0 && config.start > 0 {
+                // The start skipped exactly every frame.
+                return Err(DemodError::StartBeyondEnd {
+                    start: config.start,
+                    available: config.start,
+                });
+            }
             if state.windows == 0 {
                 return Err(DemodError::TooFewFrames {
                     got,
-                    need: chips,
+                    need: 1 << (leds + 1),
                     leds,
                 });
             }
             break;
         }
-        decode_window(config, region, &map, code_limits, leds, &window, &mut state);
+        state.add(decoder.decode(&window.frames, &sample, leds, seed.as_ref()));
         if got < want {
             break;
         }
     }
-    finish(config, &format, region, state)
+    let decoded = finish(config, &format, decoder.roi, state)?;
+    apply_verdict(decoded, config.on_implausible)
 }
 
-/// LED count named by the config (for errors before detection).
-fn requested_leds(config: &DecodeConfig) -> usize {
-    match config.leds {
-        LedCount::Fixed(n) => n,
-        LedCount::Auto => 1,
+/// The stream's format with the configured frame-rate override.
+fn stream_format(
+    source: &dyn FrameSource,
+    config: &DecodeConfig,
+) -> Result<FrameFormat, DemodError> {
+    let mut format = source.format().clone();
+    if let Some(fps) = config.fps {
+        if !(fps.is_finite() && fps > 0.0) {
+            return Err(DemodError::InvalidConfig(format!(
+                "frame rate {fps} is not positive"
+            )));
+        }
+        format.fps = fps;
+    }
+    Ok(format)
+}
+
+/// Skips the first `start` frames.
+fn skip_start(source: &mut dyn FrameSource, start: usize) -> Result<(), DemodError> {
+    for skipped in 0..start {
+        if source.next_frame()?.is_none() {
+            return Err(DemodError::StartBeyondEnd {
+                start,
+                available: skipped,
+            });
+        }
+    }
+    Ok(())
+}
+
+/// How a capture is cut into windows.
+#[derive(Debug, Clone, Copy)]
+struct WindowPlan {
+    /// Frames per window.
+    length: usize,
+    /// Frames to decode in total, when known.
+    total: Option<usize>,
+    /// Total reported to the progress callback.
+    progress_total: usize,
+}
+
+impl WindowPlan {
+    /// Windows for `config` over a stream of `remaining` frames (after the start), within the
+    /// memory budget.
+    fn new(
+        config: &DecodeConfig,
+        format: &FrameFormat,
+        roi: Roi,
+        remaining: Option<usize>,
+    ) -> Self {
+        let total = match (config.frames, remaining) {
+            (Some(f), Some(h)) => Some(f.min(h)),
+            (Some(f), None) => Some(f),
+            (None, h) => h,
+        };
+        let sample_bytes = if format.bit_depth > 8 { 2 } else { 1 };
+        let frame_bytes = (roi.width * roi.height * sample_bytes).max(1);
+        let budget_frames = (config.window_bytes / frame_bytes).clamp(1, MAX_WINDOW_FRAMES);
+        let min_chips = match config.leds {
+            LedCount::Fixed(n) => 1usize << (n + 1),
+            LedCount::Auto => 4,
+        };
+        let mut length = budget_frames.max(min_chips);
+        if let Some(t) = total {
+            length = length.min(t.max(1));
+        }
+        if let LedCount::Fixed(_) = config.leds
+            && length > min_chips
+        {
+            length -= length % min_chips;
+        }
+        Self {
+            length,
+            total,
+            progress_total: total.unwrap_or(length),
+        }
+    }
+
+    /// Frames of the next window after `read` frames (0 at the end).
+    fn next_window(&self, read: usize) -> usize {
+        match self.total {
+            Some(t) => self.length.min(t.saturating_sub(read)),
+            None => self.length,
+        }
     }
 }
 
 /// Checks the settings against the stream and returns the decoded region.
-fn validate(config: &DecodeConfig, format: &FrameFormat) -> Result<Region, DemodError> {
+fn validate(config: &DecodeConfig, format: &FrameFormat) -> Result<Roi, DemodError> {
+    let invalid = |text: String| Err(DemodError::InvalidConfig(text));
     if let LedCount::Fixed(n) = config.leds
         && !(1..=MAX_LEDS).contains(&n)
     {
-        return Err(DemodError::InvalidConfig(format!(
-            "LED count {n} is outside 1..={MAX_LEDS}"
-        )));
+        return invalid(format!("LED count {n} is outside 1..={MAX_LEDS}"));
     }
     if let Some(r) = config.rate_ratio
         && !(r.is_finite() && r > 0.0)
     {
-        return Err(DemodError::InvalidConfig(format!(
-            "rate ratio {r} is not positive"
-        )));
+        return invalid(format!("rate ratio {r} is not positive"));
     }
     if let Some(e) = config.exposure
         && !(e.is_finite() && e > 0.0 && e <= 1.0)
     {
-        return Err(DemodError::InvalidConfig(format!(
-            "exposure {e} is outside (0, 1]"
-        )));
+        return invalid(format!("exposure {e} is outside (0, 1]"));
+    }
+    if let Some(t) = config.line_time_s
+        && !(t.is_finite() && t.abs() * format.fps < 1.0)
+    {
+        return invalid(format!(
+            "line time {t} s is not shorter than a frame period at {} fps",
+            format.fps
+        ));
     }
     if !(config.max_rate_mismatch.is_finite() && (0.0..0.5).contains(&config.max_rate_mismatch)) {
-        return Err(DemodError::InvalidConfig(
-            "max rate mismatch must be in [0, 0.5)".into(),
-        ));
+        return invalid("the rate-ratio search range must be in [0, 0.5)".into());
     }
     if !config.underexposed_below.is_finite() {
-        return Err(DemodError::InvalidConfig(
-            "under-exposure threshold is NaN".into(),
-        ));
+        return invalid("under-exposure threshold is NaN".into());
     }
     let roi = config.roi.unwrap_or(Roi {
         x: 0,
@@ -221,81 +314,242 @@ fn validate(config: &DecodeConfig, format: &FrameFormat) -> Result<Region, Demod
         || roi.x + roi.width > format.width
         || roi.y + roi.height > format.height
     {
-        return Err(DemodError::InvalidConfig(format!(
+        return invalid(format!(
             "region {}x{}+{}+{} is empty or outside the {}x{} frame",
             roi.width, roi.height, roi.x, roi.y, format.width, format.height
-        )));
+        ));
     }
-    if config.row_bands == 0 || config.row_bands > roi.height {
-        return Err(DemodError::InvalidConfig(format!(
-            "row bands {} must be in 1..={}",
-            config.row_bands, roi.height
-        )));
-    }
-    Ok(Region {
-        roi,
-        bands: config.row_bands,
-    })
+    Ok(roi)
 }
 
-/// Fit limits from the config.
-fn limits(config: &DecodeConfig) -> FitLimits {
-    FitLimits {
-        max_rate_mismatch: config.max_rate_mismatch,
-        rate_ratio: config.rate_ratio,
-        exposure: config.exposure,
-    }
+/// A window's pixel sample and its Gram matrix: the timing fit's input.
+#[derive(Debug, Clone)]
+pub struct WindowSample {
+    sample: PixelSample,
+    gram: DMatrix<f64>,
 }
 
-/// Number of LEDs to decode, and (detected count, probe fit) when the video could be checked.
-fn choose_led_count(
-    config: &DecodeConfig,
-    mean: &[f64],
-) -> Result<(usize, Option<(usize, WaveformFit)>), DemodError> {
-    let frames = mean.len();
-    let fits = |m: usize| (1usize << (m + 1)) <= frames;
-    let probe = match config.leds {
-        LedCount::Fixed(n) if !config.check_led_count || !fits(n) => return Ok((n, None)),
-        LedCount::Fixed(n) if n < MAX_LEDS && fits(n + 1) => n + 1,
-        LedCount::Fixed(n) => n,
-        LedCount::Auto => match (1..=AUTO_MAX_LEDS).rev().find(|&m| fits(m)) {
-            Some(m) => m,
-            None => {
-                return Err(DemodError::TooFewFrames {
-                    got: frames,
-                    need: 4,
-                    leds: 1,
-                });
-            }
-        },
-    };
-    let fit = fit_waveforms(mean, probe, &limits(config));
-    let strongest = fit.amplitudes.iter().cloned().fold(0.0, f64::max);
-    if strongest < SIGNIFICANT_LEVEL {
-        return Err(DemodError::NoModulation);
+/// The outcome of the LED-count check.
+#[derive(Debug, Clone)]
+pub struct LedCountCheck {
+    /// LEDs to decode.
+    pub leds: usize,
+    /// Modulated LEDs seen in the window (when checked).
+    pub detected: Option<usize>,
+    /// The check's timing fit (of more LEDs), a starting point for the decode's.
+    pub fit: Option<TimingFit>,
+}
+
+/// One window decoded.
+#[derive(Debug, Clone)]
+pub struct WindowDecode {
+    /// Frames in the window.
+    pub frames: usize,
+    /// Per-pixel on-levels, noise and masks.
+    pub amplitudes: WindowAmplitudes,
+    /// The timing of the received waveforms.
+    pub fit: TimingFit,
+    /// How well it explains the window.
+    pub quality: FitQuality,
+    /// The window's verdict.
+    pub verdict: Verdict,
+    /// Row bands of the per-pixel fit.
+    pub bands: usize,
+    /// var(A_i) / σ² of the per-pixel fit, per LED (first band).
+    pub variance_factors: Vec<f64>,
+}
+
+/// The per-window decoder: planned once per stream, run on every window.
+#[derive(Debug, Clone)]
+pub struct WindowDecoder {
+    roi: Roi,
+    map: CodeMap,
+    code_limits: CodeLimits,
+    fit_limits: FitLimits,
+    estimator: Estimator,
+}
+
+impl WindowDecoder {
+    /// Plans the decoder for a stream of `format` (frame-rate override applied) and `config`.
+    pub fn new(format: &FrameFormat, config: &DecodeConfig) -> Result<Self, DemodError> {
+        let roi = validate(config, format)?;
+        Ok(Self {
+            roi,
+            map: CodeMap::new(format, config.linearize)?,
+            code_limits: CodeLimits::new(format, config.underexposed_below),
+            fit_limits: FitLimits {
+                max_rate_mismatch: config.max_rate_mismatch,
+                rate_ratio: config.rate_ratio,
+                exposure: config.exposure,
+                line_delay: config.line_time_s.map(|t| t * format.fps),
+            },
+            estimator: config.estimator,
+        })
     }
-    let significant = |a: f64| a > SIGNIFICANT_FRACTION * strongest && a > SIGNIFICANT_LEVEL;
-    let detected = fit
-        .amplitudes
-        .iter()
-        .rposition(|&a| significant(a))
-        .map_or(0, |i| i + 1);
-    match config.leds {
-        LedCount::Auto => Ok((detected, Some((detected, fit)))),
-        LedCount::Fixed(n) => {
-            let all_present = fit.amplitudes[..n].iter().all(|&a| significant(a));
-            if detected != n || !all_present {
-                let detected = if all_present {
-                    detected
-                } else {
-                    detected.min(n - 1)
-                };
-                return Err(DemodError::LedCountMismatch {
-                    requested: n,
-                    detected,
-                });
+
+    /// The decoded region.
+    pub fn roi(&self) -> Roi {
+        self.roi
+    }
+
+    /// Picks the pixel sample of a window of frames cropped to the region.
+    pub fn sample(&self, frames: &[Samples]) -> WindowSample {
+        let sample = PixelSample::gather(
+            frames,
+            self.roi.width,
+            self.roi.height,
+            &self.map,
+            self.code_limits,
+        );
+        let gram = sample.gram();
+        WindowSample { sample, gram }
+    }
+
+    /// The LED count to decode (module docs): with `check`, a fit of one LED more than a
+    /// fixed count (or of the most the window allows for `Auto`) counts the LEDs whose signal
+    /// stands above noise.
+    pub fn count_leds(
+        &self,
+        window: &WindowSample,
+        request: LedCount,
+        check: bool,
+    ) -> Result<LedCountCheck, DemodError> {
+        let frames = window.sample.frames();
+        let fits = |m: usize| (1usize << (m + 1)) <= frames;
+        let unchecked = |leds| LedCountCheck {
+            leds,
+            detected: None,
+            fit: None,
+        };
+        let probe = match request {
+            LedCount::Fixed(n) if !check || !fits(n) => return Ok(unchecked(n)),
+            LedCount::Fixed(n) if n < MAX_LEDS && fits(n + 1) => n + 1,
+            LedCount::Fixed(n) => n,
+            LedCount::Auto => match (1..=AUTO_MAX_LEDS).rev().find(|&m| fits(m)) {
+                Some(m) => m,
+                None => {
+                    return Err(DemodError::TooFewFrames {
+                        got: frames,
+                        need: 4,
+                        leds: 1,
+                    });
+                }
+            },
+        };
+        if window.sample.is_empty() {
+            return Err(DemodError::NothingToDecode("saturated"));
+        }
+        let waves: Vec<ReceivedWaveform> = (0..probe).map(ReceivedWaveform::new).collect();
+        let space = SignalSpace::new(&window.gram, probe);
+        let fit = fit_timing(
+            &window.sample,
+            &space,
+            probe,
+            self.roi.height,
+            &self.fit_limits,
+        );
+        let quality = quality::measure(&window.sample, &window.gram, &space, &fit, &waves);
+        let strongest = quality.levels.iter().cloned().fold(0.0, f64::max);
+        let present: Vec<bool> = quality
+            .leds
+            .iter()
+            .zip(&quality.levels)
+            .map(|(q, &level)| {
+                q.signal_to_noise >= quality::MIN_SIGNAL_TO_NOISE
+                    && level > SIGNIFICANT_FRACTION * strongest
+            })
+            .collect();
+        let detected = present.iter().rposition(|&p| p).map_or(0, |i| i + 1);
+        if detected == 0 {
+            return Err(DemodError::NoModulation);
+        }
+        let leds = match request {
+            LedCount::Auto => detected,
+            LedCount::Fixed(n) => {
+                let all_present = present.iter().take(n).all(|&p| p);
+                if detected != n || !all_present {
+                    let detected = if all_present {
+                        detected
+                    } else {
+                        detected.min(n - 1)
+                    };
+                    return Err(DemodError::LedCountMismatch {
+                        requested: n,
+                        detected,
+                    });
+                }
+                n
             }
-            Ok((n, Some((detected, fit))))
+        };
+        Ok(LedCountCheck {
+            leds,
+            detected: Some(detected),
+            fit: Some(fit),
+        })
+    }
+
+    /// Decodes one window of `leds` LEDs (frames cropped to the region); `seed` is an earlier
+    /// fit of this window (of at least as many LEDs) to refine instead of starting afresh.
+    pub fn decode(
+        &self,
+        frames: &[Samples],
+        window: &WindowSample,
+        leds: usize,
+        seed: Option<&TimingFit>,
+    ) -> WindowDecode {
+        let count = frames.len();
+        let height = self.roi.height;
+        let waves: Vec<ReceivedWaveform> = (0..leds).map(ReceivedWaveform::new).collect();
+        let space = SignalSpace::new(&window.gram, leds);
+        let fit = match seed {
+            Some(previous) if previous.model.shifts.len() == leds => previous.clone(),
+            Some(previous) if previous.model.shifts.len() > leds => refit_timing(
+                &window.sample,
+                &space,
+                leds,
+                height,
+                &self.fit_limits,
+                previous,
+            ),
+            _ => fit_timing(&window.sample, &space, leds, height, &self.fit_limits),
+        };
+        let quality = quality::measure(&window.sample, &window.gram, &space, &fit, &waves);
+        let verdict = quality::judge(&quality.leds, &fit);
+        let bands = if fit.rolling {
+            let ramp = fit.model.ramp_chips(height).abs();
+            ((ramp / BAND_PHASE_STEP).ceil() as usize).clamp(1, height)
+        } else {
+            1
+        };
+        let region = Region {
+            roi: self.roi,
+            bands,
+        };
+        let bases: Vec<basis::TemplateBasis> = (0..bands)
+            .map(|b| fit.model.basis(&waves, region.band_centre(b), count))
+            .collect();
+        let amplitudes = match self.estimator {
+            Estimator::Waveform => {
+                matched::matched_filter(frames, region, &bases, &self.map, self.code_limits)
+            }
+            Estimator::Thesis => {
+                let chips = 1usize << (leds + 1);
+                let used = count - count % chips;
+                thesis::thesis_window(&frames[..used], region, leds, &self.map, self.code_limits)
+            }
+        };
+        let variance_factors = bases
+            .first()
+            .map(|b| (0..leds).map(|i| b.variance_factor(i + 1)).collect())
+            .unwrap_or_default();
+        WindowDecode {
+            frames: count,
+            amplitudes,
+            fit,
+            quality,
+            verdict,
+            bands,
+            variance_factors,
         }
     }
 }
@@ -305,7 +559,6 @@ fn choose_led_count(
 struct Accumulated {
     leds: Option<usize>,
     detected: Option<usize>,
-    probe_fit: Option<WaveformFit>,
     windows: usize,
     frames: usize,
     /// Frame-weighted mean over the windows so far of each LED's A_i.
@@ -318,93 +571,64 @@ struct Accumulated {
     underexposed: Vec<bool>,
     /// The first window's report statistics, when the kernel gathered them.
     stats: Option<PixelStats>,
-    fits: Vec<WaveformFit>,
+    /// Each window's fit, quality and bands.
+    fits: Vec<(TimingFit, FitQuality, usize)>,
+    /// The verdict over the windows so far.
+    verdict: Option<Verdict>,
     variance_factors: Vec<f64>,
 }
 
-/// Fits and decodes one window and adds it to the running sums.
-fn decode_window(
-    config: &DecodeConfig,
-    region: Region,
-    map: &CodeMap,
-    code_limits: CodeLimits,
-    leds: usize,
-    window: &window::Window,
-    state: &mut Accumulated,
-) {
-    let frames = window.frames.len();
-    let limits = limits(config);
-    // The first window reuses the count probe's fit when it covered exactly these LEDs' timing.
-    let global = match state.probe_fit.take() {
-        Some(probe) if state.windows == 0 && probe.amplitudes.len() >= leds => {
-            refit_shifts(&window.mean, probe.timing, &probe.shifts[..leds])
-        }
-        _ => fit_waveforms(&window.mean, leds, &limits),
-    };
-    let waves: Vec<ReceivedWaveform> = (0..leds).map(ReceivedWaveform::new).collect();
-    let bases: Vec<TemplateBasis> = (0..region.bands)
-        .map(|band| {
-            let shifts = if region.bands > 1 {
-                refit_shifts(&window.band_means[band], global.timing, &global.shifts).shifts
-            } else {
-                global.shifts.clone()
+impl Accumulated {
+    /// Adds one decoded window.
+    fn add(&mut self, window: WindowDecode) {
+        let count = window.frames;
+        let amplitudes = window.amplitudes;
+        if self.windows == 0 {
+            self.variance_factors = window.variance_factors;
+            self.mean_leds = amplitudes.leds;
+            self.mean_variance = amplitudes.noise_variance;
+            self.saturated = amplitudes.saturated;
+            self.underexposed = amplitudes.underexposed;
+            self.stats = amplitudes.stats;
+        } else {
+            // Running frame-weighted means: m += (x − m)·F / (F_total + F).
+            let step = (count as f64 / (self.frames + count) as f64) as f32;
+            let update = |mean: &mut Vec<f32>, window: &[f32]| {
+                mean.par_iter_mut()
+                    .zip(window)
+                    .for_each(|(m, &x)| *m += (x - *m) * step);
             };
-            TemplateBasis::new(&template_columns(&waves, global.timing, &shifts, frames))
-        })
-        .collect();
-    let amplitudes: WindowAmplitudes = match config.estimator {
-        Estimator::Waveform => {
-            matched::matched_filter(&window.frames, region, &bases, map, code_limits)
+            for (mean, image) in self.mean_leds.iter_mut().zip(&amplitudes.leds) {
+                update(mean, image);
+            }
+            update(&mut self.mean_variance, &amplitudes.noise_variance);
+            self.saturated
+                .par_iter_mut()
+                .zip(&amplitudes.saturated)
+                .for_each(|(s, &w)| *s |= w);
+            self.underexposed
+                .par_iter_mut()
+                .zip(&amplitudes.underexposed)
+                .for_each(|(u, &w)| *u &= w);
         }
-        Estimator::Thesis => {
-            let chips = 1usize << (leds + 1);
-            let used = frames - frames % chips;
-            thesis::thesis_window(&window.frames[..used], region, leds, map, code_limits)
-        }
-    };
-    if state.windows == 0 {
-        state.variance_factors = (0..leds).map(|i| bases[0].variance_factor(i + 1)).collect();
-        state.mean_leds = amplitudes.leds;
-        state.mean_variance = amplitudes.noise_variance;
-        state.saturated = amplitudes.saturated;
-        state.underexposed = amplitudes.underexposed;
-        state.stats = amplitudes.stats;
-    } else {
-        // Running frame-weighted means: m += (x − m)·F / (F_total + F).
-        let step = (frames as f64 / (state.frames + frames) as f64) as f32;
-        let update = |mean: &mut Vec<f32>, window: &[f32]| {
-            mean.par_iter_mut()
-                .zip(window)
-                .for_each(|(m, &x)| *m += (x - *m) * step);
-        };
-        for (mean, image) in state.mean_leds.iter_mut().zip(&amplitudes.leds) {
-            update(mean, image);
-        }
-        update(&mut state.mean_variance, &amplitudes.noise_variance);
-        state
-            .saturated
-            .par_iter_mut()
-            .zip(&amplitudes.saturated)
-            .for_each(|(s, &w)| *s |= w);
-        state
-            .underexposed
-            .par_iter_mut()
-            .zip(&amplitudes.underexposed)
-            .for_each(|(u, &w)| *u &= w);
+        self.verdict = Some(match self.verdict.take() {
+            Some(v) => v.merge(&window.verdict),
+            None => window.verdict,
+        });
+        self.windows += 1;
+        self.frames += count;
+        self.fits.push((window.fit, window.quality, window.bands));
     }
-    state.windows += 1;
-    state.frames += frames;
-    state.fits.push(global);
 }
 
 /// Turns the running sums into images, masks and the report.
 fn finish(
     config: &DecodeConfig,
     format: &FrameFormat,
-    region: Region,
+    roi: Roi,
     state: Accumulated,
 ) -> Result<Decoded, DemodError> {
-    let (height, width) = (region.roi.height, region.roi.width);
+    let (height, width) = (roi.height, roi.width);
     let leds = state.leds.unwrap_or(0);
     if state.windows == 0 {
         return Err(DemodError::TooFewFrames {
@@ -440,6 +664,7 @@ fn finish(
     let valid_count = stats.valid_pixels as f64;
     let noise_power = stats.noise_power / valid_count;
     let median_noise = median_of_valid(&noise_values, valid);
+    let (first_fit, first_quality, _) = &state.fits[0];
     let per_led = (0..leds)
         .map(|i| {
             let mean_level = stats.level_sums[i] / valid_count;
@@ -447,24 +672,27 @@ fn finish(
                 (noise_power * state.variance_factors[i]).sqrt() / (state.windows as f64).sqrt();
             LedReport {
                 led: i + 1,
-                phase_chips: state.fits[0].shifts[i],
+                phase_chips: first_fit.model.shifts[i],
                 mean_level,
                 snr_db: 20.0 * (mean_level.abs().max(1e-12) / amplitude_noise.max(1e-12)).log10(),
+                quality: first_quality.leds[i].clone(),
             }
         })
         .collect();
-    let shape_error = |e: ndarray::ShapeError| DemodError::InvalidConfig(e.to_string());
     let images = state
         .mean_leds
         .into_iter()
-        .map(|values| Array2::from_shape_vec((height, width), values).map_err(shape_error))
+        .map(|values| Array2::from_shape_vec((height, width), values))
         .collect::<Result<Vec<_>, _>>()?;
-    let noise = Array2::from_shape_vec((height, width), noise_values).map_err(shape_error)?;
-    let saturated = Array2::from_shape_vec((height, width), saturated).map_err(shape_error)?;
-    let underexposed =
-        Array2::from_shape_vec((height, width), underexposed).map_err(shape_error)?;
-    let n_fits = state.fits.len() as f64;
-    let rate_ratio = state.fits.iter().map(|f| f.timing.rate_ratio).sum::<f64>() / n_fits;
+    let noise = Array2::from_shape_vec((height, width), noise_values)?;
+    let saturated = Array2::from_shape_vec((height, width), saturated)?;
+    let underexposed = Array2::from_shape_vec((height, width), underexposed)?;
+    let windows = state.fits.len() as f64;
+    let mean = |f: &dyn Fn(&(TimingFit, FitQuality, usize)) -> f64| {
+        state.fits.iter().map(f).sum::<f64>() / windows
+    };
+    let rate_ratio = mean(&|(fit, _, _)| fit.model.timing.rate_ratio);
+    let line_delay = mean(&|(fit, _, _)| fit.model.line_delay);
     let report = DecodeReport {
         estimator: config.estimator,
         leds,
@@ -476,12 +704,22 @@ fn finish(
         rate_ratio,
         fps: format.fps,
         chip_rate_hz: rate_ratio * format.fps,
-        exposure: state.fits.iter().map(|f| f.timing.exposure).sum::<f64>() / n_fits,
-        fit_residual: state.fits.iter().map(|f| f.residual_rms).sum::<f64>() / n_fits,
+        exposure: mean(&|(fit, _, _)| fit.model.timing.exposure),
+        line_time_us: if format.fps > 0.0 {
+            line_delay / format.fps * 1e6
+        } else {
+            0.0
+        },
+        line_delay_frames: line_delay,
+        row_bands: state.fits.iter().map(|(_, _, b)| *b).max().unwrap_or(1),
+        fit_residual: mean(&|(_, quality, _)| quality.residual_rms),
         median_noise,
         saturated_pixels: stats.saturated_pixels,
         underexposed_pixels: stats.underexposed_pixels,
         per_led,
+        verdict: state
+            .verdict
+            .unwrap_or_else(|| Verdict::from_findings(Vec::new(), Vec::new())),
     };
     Ok(Decoded {
         leds: LedImages { images },
@@ -490,6 +728,24 @@ fn finish(
         underexposed,
         report,
     })
+}
+
+/// Refuses an implausible decode, or keeps it with the verdict marked overridden.
+fn apply_verdict(mut decoded: Decoded, policy: OnImplausible) -> Result<Decoded, DemodError> {
+    let verdict = &mut decoded.report.verdict;
+    if verdict.is_plausible() {
+        return Ok(decoded);
+    }
+    match policy {
+        OnImplausible::Refuse => Err(DemodError::Implausible {
+            problems: verdict.problems.join("; "),
+            advice: verdict.advice.join("; "),
+        }),
+        OnImplausible::Keep => {
+            verdict.status = VerdictStatus::Overridden;
+            Ok(decoded)
+        }
+    }
 }
 
 /// Median of the valid pixels' values: exact up to [`MEDIAN_SAMPLE`] pixels, else the median

@@ -1,6 +1,7 @@
 //! The decode report written as `decode.json`.
 
 use super::config::Estimator;
+use super::quality::{LedQuality, Verdict};
 use serde::{Deserialize, Serialize};
 
 /// What the decoder measured about one LED.
@@ -14,6 +15,9 @@ pub struct LedReport {
     pub mean_level: f64,
     /// Signal-to-noise ratio of the LED image, 20·log10(mean level / RMS noise of A_i), dB.
     pub snr_db: f64,
+    /// How well the fitted waveform explains this LED (first window; the verdict covers all).
+    #[serde(default)]
+    pub quality: LedQuality,
 }
 
 /// Summary of one decode.
@@ -39,9 +43,21 @@ pub struct DecodeReport {
     pub fps: f64,
     /// Chip rate implied by the rate ratio, Hz.
     pub chip_rate_hz: f64,
-    /// Estimated exposure as a fraction of the frame period.
+    /// Estimated exposure as a fraction of the frame period (at a rate ratio of exactly 1 any
+    /// exposure up to one frame gives the same waveforms, so it is not identifiable there).
     pub exposure: f64,
-    /// RMS residual of the waveform fit to the mean signal (fraction of full scale).
+    /// Rolling-shutter line time in microseconds (fitted or given; 0 for a global shutter or
+    /// when the frame rate is unknown: see `line_delay_frames`).
+    #[serde(default)]
+    pub line_time_us: f64,
+    /// Rolling-shutter line delay in frame periods per row (0 for a global shutter).
+    #[serde(default)]
+    pub line_delay_frames: f64,
+    /// Row bands with their own waveforms in the per-pixel fit (1 for a global shutter).
+    #[serde(default)]
+    pub row_bands: usize,
+    /// RMS residual per frame sample of the timing model on the fit's pixel sample (fraction
+    /// of full scale; close to the noise when the model fits).
     pub fit_residual: f64,
     /// Median per-frame pixel noise σ (fraction of full scale).
     pub median_noise: f64,
@@ -51,4 +67,7 @@ pub struct DecodeReport {
     pub underexposed_pixels: usize,
     /// Per-LED results.
     pub per_led: Vec<LedReport>,
+    /// Whether the decode can be trusted, what looks wrong and what to try.
+    #[serde(default)]
+    pub verdict: Verdict,
 }

@@ -52,6 +52,14 @@ impl ReceivedWaveform {
         self.chips.len()
     }
 
+    /// The carrier s_i (±1) at chip `m` of its period.
+    pub fn chip(&self, m: usize) -> f64 {
+        self.chips
+            .get(m % self.chips.len().max(1))
+            .copied()
+            .unwrap_or(0.0)
+    }
+
     /// Chip index (within one period) and fraction of the chip at chip time `t`: the floor
     /// is taken with an integer cast because this sits in the waveform fit's innermost loop
     /// (`f64::rem_euclid` and `floor` are library calls on the baseline x86-64 target).

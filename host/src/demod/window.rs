@@ -1,20 +1,11 @@
-//! Reading a window of frames: region of interest, code-value conversion, per-band means.
+//! Reading a window of frames (region of interest) and the code-value conversion.
 //!
-//! Frames are kept in their native 8/16-bit form (a 128-frame 720p 8-bit window is 118 MB);
-//! the spatial mean of every row band (frames in parallel) is computed once the window is
-//! read, because the waveform fit ([`super::fit`]) needs it before the per-pixel pass. On
-//! frames above [`MEAN_PIXELS`] it is taken over every k-th row: the fit only needs the mean to
-//! fix the shared timing, and 65 536 pixels already average the noise down by 256×, while
-//! reading every row would cost a second full pass over memory (measured: 6–12 ms of a
-//! 128-frame 720p window, against 2 ms sampled).
+//! Frames are kept in their native 8/16-bit form (a 128-frame 720p 8-bit window is 118 MB), so
+//! the memory a decode needs is bounded by the window, not the clip.
 
 use super::config::{Linearize, Roi};
 use super::error::DemodError;
 use crate::capture::{FrameFormat, FrameSource, Samples};
-use rayon::prelude::*;
-
-/// Pixels per frame above which the band means sample rows (see [`read_window`]).
-pub const MEAN_PIXELS: usize = 1 << 16;
 
 /// Maps code values to fractions of full scale (optionally linearised).
 #[derive(Debug, Clone)]
@@ -99,48 +90,49 @@ impl CodeMap {
     }
 }
 
-/// Frames of one decoding window plus their per-band spatial means.
+/// Frames of one decoding window.
 #[derive(Debug, Default)]
 pub struct Window {
     /// Cropped frames in native form.
     pub frames: Vec<Samples>,
-    /// `band_means[b][j]`: mean fraction of full scale of band b in frame j.
-    pub band_means: Vec<Vec<f64>>,
-    /// `mean[j]`: mean fraction of full scale of the whole region in frame j.
-    pub mean: Vec<f64>,
 }
 
-/// Geometry of the decoded region.
+/// Geometry of the decoded region and its row bands.
 #[derive(Debug, Clone, Copy)]
 pub struct Region {
     /// Region in source pixels.
     pub roi: Roi,
-    /// Row bands.
+    /// Row bands with their own waveforms in the per-pixel fit (rolling shutter).
     pub bands: usize,
 }
 
 impl Region {
     /// Band of a region row.
     pub fn band_of(&self, row: usize) -> usize {
-        (row * self.bands / self.roi.height.max(1)).min(self.bands - 1)
+        (row * self.bands / self.roi.height.max(1)).min(self.bands.max(1) - 1)
+    }
+
+    /// Centre row of band `band`.
+    pub fn band_centre(&self, band: usize) -> f64 {
+        // Rows r with band_of(r) = b are ceil(b·H/B) ..= ceil((b+1)·H/B) − 1.
+        let (h, b) = (self.roi.height, self.bands.max(1));
+        let first = (band * h).div_ceil(b);
+        let last = ((band + 1) * h).div_ceil(b).max(first + 1) - 1;
+        0.5 * (first + last) as f64
     }
 }
 
-/// Reads up to `count` frames; returns fewer only at the end of the stream.
+/// Reads up to `count` frames cropped to `roi`; returns fewer only at the end of the stream.
 pub fn read_window(
     source: &mut dyn FrameSource,
     format: &FrameFormat,
-    region: Region,
-    map: &CodeMap,
+    roi: Roi,
     count: usize,
     mut on_frame: impl FnMut(),
 ) -> Result<Window, DemodError> {
     let mut window = Window {
         frames: Vec::with_capacity(count),
-        band_means: vec![Vec::with_capacity(count); region.bands],
-        mean: Vec::with_capacity(count),
     };
-    let roi = region.roi;
     while window.frames.len() < count {
         let Some(frame) = source.next_frame()? else {
             break;
@@ -158,62 +150,7 @@ pub fn read_window(
         window.frames.push(crop(frame.samples, format.width, roi));
         on_frame();
     }
-    // The fit needs the band means only to fix the timing, so large frames are sampled every
-    // `stride`-th row (at least [`MEAN_PIXELS`] pixels, and every band's first row).
-    let stride = (roi.width * roi.height / MEAN_PIXELS).max(1);
-    let sampled =
-        |row: usize| row.is_multiple_of(stride) || region.band_of(row) != region.band_of(row - 1);
-    let rows: Vec<usize> = (0..roi.height).filter(|&row| sampled(row)).collect();
-    let mut band_pixels = vec![0usize; region.bands];
-    for &row in &rows {
-        band_pixels[region.band_of(row)] += roi.width;
-    }
-    // Every frame's band sums, frames in parallel.
-    let sums: Vec<Vec<f64>> = window
-        .frames
-        .par_iter()
-        .map(|frame| {
-            let mut band_sums = vec![0.0f64; region.bands];
-            for &row in &rows {
-                let range = row * roi.width..(row + 1) * roi.width;
-                band_sums[region.band_of(row)] += row_sum(frame, range, map);
-            }
-            band_sums
-        })
-        .collect();
-    let sampled_pixels: usize = band_pixels.iter().sum();
-    for band_sums in &sums {
-        for (band, means) in window.band_means.iter_mut().enumerate() {
-            means.push(map.mean_fraction(band_sums[band] / band_pixels[band].max(1) as f64));
-        }
-        let total: f64 = band_sums.iter().sum();
-        window
-            .mean
-            .push(map.mean_fraction(total / sampled_pixels.max(1) as f64));
-    }
     Ok(window)
-}
-
-/// Sum of the accumulation values of one row: exact integer sums of the codes for a linear
-/// map (no per-sample conversion), table look-ups otherwise.
-fn row_sum(samples: &Samples, range: std::ops::Range<usize>, map: &CodeMap) -> f64 {
-    match (samples, map) {
-        (Samples::U8(v), CodeMap::Linear { .. }) => v[range]
-            .chunks(1 << 16)
-            .map(|chunk| u64::from(chunk.iter().map(|&c| u32::from(c)).sum::<u32>()))
-            .sum::<u64>() as f64,
-        (Samples::U16(v), CodeMap::Linear { .. }) => {
-            v[range].iter().map(|&c| u64::from(c)).sum::<u64>() as f64
-        }
-        (Samples::U8(v), CodeMap::Table(t)) => v[range]
-            .iter()
-            .map(|&c| f64::from(t.get(usize::from(c)).copied().unwrap_or(1.0)))
-            .sum(),
-        (Samples::U16(v), CodeMap::Table(t)) => v[range]
-            .iter()
-            .map(|&c| f64::from(t.get(usize::from(c)).copied().unwrap_or(1.0)))
-            .sum(),
-    }
 }
 
 /// Cuts the region of interest out of a full frame (no copy when it is the whole frame).

@@ -2,7 +2,10 @@
 //! drawn with three.js (pinned in `host/viewer/package.json`, inlined by `build.rs`), so the
 //! page stays one file that works offline. Drag to turn the surface, scroll to zoom.
 //!
-//! three.js is embedded as a base64 `data:` module and imported dynamically; the mesh goes in
+//! three.js is embedded as a base64 `data:` module and imported dynamically. A build without
+//! npm has no copy to inline: the page then fetches the same pinned file from a CDN with
+//! subresource integrity ([`THREE_JS_SHA384`]), so the view needs the network there and a
+//! tampered or different file is refused by the browser. The mesh goes in the mesh goes in
 //! as base64 little-endian float32 positions and uint32 indices. Large surfaces are drawn from
 //! a sub-sampled grid so the page stays small. After its first frame the viewer sets
 //! `data-viewer="rendered"` on `<body>` (or `data-viewer="error: …"`), which tests read.
@@ -10,8 +13,31 @@
 use super::mesh::SurfaceMesh;
 use base64::Engine;
 
-/// three.js r170, the single-file ES module build.
+/// three.js r170, the single-file ES module build (empty when the build had no npm).
 const THREE_JS: &str = include_str!(concat!(env!("OUT_DIR"), "/three.module.min.js"));
+
+/// Where the page fetches the pinned three.js when the build could not inline it.
+pub const THREE_JS_CDN: &str =
+    "https://cdn.jsdelivr.net/npm/three@0.170.0/build/three.module.min.js";
+
+/// Subresource-integrity digest of the pinned `three.module.min.js` (three 0.170.0).
+pub const THREE_JS_SHA384: &str =
+    "sha384-IDC7sAMAIMB/TZ6dgKKPPAKZ2bXXXP8+FBMBC8cU319eBhKITx+PaalhfDkDNH28";
+
+/// The JavaScript expression that imports three.js: the inlined module, or the CDN copy
+/// checked against [`THREE_JS_SHA384`].
+fn three_import() -> String {
+    if THREE_JS.is_empty() {
+        format!(
+            r#"(async () => {{ const r = await fetch("{THREE_JS_CDN}", {{ integrity: "{THREE_JS_SHA384}" }}); if (!r.ok) throw new Error("three.js: HTTP " + r.status); return import(URL.createObjectURL(new Blob([await r.text()], {{ type: "text/javascript" }}))); }})()"#
+        )
+    } else {
+        format!(
+            r#"import("data:text/javascript;base64,{}")"#,
+            base64::engine::general_purpose::STANDARD.encode(THREE_JS.as_bytes())
+        )
+    }
+}
 
 /// Most vertices the viewer draws; larger meshes are sub-sampled.
 pub const MAX_VIEWER_VERTICES: usize = 120_000;
@@ -36,7 +62,7 @@ pub fn surface_viewer(mesh: &SurfaceMesh) -> String {
 <script type="module">
 const note = document.getElementById("meb-viewer-note");
 try {{
-  const THREE = await import("data:text/javascript;base64,{three}");
+  const THREE = await {three};
   const bytes = (s) => Uint8Array.from(atob(s), (c) => c.charCodeAt(0)).buffer;
   const geometry = new THREE.BufferGeometry();
   geometry.setAttribute("position", new THREE.BufferAttribute(new Float32Array(bytes("{positions}")), 3));
@@ -90,7 +116,7 @@ try {{
   document.body.dataset.viewer = "error: " + error;
 }}
 </script>"#,
-        three = b64(THREE_JS.as_bytes()),
+        three = three_import(),
         positions = b64(&positions),
         indices = b64(&indices),
     )
@@ -129,9 +155,22 @@ mod tests {
             pitch_mm: 1.0,
         };
         let html = surface_viewer(&viewer_mesh(&depth));
-        assert!(THREE_JS.contains("REVISION") || THREE_JS.contains("\"170\""));
-        assert!(html.contains("data:text/javascript;base64,"));
         assert!(html.contains("data-viewer") || html.contains("dataset.viewer"));
+        if THREE_JS.is_empty() {
+            assert!(
+                std::env::var_os("CI").is_none(),
+                "three.js was not inlined (the build had no npm); CI must install it"
+            );
+            assert!(html.contains(THREE_JS_CDN) && html.contains(THREE_JS_SHA384));
+        } else {
+            assert!(THREE_JS.contains("REVISION") || THREE_JS.contains("\"170\""));
+            assert!(html.contains("data:text/javascript;base64,"));
+            // The CDN fallback must load exactly the file a build with npm inlines.
+            use sha2::Digest;
+            let digest = sha2::Sha384::digest(THREE_JS.as_bytes());
+            let digest = base64::engine::general_purpose::STANDARD.encode(digest);
+            assert_eq!(THREE_JS_SHA384, format!("sha384-{digest}"));
+        }
     }
 
     #[test]

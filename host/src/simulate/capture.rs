@@ -433,7 +433,7 @@ impl FrameSource for SimulatedCapture {
     }
 
     fn frame_count_hint(&self) -> Option<usize> {
-        Some(self.config.frames)
+        Some(self.config.frames.saturating_sub(self.next))
     }
 }
 

@@ -161,6 +161,8 @@ pub struct DecodeQuality {
     pub median_noise: f64,
     /// Signal-to-noise ratio of each LED image, dB.
     pub led_snr_db: Vec<f64>,
+    /// The decoder's quality verdict (an implausible window is refused unless `--force`).
+    pub verdict: crate::demod::quality::Verdict,
 }
 
 impl DecodeQuality {
@@ -173,6 +175,7 @@ impl DecodeQuality {
             fit_residual: report.fit_residual,
             median_noise: report.median_noise,
             led_snr_db: report.per_led.iter().map(|l| l.snr_db).collect(),
+            verdict: report.verdict.clone(),
         }
     }
 }

@@ -175,11 +175,15 @@ mod tests {
                 fps: 1000.0,
                 chip_rate_hz: 1000.0,
                 exposure: 1.0,
+                line_time_us: 0.0,
+                line_delay_frames: 0.0,
+                row_bands: 1,
                 fit_residual: 0.0,
                 median_noise: 0.0,
                 saturated_pixels: 0,
                 underexposed_pixels: 0,
                 per_led: vec![],
+                verdict: Default::default(),
             },
         }
     }

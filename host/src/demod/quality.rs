@@ -1,0 +1,445 @@
+//! How well the fitted timing explains each LED's modulation, and the verdict on a decode.
+//!
+//! On the pixel sample (centred values x_p, noise energy σ²_G = Σ_p σ_p² per direction, see
+//! [`super::spectrum`]), for LED i with template t_i (SPEC §3) at each pixel's row:
+//!
+//! - signal: S_i = Σ_p (x_p·û_i)² − σ²_G, û_i the unit part of t_i orthogonal to the other
+//!   templates, i.e. the energy only LED i explains; `signal_to_noise` = S_i / σ²_G.
+//! - unexplained: U_i = Σ_p |Π_i (x_p − P_T x_p)|² − d_i·σ²_G, the energy left in LED i's
+//!   subspace after the fit, above what noise alone leaves there. LED i's subspace is spanned
+//!   by the strongest harmonics of its carrier at the fitted rate (SPEC §4 at ρ = 1: the DFT
+//!   bins of LED i), orthogonalised against the templates (d_i directions). A wrong phase,
+//!   rate, exposure or a rolling shutter the model misses leaves LED i's energy there.
+//! - gain uncertainty: the timing's statistical uncertainty carried into the LED's gain
+//!   ([`super::fit`]).
+//!
+//! A decode is implausible when an LED has no signal above noise, leaves a significant part of
+//! its modulation unexplained, or has a gain uncertain by more than a third of a percent (so
+//! that three standard deviations stay within 1 %).
+
+use super::fit::TimingFit;
+use super::sample::PixelSample;
+use super::spectrum::SignalSpace;
+use super::waveform::ReceivedWaveform;
+use nalgebra::{DMatrix, DVector};
+use serde::{Deserialize, Serialize};
+
+/// Below this signal-to-noise an LED's image is noise.
+pub const MIN_SIGNAL_TO_NOISE: f64 = 1.0;
+/// Unexplained energy, in noise directions, above which the fit is implausible …
+pub const MAX_UNEXPLAINED: f64 = 3.0;
+/// … when it is also this fraction of the LED's signal.
+pub const MAX_UNEXPLAINED_FRACTION: f64 = 1e-3;
+/// Largest relative 1σ gain uncertainty of a plausible decode.
+pub const MAX_GAIN_UNCERTAINTY: f64 = 0.0033;
+/// Harmonics of an LED's carrier spanning its subspace.
+const HARMONICS: usize = 4;
+/// A subspace direction shorter than this (relative) after orthogonalisation is dropped.
+const DIRECTION_TOLERANCE: f64 = 0.1;
+
+/// How well the fit explains one LED.
+#[derive(Debug, Clone, Default, PartialEq, Serialize, Deserialize)]
+pub struct LedQuality {
+    /// Energy only this LED explains, in noise directions (S_i / σ²_G).
+    pub signal_to_noise: f64,
+    /// Energy left in the LED's subspace beyond noise, in noise directions (U_i / σ²_G).
+    pub unexplained: f64,
+    /// The same as a fraction of the LED's signal energy.
+    pub unexplained_fraction: f64,
+    /// Relative 1σ uncertainty of the LED's gain from the timing fit.
+    pub gain_uncertainty: f64,
+}
+
+/// Whether a decode can be trusted.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "lowercase")]
+pub enum VerdictStatus {
+    /// No verdict was recorded (a `decode.json` of an older version).
+    #[default]
+    Unchecked,
+    /// Every check passed.
+    Plausible,
+    /// A check failed; the result was not kept.
+    Implausible,
+    /// A check failed and the result was kept anyway on request.
+    Overridden,
+}
+
+/// The verdict on a decode, with what looks wrong and what to try.
+#[derive(Debug, Clone, Default, PartialEq, Serialize, Deserialize)]
+pub struct Verdict {
+    /// The outcome.
+    pub status: VerdictStatus,
+    /// What looks wrong (empty when plausible).
+    pub problems: Vec<String>,
+    /// What to try.
+    pub advice: Vec<String>,
+}
+
+impl Verdict {
+    /// A verdict from its problems and advice.
+    pub fn from_findings(problems: Vec<String>, advice: Vec<String>) -> Self {
+        let status = if problems.is_empty() {
+            VerdictStatus::Plausible
+        } else {
+            VerdictStatus::Implausible
+        };
+        Self {
+            status,
+            problems,
+            advice,
+        }
+    }
+
+    /// Whether the decode may be used.
+    pub fn is_plausible(&self) -> bool {
+        self.status == VerdictStatus::Plausible
+    }
+
+    /// Combines the verdicts of two windows.
+    pub fn merge(mut self, other: &Self) -> Self {
+        for p in &other.problems {
+            if !self.problems.contains(p) {
+                self.problems.push(p.clone());
+            }
+        }
+        for a in &other.advice {
+            if !self.advice.contains(a) {
+                self.advice.push(a.clone());
+            }
+        }
+        Self::from_findings(self.problems, self.advice)
+    }
+}
+
+/// What the sample says about a fit.
+#[derive(Debug, Clone, PartialEq)]
+pub struct FitQuality {
+    /// Per LED.
+    pub leds: Vec<LedQuality>,
+    /// Mean least-squares on-level A_i of each LED over the sample's pixels.
+    pub levels: Vec<f64>,
+    /// RMS residual per frame sample of the sample's pixels (fraction of full scale).
+    pub residual_rms: f64,
+}
+
+/// Measures each LED's quality (module docs); `gram` is the sample's Gram matrix (used when
+/// every row shares one set of templates).
+pub fn measure(
+    sample: &PixelSample,
+    gram: &DMatrix<f64>,
+    space: &SignalSpace,
+    fit: &TimingFit,
+    waves: &[ReceivedWaveform],
+) -> FitQuality {
+    let frames = sample.frames();
+    let model = &fit.model;
+    let subspaces: Vec<Vec<Vec<f64>>> = waves
+        .iter()
+        .map(|w| led_subspace(w, model.timing.rate_ratio, frames))
+        .collect();
+    let mut sums = Sums::new(waves.len());
+    if fit.rolling {
+        for run in sample.row_runs() {
+            let row = sample.rows()[run.start] as f64;
+            let parts = Parts::new(model, waves, &subspaces, row, frames);
+            let pixels: Vec<&[f64]> = run.clone().map(|p| sample.pixel(p)).collect();
+            parts.add_pixels(&pixels, fit.pixel_noise, &mut sums);
+        }
+    } else {
+        let parts = Parts::new(model, waves, &subspaces, 0.0, frames);
+        let mut total = vec![0.0; frames];
+        for p in 0..sample.len() {
+            total
+                .iter_mut()
+                .zip(sample.pixel(p))
+                .for_each(|(t, x)| *t += x);
+        }
+        parts.add_gram(gram, &total, sample.len(), fit.pixel_noise, &mut sums);
+    }
+    let noise = space.noise.max(f64::MIN_POSITIVE);
+    let pixels = sample.len().max(1) as f64;
+    let dof = frames.saturating_sub(waves.len() + 1).max(1) as f64;
+    let leds = (0..waves.len())
+        .map(|i| {
+            let s = sums.signal[i] - noise;
+            let u = sums.unexplained[i] - sums.expected[i];
+            LedQuality {
+                signal_to_noise: s / noise,
+                unexplained: u / noise,
+                unexplained_fraction: if s > 0.0 {
+                    u.max(0.0) / s
+                } else {
+                    f64::INFINITY
+                },
+                gain_uncertainty: fit.gain_uncertainty.get(i).copied().unwrap_or(0.0),
+            }
+        })
+        .collect();
+    FitQuality {
+        leds,
+        levels: sums.levels.iter().map(|s| s / pixels).collect(),
+        residual_rms: (sums.residual.max(0.0) / (pixels * dof)).sqrt(),
+    }
+}
+
+/// Running sums of [`measure`].
+struct Sums {
+    signal: Vec<f64>,
+    unexplained: Vec<f64>,
+    expected: Vec<f64>,
+    levels: Vec<f64>,
+    residual: f64,
+}
+
+impl Sums {
+    fn new(leds: usize) -> Self {
+        Self {
+            signal: vec![0.0; leds],
+            unexplained: vec![0.0; leds],
+            expected: vec![0.0; leds],
+            levels: vec![0.0; leds],
+            residual: 0.0,
+        }
+    }
+}
+
+/// The directions [`measure`] projects on for one set of templates.
+struct Parts {
+    basis: super::basis::TemplateBasis,
+    /// Per LED: the unit part of its template no other template explains.
+    unique: Vec<Vec<f64>>,
+    /// Per LED: its subspace orthogonal to the templates.
+    left: Vec<Vec<Vec<f64>>>,
+}
+
+impl Parts {
+    fn new(
+        model: &super::fit::TimingModel,
+        waves: &[ReceivedWaveform],
+        subspaces: &[Vec<Vec<f64>>],
+        row: f64,
+        frames: usize,
+    ) -> Self {
+        let columns = model.columns(waves, row, frames);
+        let basis = model.basis(waves, row, frames);
+        let unique = (0..waves.len())
+            .map(|i| unique_direction(&columns, i + 1))
+            .collect();
+        let left = subspaces
+            .iter()
+            .map(|s| orthonormal_complement(s, &basis.rows))
+            .collect();
+        Self {
+            basis,
+            unique,
+            left,
+        }
+    }
+
+    /// Adds pixels one by one.
+    fn add_pixels(&self, pixels: &[&[f64]], pixel_noise: f64, sums: &mut Sums) {
+        let k = self.basis.columns;
+        let mut projections = vec![0.0; k];
+        let mut coefficients = vec![0.0; k];
+        let mut residual = Vec::new();
+        for x in pixels {
+            residual.clear();
+            residual.extend_from_slice(x);
+            for (q, b) in self.basis.rows.iter().zip(projections.iter_mut()) {
+                *b = dot(q, x);
+                residual.iter_mut().zip(q).for_each(|(r, v)| *r -= *b * v);
+            }
+            self.basis.coefficients(&projections, &mut coefficients);
+            sums.levels
+                .iter_mut()
+                .zip(&coefficients[1..])
+                .for_each(|(s, c)| *s += c);
+            sums.residual += dot(&residual, &residual);
+            for (i, (u, left)) in self.unique.iter().zip(&self.left).enumerate() {
+                sums.signal[i] += dot(u, x).powi(2);
+                // A left direction is orthogonal to the templates: bᵀr = bᵀx.
+                sums.unexplained[i] += left.iter().map(|b| dot(b, x).powi(2)).sum::<f64>();
+            }
+        }
+        for (e, l) in sums.expected.iter_mut().zip(&self.left) {
+            *e += l.len() as f64 * pixels.len() as f64 * pixel_noise;
+        }
+    }
+
+    /// Adds `pixels` pixels at once from their Gram matrix and summed values.
+    fn add_gram(
+        &self,
+        gram: &DMatrix<f64>,
+        total: &[f64],
+        pixels: usize,
+        pixel_noise: f64,
+        sums: &mut Sums,
+    ) {
+        let energy = |v: &[f64]| {
+            let v = DVector::from_column_slice(v);
+            (v.transpose() * gram * &v)[(0, 0)]
+        };
+        let k = self.basis.columns;
+        let projections: Vec<f64> = self.basis.rows.iter().map(|q| dot(q, total)).collect();
+        let mut coefficients = vec![0.0; k];
+        self.basis.coefficients(&projections, &mut coefficients);
+        sums.levels
+            .iter_mut()
+            .zip(&coefficients[1..])
+            .for_each(|(s, c)| *s += c);
+        let explained: f64 = self.basis.rows.iter().map(|q| energy(q)).sum();
+        sums.residual += gram.trace() - explained;
+        for (i, (u, left)) in self.unique.iter().zip(&self.left).enumerate() {
+            sums.signal[i] += energy(u);
+            sums.unexplained[i] += left.iter().map(|b| energy(b)).sum::<f64>();
+            sums.expected[i] += left.len() as f64 * pixels as f64 * pixel_noise;
+        }
+    }
+}
+
+/// The verdict for one window's LED qualities and timing fit.
+pub fn judge(quality: &[LedQuality], fit: &TimingFit) -> Verdict {
+    let mut problems = Vec::new();
+    let mut advice = Vec::new();
+    let mut advise = |text: &str| {
+        if !advice.iter().any(|a: &String| a == text) {
+            advice.push(text.to_string());
+        }
+    };
+    for (i, q) in quality.iter().enumerate() {
+        let led = i + 1;
+        if q.signal_to_noise.is_nan() || q.signal_to_noise < MIN_SIGNAL_TO_NOISE {
+            problems.push(format!(
+                "LED {led} shows no modulation above noise (signal-to-noise {:.2})",
+                q.signal_to_noise
+            ));
+            advise("check that every LED is on and lights the scene, or decode fewer LEDs");
+            continue;
+        }
+        if q.unexplained > MAX_UNEXPLAINED && q.unexplained_fraction > MAX_UNEXPLAINED_FRACTION {
+            problems.push(format!(
+                "the fitted waveform leaves {:.2} % of LED {led}'s modulation unexplained \
+                 ({:.1} noise levels)",
+                100.0 * q.unexplained_fraction,
+                q.unexplained
+            ));
+            advise(
+                "give the chip rate / rate ratio, exposure or rolling-shutter line time if known, \
+                 and check the code-value linearisation (gamma)",
+            );
+        }
+        if q.gain_uncertainty > MAX_GAIN_UNCERTAINTY {
+            problems.push(format!(
+                "LED {led}'s gain is only determined to ±{:.2} % (1σ) by this capture",
+                100.0 * q.gain_uncertainty
+            ));
+            advise("decode more frames, expose brighter or with less noise, or give the exposure");
+        }
+    }
+    if fit.rate_at_limit {
+        problems.push("the rate ratio sits at the edge of the searched range".into());
+        advise("widen the rate-ratio search or give the chip rate");
+    }
+    if fit.line_delay_at_limit {
+        problems.push(
+            "the rolling-shutter line delay sits at the largest one searched (a readout of \
+             1.5 frame periods over the region)"
+                .into(),
+        );
+        advise("give the rolling-shutter line time");
+    }
+    Verdict::from_findings(problems, advice)
+}
+
+/// Dot product.
+fn dot(a: &[f64], b: &[f64]) -> f64 {
+    a.iter().zip(b).map(|(x, y)| x * y).sum()
+}
+
+/// Unit part of `columns[index]` orthogonal to every other column (zero if none is left).
+fn unique_direction(columns: &[Vec<f64>], index: usize) -> Vec<f64> {
+    let others: Vec<Vec<f64>> = columns
+        .iter()
+        .enumerate()
+        .filter(|(k, _)| *k != index)
+        .map(|(_, c)| c.clone())
+        .collect();
+    let basis = orthonormal_complement(&others, &[]);
+    let mut v = columns.get(index).cloned().unwrap_or_default();
+    for q in &basis {
+        let c = dot(q, &v);
+        v.iter_mut().zip(q).for_each(|(x, y)| *x -= c * y);
+    }
+    let norm = dot(&v, &v).sqrt();
+    if norm > 1e-12 {
+        v.iter_mut().for_each(|x| *x /= norm);
+    } else {
+        v.iter_mut().for_each(|x| *x = 0.0);
+    }
+    v
+}
+
+/// Orthonormal basis (modified Gram–Schmidt, twice) of `vectors` made orthogonal to the
+/// orthonormal `against`; directions that shrink below [`DIRECTION_TOLERANCE`] are dropped.
+fn orthonormal_complement(vectors: &[Vec<f64>], against: &[Vec<f64>]) -> Vec<Vec<f64>> {
+    let mut basis: Vec<Vec<f64>> = Vec::new();
+    for v in vectors {
+        let scale = dot(v, v).sqrt();
+        if scale < 1e-12 {
+            continue;
+        }
+        let mut w = v.clone();
+        for _ in 0..2 {
+            for q in against.iter().chain(basis.iter()) {
+                let c = dot(q, &w);
+                w.iter_mut().zip(q).for_each(|(x, y)| *x -= c * y);
+            }
+        }
+        let norm = dot(&w, &w).sqrt();
+        if norm > DIRECTION_TOLERANCE * scale {
+            w.iter_mut().for_each(|x| *x /= norm);
+            basis.push(w);
+        }
+    }
+    basis
+}
+
+/// The centred cosine and sine columns of LED `wave`'s [`HARMONICS`] strongest harmonics at
+/// rate ratio `rate` over `frames` frames (not yet orthonormal).
+fn led_subspace(wave: &ReceivedWaveform, rate: f64, frames: usize) -> Vec<Vec<f64>> {
+    let period = wave.period();
+    let chips: Vec<f64> = (0..period).map(|m| wave.chip(m)).collect();
+    // |c_m| of the chip-level carrier: |DFT_m| / P · |sinc(m / P)|, m odd (only odd ones
+    // exist: a half-period shift negates the carrier).
+    let mut strengths: Vec<(f64, usize)> = (1..3 * period)
+        .step_by(2)
+        .map(|m| {
+            let (mut re, mut im) = (0.0, 0.0);
+            for (k, s) in chips.iter().enumerate() {
+                let angle = -std::f64::consts::TAU * (m * k) as f64 / period as f64;
+                re += s * angle.cos();
+                im += s * angle.sin();
+            }
+            let x = std::f64::consts::PI * m as f64 / period as f64;
+            (
+                (re * re + im * im).sqrt() / period as f64 * (x.sin() / x).abs(),
+                m,
+            )
+        })
+        .collect();
+    strengths.sort_by(|a, b| b.0.total_cmp(&a.0));
+    let mut columns = Vec::new();
+    for &(_, m) in strengths.iter().take(HARMONICS) {
+        let frequency = std::f64::consts::TAU * rate * m as f64 / period as f64;
+        for phase in [0.0, std::f64::consts::FRAC_PI_2] {
+            let mut column: Vec<f64> = (0..frames)
+                .map(|j| (frequency * j as f64 + phase).cos())
+                .collect();
+            let mean = column.iter().sum::<f64>() / frames.max(1) as f64;
+            column.iter_mut().for_each(|v| *v -= mean);
+            columns.push(column);
+        }
+    }
+    columns
+}

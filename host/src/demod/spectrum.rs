@@ -1,0 +1,121 @@
+//! The signal space of a window: leading eigenvectors of the pixel sample's Gram matrix.
+//!
+//! With X the sample (pixels × F, centred) and G = XᵀX, the noise-free part of X is A·Tᵀ (A the
+//! pixels' on-levels A_i, T the F × N received waveforms u_i of SPEC §3), so the signal lives in
+//! an N-dimensional subspace of R^F (a few more with a rolling shutter, whose rows see shifted
+//! waveforms) and white noise adds the same energy σ²_G = Σ_p σ_p² to every direction. The
+//! leading eigenpairs are found by randomised subspace iteration (Halko, Martinsson & Tropp,
+//! "Finding structure with randomness", SIAM Review 2011, Alg. 4.4) with a fixed seed, so a
+//! decode is deterministic; σ²_G is the mean of the trailing eigenvalues (the trace minus the
+//! leading ones), which only noise reaches.
+
+use nalgebra::{DMatrix, SymmetricEigen};
+use rand::SeedableRng;
+use rand_chacha::ChaCha8Rng;
+use rand_distr::{Distribution, StandardNormal};
+
+/// Extra random directions of the subspace iteration.
+const OVERSAMPLING: usize = 8;
+/// Power iterations of the subspace iteration.
+const POWER_ITERATIONS: usize = 3;
+/// An eigenvalue above this multiple of σ²_G counts as signal.
+const SIGNAL_FACTOR: f64 = 2.0;
+
+/// Leading eigenpairs of the Gram matrix and the noise energy per dimension.
+#[derive(Debug, Clone)]
+pub struct SignalSpace {
+    /// Eigenvectors (F × k, columns) of the `values`, descending.
+    pub vectors: DMatrix<f64>,
+    /// The leading eigenvalues, descending.
+    pub values: Vec<f64>,
+    /// σ²_G: noise energy per direction, summed over the sample's pixels.
+    pub noise: f64,
+    /// Directions that carry signal (at least the LED count, when the window allows).
+    pub rank: usize,
+}
+
+impl SignalSpace {
+    /// Analyses the F × F Gram matrix of a centred sample for `leds` LEDs.
+    pub fn new(gram: &DMatrix<f64>, leds: usize) -> Self {
+        let f = gram.nrows();
+        // Directions beyond the constant (removed by centring) that may hold signal, leaving at
+        // least a quarter of the window (and two directions) to measure the noise on.
+        let noise_dims = ((f.saturating_sub(1)) / 4).max(2);
+        let leading = (3 * leds + 2).min(f.saturating_sub(1 + noise_dims)).max(1);
+        let (values, vectors) = leading_eigenpairs(gram, leading);
+        let captured: f64 = values.iter().take(leading).sum();
+        let rest = f.saturating_sub(1 + leading).max(1) as f64;
+        let noise = ((gram.trace() - captured) / rest).max(f64::MIN_POSITIVE);
+        let significant = values
+            .iter()
+            .take(leading)
+            .filter(|&&v| v > SIGNAL_FACTOR * noise)
+            .count();
+        let rank = significant.max(leds.min(leading)).min(vectors.ncols());
+        Self {
+            vectors,
+            values,
+            noise,
+            rank,
+        }
+    }
+
+    /// The signal directions (F × rank).
+    pub fn basis(&self) -> nalgebra::DMatrixView<'_, f64> {
+        self.vectors.columns(0, self.rank)
+    }
+}
+
+/// The `count` leading eigenpairs of a symmetric positive semi-definite matrix, descending.
+fn leading_eigenpairs(matrix: &DMatrix<f64>, count: usize) -> (Vec<f64>, DMatrix<f64>) {
+    let n = matrix.nrows();
+    let width = (count + OVERSAMPLING).min(n);
+    let (values, vectors) = if width >= n {
+        let eigen = SymmetricEigen::new(matrix.clone());
+        (eigen.eigenvalues, eigen.eigenvectors)
+    } else {
+        let mut rng = ChaCha8Rng::seed_from_u64(0x5eed);
+        let omega = DMatrix::from_fn(n, width, |_, _| StandardNormal.sample(&mut rng));
+        let mut q = (matrix * omega).qr().q();
+        for _ in 0..POWER_ITERATIONS {
+            q = (matrix * &q).qr().q();
+        }
+        let small = q.transpose() * matrix * &q;
+        let eigen = SymmetricEigen::new(small);
+        (eigen.eigenvalues, q * eigen.eigenvectors)
+    };
+    let mut order: Vec<usize> = (0..values.len()).collect();
+    order.sort_by(|&a, &b| values[b].total_cmp(&values[a]));
+    order.truncate(count.min(order.len()));
+    let sorted = DMatrix::from_fn(n, order.len(), |r, c| vectors[(r, order[c])]);
+    (order.iter().map(|&k| values[k].max(0.0)).collect(), sorted)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn finds_a_planted_subspace_and_the_noise_level() {
+        // G = 50·v1v1ᵀ + 20·v2v2ᵀ + 0.5·(I − 11ᵀ/F) on F = 40.
+        let f = 40;
+        // v1, v2 centred (orthogonal to the constant), so they are exact eigenvectors.
+        let ones = DMatrix::from_element(f, 1, 1.0 / (f as f64).sqrt());
+        let centre = |v: DMatrix<f64>| &v - &ones * (ones.transpose() * &v)[(0, 0)];
+        let v1 = centre(DMatrix::from_fn(f, 1, |j, _| ((j as f64) * 0.7).sin()));
+        let v1 = &v1 / v1.norm();
+        let v2 = centre(DMatrix::from_fn(f, 1, |j, _| ((j as f64) * 1.9).cos()));
+        let v2 = &v2 - &v1 * (v1.transpose() * &v2)[(0, 0)];
+        let v2 = &v2 / v2.norm();
+        let gram = &v1 * v1.transpose() * 50.0
+            + &v2 * v2.transpose() * 20.0
+            + (DMatrix::identity(f, f) - &ones * ones.transpose()) * 0.5;
+        let space = SignalSpace::new(&gram, 2);
+        assert!((space.values[0] - 50.5).abs() < 1e-6, "{:?}", space.values);
+        assert!((space.values[1] - 20.5).abs() < 1e-6, "{:?}", space.values);
+        assert_eq!(space.rank, 2);
+        assert!((space.noise - 0.5).abs() < 1e-6, "{}", space.noise);
+        let overlap = (space.basis().transpose() * &v1).norm();
+        assert!((overlap - 1.0).abs() < 1e-9);
+    }
+}
