@@ -105,9 +105,8 @@ fn run_err(args: &[&str]) -> String {
 #[test]
 fn the_turning_ellipsoid_is_scored_frame_by_frame_within_the_thesis_accuracy() {
     let tmp = tempfile::tempdir().unwrap();
-    // 320×180 with the simulator's seed-0 phases: fitted on its own, window 1's waveform
-    // timing goes astray (rate ratio 0.984, 38 mm RMSE); the timing carried from window 0
-    // decodes it right.
+    // 320×180 with the simulator's seed-0 phases (where an earlier per-window timing fit went
+    // astray in window 1: rate ratio 0.984, 38 mm RMSE).
     let rig = dynamic_rig(tmp.path(), 320, 180);
     let clip = ellipsoid_with(tmp.path(), &rig, "ellipsoid", 200, 7.5, "0,1,0", &[]);
     let out = tmp.path().join("video");

@@ -3,10 +3,10 @@
 //! The decoder fits each LED's received waveform — shift, exposure and camera/chip rate
 //! ratio — from a window's spatial mean (SPEC §4). Exposure and rate ratio belong to the
 //! camera and the luminaire's clock, not to the window: they stay put for a whole clip, while
-//! a 32-frame fit of them can go astray when the object's mean brightness drifts (a turning
-//! ellipsoid: one window in five fitted a 1.6 % rate error and 4 % exposure, and its 3-D frame
-//! came out 38 mm wrong). So the video decodes every window with the timing of the best free
-//! fit so far and fits only the shifts, which is also cheaper.
+//! a 32-frame fit of them can go astray when the object's mean brightness drifts (with the
+//! decoder's earlier per-window fit, one window in five of a turning ellipsoid fitted a 1.6 %
+//! rate error and 4 % exposure, and its 3-D frame came out 38 mm wrong). So the video decodes
+//! every window with the timing of the best free fit so far and fits only the shifts.
 //!
 //! "Best" is the lowest median per-pixel residual σ of the decode (how well the LED model
 //! explains the pixels). The first [`FREE_WINDOWS`] windows are decoded both ways; later a
