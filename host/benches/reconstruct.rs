@@ -16,7 +16,9 @@
 //! meb is ≈ 6× faster than the straightforward version; the target is ≤ 25 ms.
 
 use criterion::{Criterion, criterion_group, criterion_main};
-use meb::integrate::{IntegrateConfig, integrate_normals};
+use meb::integrate::{
+    IntegrateConfig, Integrator, SurfaceEvidence, integrate_normals, integrate_surface,
+};
 use meb::photometric::{Lights, PhotometricConfig, estimate_normals};
 use meb::rig::Rig;
 use meb::types::LedImages;
@@ -163,6 +165,14 @@ fn bench(c: &mut Criterion) {
             .collect(),
     );
     let pitch = rig.camera.pitch_mm();
+    let least_squares = IntegrateConfig {
+        integrator: Integrator::LeastSquares,
+        ..IntegrateConfig::default()
+    };
+    let bilateral = IntegrateConfig {
+        integrator: Integrator::Bilateral,
+        ..IntegrateConfig::default()
+    };
     let mut group = c.benchmark_group("ps+integration 1280x720 sphere");
     group.sample_size(10);
     group.bench_function("meb", |b| {
@@ -175,9 +185,7 @@ fn bench(c: &mut Criterion) {
                 &PhotometricConfig::default(),
             )
             .unwrap();
-            black_box(
-                integrate_normals(&ps.field, pitch, &IntegrateConfig::default(), None).unwrap(),
-            )
+            black_box(integrate_normals(&ps.field, pitch, &least_squares, None).unwrap())
         })
     });
     group.bench_function("straightforward", |b| {
@@ -185,7 +193,7 @@ fn bench(c: &mut Criterion) {
     });
     group.finish();
 
-    // The two stages of "meb" separately.
+    // The stages of "meb" separately, and the other integrators.
     let config = PhotometricConfig::default();
     let ps = estimate_normals(&images, &lights, Some(&mask), None, &config).unwrap();
     let mut stages = c.benchmark_group("stages 1280x720 sphere");
@@ -196,11 +204,20 @@ fn bench(c: &mut Criterion) {
         })
     });
     stages.bench_function("least-squares integration", |b| {
-        b.iter(|| {
-            black_box(
-                integrate_normals(&ps.field, pitch, &IntegrateConfig::default(), None).unwrap(),
-            )
-        })
+        b.iter(|| black_box(integrate_normals(&ps.field, pitch, &least_squares, None).unwrap()))
+    });
+    stages.bench_function("bilateral integration", |b| {
+        b.iter(|| black_box(integrate_normals(&ps.field, pitch, &bilateral, None).unwrap()))
+    });
+    // With the pixels lit by two LEDs (circles) and the holes.
+    let evidence = SurfaceEvidence {
+        field: &ps.field,
+        planes: &ps.planes,
+        fill: Some(&ps.fill),
+    };
+    let projection = rig.camera.projection();
+    stages.bench_function("bilateral integration with two-LED pixels", |b| {
+        b.iter(|| black_box(integrate_surface(&evidence, &projection, &bilateral, None).unwrap()))
     });
     stages.finish();
 }

@@ -2,28 +2,37 @@
 //! refinement (SPEC §5–§6).
 //!
 //! The first pass uses light vectors at the plane z = 0; every further pass recomputes each
-//! pixel's light vectors L_i(X(p)) at X(p) = (x, y, z(p)) from the previous depth, re-solves the
-//! normals and re-integrates (warm-started). Depth zero is put on the object's outline, which
-//! Integration fixes depth only up to a constant, and the light vectors depend on it: after each
-//! integration the constant is chosen by a golden-section search that minimises the Lambertian
-//! misfit of the pixels lit by more than three LEDs ([`model_misfit`]), bracketed to ±`offset
-//! search` mm around the outline-anchored depth.
+//! pixel's light vectors L_i(X(p)) at the point X(p) of its ray at the previous depth, re-solves
+//! the normals and re-integrates (warm-started). Pixels lit by two LEDs and holes inside the
+//! object are integrated with the rest ([`crate::integrate::coverage`]). Integration fixes depth
+//! only up to a constant per separate part of the object (a scale for a perspective camera): per
+//! piece of the mask, and per part the bilateral integrator cut off along a depth discontinuity.
+//! The light vectors depend on it: after each integration every part's constant is chosen by a
+//! golden-section search that minimises the Lambertian misfit of its pixels lit by more than
+//! three LEDs ([`model_misfit`]), bracketed to ±`offset_search_mm` around the integrated depth.
 //!
 //! [`from_decoded`] is the one path from a decoded capture to a reconstruction: `meb
 //! reconstruct`, `meb demo` and the hardware-in-the-loop tests all call it, with the
 //! decoded-capture settings of [`ReconstructConfig::decoded_capture`].
 
 use crate::demod::Decoded;
-use crate::integrate::{IntegrateConfig, IntegrateError, Integration, integrate_normals};
+use crate::integrate::{
+    Confidence, IntegrateConfig, IntegrateError, Integration, SurfaceEvidence, integrate_surface,
+};
+use crate::photometric::lights::moved_depth;
 use crate::photometric::{
     Lights, PhotometricConfig, PhotometricError, PhotometricResult, estimate_normals, model_misfit,
 };
-use crate::rig::Rig;
+use crate::rig::{Projection, Rig};
 pub use crate::timing::StageTiming;
-use crate::types::LedImages;
+use crate::types::{LedImages, NormalField};
 use ndarray::{Array2, Zip};
 use std::time::Instant;
 use thiserror::Error;
+
+/// Bilateral reweightings of the near-field passes before the last (they only feed the next
+/// pass's light vectors).
+const EARLY_PASS_REWEIGHTINGS: usize = 8;
 
 /// Settings of the whole reconstruction.
 #[derive(Debug, Clone, PartialEq, serde::Serialize, serde::Deserialize)]
@@ -50,14 +59,12 @@ impl Default for ReconstructConfig {
 }
 
 impl ReconstructConfig {
-    /// Settings for decoded captures: an LED below 7 % of the pixel's brightest counts as
-    /// shadowed. Near the terminator such grazing values sit at the noise floor and tilted the
-    /// whole least-squares surface (sphere end to end, seed 7: 0.58 mm at the default 2 %,
-    /// 0.18 mm at 7 % with 96.8 % of the ≥ 3-lit surface kept).
+    /// Settings for decoded captures. They are the defaults: with the decoder's noise map the
+    /// shadow test is statistical per LED ([`crate::photometric::solve`]), which replaced a
+    /// fixed 7 % ratio (an LED image's noise can be 3.5 times the level noise, so grazing and
+    /// shadowed values were mixed up; the ratio hid that at the cost of coverage).
     pub fn decoded_capture() -> Self {
-        let mut config = Self::default();
-        config.photometric.shadow_fraction = 0.07;
-        config
+        Self::default()
     }
 }
 
@@ -106,6 +113,34 @@ pub struct Reconstruction {
     pub timings: Vec<StageTiming>,
 }
 
+impl Reconstruction {
+    /// Normals of every reconstructed pixel: measured where three or more LEDs lit it, the
+    /// integrator's choice for two-LED and filled pixels; the mask is the reconstructed pixels.
+    pub fn surface_normals(&self) -> NormalField {
+        let measured = &self.photometric.field;
+        let mut normals = measured.normals.clone();
+        Zip::indexed(&self.integration.confidence).for_each(|(r, c), &k| {
+            for j in 0..3 {
+                normals[(r, c, j)] = match k {
+                    Confidence::Measured => measured.normals[(r, c, j)],
+                    Confidence::None => f32::NAN,
+                    _ => self.integration.completed_normals[(r, c, j)],
+                };
+            }
+        });
+        NormalField {
+            normals,
+            albedo: measured.albedo.clone(),
+            mask: self.integration.kept.clone(),
+        }
+    }
+
+    /// How each pixel's depth is known.
+    pub fn confidence(&self) -> &Array2<Confidence> {
+        &self.integration.confidence
+    }
+}
+
 /// Reconstructs a surface from LED images taken with `rig`.
 pub fn reconstruct(
     images: &LedImages,
@@ -127,7 +162,8 @@ pub fn reconstruct(
             images.images.len()
         )));
     }
-    let pitch = rig.camera.pitch_mm();
+    config.integrate.validate()?;
+    let projection = rig.camera.projection();
     let mut timings = Vec::new();
     let mut time = |stage: String, start: Instant| {
         timings.push(StageTiming {
@@ -164,17 +200,26 @@ pub fn reconstruct(
         time(format!("photometric stereo (pass {})", pass + 1), start);
         object_mask.get_or_insert_with(|| ps.object_mask.clone());
         let start = Instant::now();
-        let mut integration = integrate_normals(&ps.field, pitch, &config.integrate, depth)?;
+        let evidence = SurfaceEvidence {
+            field: &ps.field,
+            planes: &ps.planes,
+            fill: Some(&ps.fill),
+        };
+        // Early passes only feed the light vectors of the next: a few reweightings suffice.
+        let mut integrate_config = config.integrate.clone();
+        if pass + 1 < passes {
+            integrate_config.bilateral.max_iterations = integrate_config
+                .bilateral
+                .max_iterations
+                .min(EARLY_PASS_REWEIGHTINGS);
+        }
+        let mut integration = integrate_surface(&evidence, &projection, &integrate_config, depth)?;
         time(format!("integration (pass {})", pass + 1), start);
         if matches!(config.light_model, LightModel::NearField { .. })
             && config.offset_search_mm > 0.0
         {
             let start = Instant::now();
-            let offset = best_depth_offset(images, rig, &integration.depth.depth_mm, &ps, config);
-            integration
-                .depth
-                .depth_mm
-                .mapv_inplace(|z| z + offset as f32);
+            place_parts(images, rig, noise, &ps, &mut integration, config);
             time(format!("depth offset search (pass {})", pass + 1), start);
         }
         previous = Some((ps, integration));
@@ -188,37 +233,107 @@ pub fn reconstruct(
     })
 }
 
-/// The constant added to `depth` that minimises the Lambertian misfit (module docs).
-fn best_depth_offset(
+/// `depth` with the pixels of `part` moved by `offset` mm towards the camera
+/// ([`moved_depth`]).
+fn moved_part(
+    depth: &Array2<f32>,
+    parts: &Array2<u32>,
+    part: u32,
+    offset: f64,
+    projection: &Projection,
+) -> Array2<f32> {
+    let mut out = depth.clone();
+    Zip::from(&mut out).and(parts).for_each(|z, &p| {
+        if p == part && z.is_finite() {
+            *z = moved_depth(f64::from(*z), offset, projection) as f32;
+        }
+    });
+    out
+}
+
+/// Moves every part of the integrated depth to the offset that minimises the Lambertian
+/// misfit of its pixels lit by more than three LEDs (module docs); parts with too few such
+/// pixels stay where the integrator put them.
+fn place_parts(
     images: &LedImages,
     rig: &Rig,
-    depth: &Array2<f32>,
+    noise: Option<&Array2<f32>>,
     ps: &PhotometricResult,
+    integration: &mut Integration,
     config: &ReconstructConfig,
-) -> f64 {
-    // Only pixels lit by more than three LEDs constrain the offset; use at most ~20 000.
+) {
+    let projection = rig.camera.projection();
+    for part in 0..integration.parts as u32 {
+        let pixels = constraining_pixels(ps, &integration.depth.depth_mm, |p| {
+            integration.part[p] == part
+        });
+        let offset = best_offset(
+            images,
+            rig,
+            noise,
+            &integration.depth.depth_mm,
+            &pixels,
+            ps,
+            config,
+            config.offset_search_mm,
+        );
+        if offset != 0.0 {
+            integration.depth.depth_mm = moved_part(
+                &integration.depth.depth_mm,
+                &integration.part,
+                part,
+                offset,
+                &projection,
+            );
+        }
+    }
+}
+
+/// The pixels chosen by `inside` that constrain absolute depth: lit by more than three LEDs,
+/// with a depth; at most about 20 000, evenly spread.
+fn constraining_pixels(
+    ps: &PhotometricResult,
+    depth: &Array2<f32>,
+    inside: impl Fn((usize, usize)) -> bool,
+) -> Vec<(usize, usize)> {
     let pixels: Vec<(usize, usize)> = ps
         .lit_count
         .indexed_iter()
-        .filter(|(p, n)| **n > 3 && depth[*p].is_finite())
+        .filter(|(p, n)| **n > 3 && depth[*p].is_finite() && inside(*p))
         .map(|(p, _)| p)
         .collect();
+    let step = pixels.len().div_ceil(20_000).max(1);
+    pixels.into_iter().step_by(step).collect()
+}
+
+/// The offset (mm towards the camera, within ±`half_range`) of the depth of `pixels` that
+/// minimises their Lambertian misfit (module docs); 0 with fewer than 16 pixels.
+#[allow(clippy::too_many_arguments)]
+fn best_offset(
+    images: &LedImages,
+    rig: &Rig,
+    noise: Option<&Array2<f32>>,
+    depth: &Array2<f32>,
+    pixels: &[(usize, usize)],
+    ps: &PhotometricResult,
+    config: &ReconstructConfig,
+    half_range: f64,
+) -> f64 {
     if pixels.len() < 16 {
         return 0.0;
     }
-    let step = pixels.len().div_ceil(20_000);
-    let pixels: Vec<(usize, usize)> = pixels.into_iter().step_by(step).collect();
     let misfit = |offset: f64| {
-        let shifted = depth.mapv(|z| z + offset as f32);
         model_misfit(
             images,
-            &Lights::near_field(rig, Some(&shifted)),
-            &pixels,
+            &Lights::near_field(rig, Some(depth)).moved(offset),
+            pixels,
+            noise,
+            &ps.noise_gains,
             &config.photometric,
         )
     };
     // Coarse scan, then golden-section refinement around the best sample.
-    let half = config.offset_search_mm;
+    let half = half_range;
     let samples = 13;
     let step = 2.0 * half / (samples - 1) as f64;
     let (mut best, mut best_value) = (0.0, misfit(0.0));

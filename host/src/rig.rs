@@ -1,7 +1,13 @@
 //! Camera and LED geometry of a capture rig (TOML files and the thesis' rigs as presets).
 //!
 //! Coordinates (SPEC §5): origin at the object centre, x right, y up, z towards the camera,
-//! millimetres. The camera is orthographic and looks along −z from `distance_mm`.
+//! millimetres. The camera looks along −z from (0, 0, `distance_mm`). It is orthographic (the
+//! thesis' model and presets: one grid pitch in mm per pixel) or, with `[camera.intrinsics]`, a
+//! pinhole camera with focal lengths fx, fy and principal point cx, cy in pixels (OpenCV
+//! convention: pixel centres at integer coordinates, u = column, v = row) and optional radial
+//! distortion x_d = x_u·(1 + k1·r² + k2·r⁴) of the normalised coordinates (Brown–Conrady, radial
+//! terms only). Every pixel has a ray ([`PixelRay`]): the scene points it sees, parametrised by
+//! their height z.
 //! An LED at P_i with axis a_i, relative intensity Φ_i and Lambert order m lights a surface
 //! point X along the light vector (SPEC §5, thesis Eq. 3.3 generalised to the near field)
 //!
@@ -37,12 +43,12 @@ pub enum RigError {
         source: std::io::Error,
     },
     /// The TOML does not parse into a rig.
-    #[error("rig file {path}: {message}")]
+    #[error("rig file {path}: {source}")]
     Parse {
         /// The file (or preset name).
         path: String,
-        /// The parser's message.
-        message: String,
+        /// The parser's error.
+        source: toml::de::Error,
     },
     /// A value is out of range; names the field.
     #[error("rig field `{field}`: {reason}")]
@@ -57,7 +63,7 @@ pub enum RigError {
     UnknownPreset(String),
 }
 
-/// Orthographic camera looking along −z.
+/// The camera: orthographic, or perspective when `intrinsics` are given (module docs).
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct Camera {
@@ -67,42 +73,265 @@ pub struct Camera {
     pub height: usize,
     /// Frame rate in frames per second.
     pub fps: f64,
-    /// Distance from the object centre along +z, mm.
+    /// Distance from the object centre along +z, mm (the perspective camera's centre).
     pub distance_mm: f64,
-    /// Horizontal field of view in degrees (used when `pixel_pitch_mm` is absent).
+    /// Horizontal field of view in degrees (orthographic; used when `pixel_pitch_mm` is absent).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub fov_deg: Option<f64>,
-    /// Grid pitch on the object plane, mm per pixel (overrides `fov_deg`).
+    /// Grid pitch on the object plane, mm per pixel (orthographic; overrides `fov_deg`).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub pixel_pitch_mm: Option<f64>,
+    /// Pinhole intrinsics: makes the camera perspective.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub intrinsics: Option<Intrinsics>,
 }
 
-impl Camera {
-    /// Grid pitch h in mm per pixel: `pixel_pitch_mm`, else h = 2·d·tan(FOV/2)/width (SPEC §6).
-    pub fn pitch_mm(&self) -> f64 {
-        match (self.pixel_pitch_mm, self.fov_deg) {
-            (Some(h), _) => h,
-            (None, Some(fov)) => {
-                2.0 * self.distance_mm * (fov.to_radians() / 2.0).tan() / self.width as f64
+/// Pinhole intrinsics in pixels with radial distortion (OpenCV convention, module docs).
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct Intrinsics {
+    /// Focal length along the columns, pixels.
+    pub fx: f64,
+    /// Focal length along the rows, pixels.
+    pub fy: f64,
+    /// Principal point column.
+    pub cx: f64,
+    /// Principal point row.
+    pub cy: f64,
+    /// Radial distortion coefficient of r².
+    #[serde(default, skip_serializing_if = "is_zero")]
+    pub k1: f64,
+    /// Radial distortion coefficient of r⁴.
+    #[serde(default, skip_serializing_if = "is_zero")]
+    pub k2: f64,
+}
+
+fn is_zero(v: &f64) -> bool {
+    *v == 0.0
+}
+
+/// The scene points a pixel sees: X(z) = `base` + z·`slope`, parametrised by their height z.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct PixelRay {
+    /// Where the ray crosses the plane z = 0.
+    pub base: Vector3<f64>,
+    /// dX/dz along the ray (z component 1).
+    pub slope: Vector3<f64>,
+}
+
+impl PixelRay {
+    /// The scene point of height `z` on the ray.
+    pub fn at(&self, z: f64) -> Vector3<f64> {
+        self.base + self.slope * z
+    }
+
+    /// Unit vector from the scene towards the camera along the ray (the view vector).
+    pub fn towards_camera(&self) -> Vector3<f64> {
+        self.slope.normalize()
+    }
+}
+
+/// How scene points map to pixels (the part of [`Camera`] geometry needs).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub enum Projection {
+    /// Parallel rays along −z, `pitch_mm` apart, centred on the image.
+    Orthographic {
+        /// Grid pitch h, mm per pixel.
+        pitch_mm: f64,
+        /// Image width and height in pixels.
+        size: (usize, usize),
+    },
+    /// Rays through the camera centre (0, 0, `distance_mm`).
+    Perspective {
+        /// The intrinsics.
+        intrinsics: Intrinsics,
+        /// Height of the camera centre above the object centre, mm.
+        distance_mm: f64,
+    },
+}
+
+impl Intrinsics {
+    /// Radial distortion factor 1 + k1·s + k2·s² at s = r² and its derivative in s.
+    fn distortion(&self, s: f64) -> (f64, f64) {
+        (
+            1.0 + self.k1 * s + self.k2 * s * s,
+            self.k1 + 2.0 * self.k2 * s,
+        )
+    }
+
+    /// Undistorted normalised coordinates (x right, y down) of pixel (row, col); Newton
+    /// iterations invert the radial model r_d = r_u·(1 + k1·r_u² + k2·r_u⁴).
+    pub fn normalised(&self, row: f64, col: f64) -> (f64, f64) {
+        let (xd, yd) = ((col - self.cx) / self.fx, (row - self.cy) / self.fy);
+        if self.k1 == 0.0 && self.k2 == 0.0 {
+            return (xd, yd);
+        }
+        let rd = xd.hypot(yd);
+        if rd == 0.0 {
+            return (0.0, 0.0);
+        }
+        let mut r = rd;
+        for _ in 0..30 {
+            let (f, df) = self.distortion(r * r);
+            let g = r * f - rd;
+            let dg = f + 2.0 * r * r * df;
+            if dg <= 0.0 {
+                break;
             }
-            (None, None) => f64::NAN,
+            let step = g / dg;
+            r -= step;
+            if step.abs() < 1e-15 * rd.max(1e-300) {
+                break;
+            }
+        }
+        (xd * r / rd, yd * r / rd)
+    }
+
+    /// Pixel (row, col) of undistorted normalised coordinates.
+    pub fn pixel(&self, x: f64, y: f64) -> (f64, f64) {
+        let (f, _) = self.distortion(x * x + y * y);
+        (self.fy * y * f + self.cy, self.fx * x * f + self.cx)
+    }
+
+    /// ∂(x, y)/∂(col, row) of [`Self::normalised`] at a pixel, as [[∂x/∂col, ∂x/∂row],
+    /// [∂y/∂col, ∂y/∂row]] (the inverse of the distortion Jacobian, scaled by 1/fx, 1/fy).
+    pub fn jacobian(&self, row: f64, col: f64) -> [[f64; 2]; 2] {
+        let (x, y) = self.normalised(row, col);
+        let (f, df) = self.distortion(x * x + y * y);
+        // Distortion Jacobian ∂(x_d, y_d)/∂(x, y).
+        let (a, b) = (f + 2.0 * x * x * df, 2.0 * x * y * df);
+        let (c, d) = (2.0 * x * y * df, f + 2.0 * y * y * df);
+        let det = a * d - b * c;
+        [
+            [d / det / self.fx, -b / det / self.fy],
+            [-c / det / self.fx, a / det / self.fy],
+        ]
+    }
+}
+
+impl Projection {
+    /// The projection of every `step`-th row and column (pixel (r, c) of the result is pixel
+    /// (r·step, c·step) here): focal lengths and principal point divided by `step`, or the
+    /// pitch multiplied by it.
+    pub fn every(&self, step: usize) -> Self {
+        let k = step.max(1) as f64;
+        match *self {
+            Projection::Orthographic { pitch_mm, size } => Projection::Orthographic {
+                pitch_mm: pitch_mm * k,
+                size: (size.0.div_ceil(step.max(1)), size.1.div_ceil(step.max(1))),
+            },
+            Projection::Perspective {
+                intrinsics,
+                distance_mm,
+            } => Projection::Perspective {
+                intrinsics: Intrinsics {
+                    fx: intrinsics.fx / k,
+                    fy: intrinsics.fy / k,
+                    cx: intrinsics.cx / k,
+                    cy: intrinsics.cy / k,
+                    ..intrinsics
+                },
+                distance_mm,
+            },
         }
     }
 
-    /// Scene (x, y) in mm of the centre of pixel (row, col).
-    pub fn pixel_centre_xy(&self, row: f64, col: f64) -> (f64, f64) {
-        let h = self.pitch_mm();
-        let x = (col + 0.5 - self.width as f64 / 2.0) * h;
-        let y = (self.height as f64 / 2.0 - row - 0.5) * h;
-        (x, y)
+    /// The ray of the (continuous) pixel position (row, col).
+    pub fn ray(&self, row: f64, col: f64) -> PixelRay {
+        match *self {
+            Projection::Orthographic { pitch_mm, size } => {
+                let x = (col + 0.5 - size.0 as f64 / 2.0) * pitch_mm;
+                let y = (size.1 as f64 / 2.0 - row - 0.5) * pitch_mm;
+                PixelRay {
+                    base: Vector3::new(x, y, 0.0),
+                    slope: Vector3::z(),
+                }
+            }
+            Projection::Perspective {
+                intrinsics,
+                distance_mm,
+            } => {
+                // Camera frame x right, y down; scene y up. X(z) = C + (D − z)·(x, −y, −1).
+                let (x, y) = intrinsics.normalised(row, col);
+                PixelRay {
+                    base: Vector3::new(distance_mm * x, -distance_mm * y, 0.0),
+                    slope: Vector3::new(-x, y, 1.0),
+                }
+            }
+        }
     }
 
-    /// Continuous (row, col) of scene point (x, y); inverse of [`Self::pixel_centre_xy`].
+    /// Continuous pixel (row, col) of a scene point; `None` at or behind a perspective camera.
+    pub fn project(&self, point: &Vector3<f64>) -> Option<(f64, f64)> {
+        match *self {
+            Projection::Orthographic { pitch_mm, size } => Some((
+                size.1 as f64 / 2.0 - point.y / pitch_mm - 0.5,
+                point.x / pitch_mm + size.0 as f64 / 2.0 - 0.5,
+            )),
+            Projection::Perspective {
+                intrinsics,
+                distance_mm,
+            } => {
+                let d = distance_mm - point.z;
+                (d > 0.0).then(|| intrinsics.pixel(point.x / d, -point.y / d))
+            }
+        }
+    }
+}
+
+impl Camera {
+    /// Grid pitch h in mm per pixel: `pixel_pitch_mm`, else h = 2·d·tan(FOV/2)/width (SPEC §6);
+    /// for a perspective camera the pitch on the object plane z = 0, d/fx.
+    pub fn pitch_mm(&self) -> f64 {
+        match (self.intrinsics, self.pixel_pitch_mm, self.fov_deg) {
+            (Some(k), _, _) => self.distance_mm / k.fx,
+            (None, Some(h), _) => h,
+            (None, None, Some(fov)) => {
+                2.0 * self.distance_mm * (fov.to_radians() / 2.0).tan() / self.width as f64
+            }
+            (None, None, None) => f64::NAN,
+        }
+    }
+
+    /// The camera's projection.
+    pub fn projection(&self) -> Projection {
+        match self.intrinsics {
+            Some(intrinsics) => Projection::Perspective {
+                intrinsics,
+                distance_mm: self.distance_mm,
+            },
+            None => Projection::Orthographic {
+                pitch_mm: self.pitch_mm(),
+                size: (self.width, self.height),
+            },
+        }
+    }
+
+    /// Whether the camera is a pinhole (perspective) camera.
+    pub fn is_perspective(&self) -> bool {
+        self.intrinsics.is_some()
+    }
+
+    /// The ray of pixel (row, col).
+    pub fn ray(&self, row: f64, col: f64) -> PixelRay {
+        self.projection().ray(row, col)
+    }
+
+    /// Continuous pixel (row, col) of a scene point (`None` behind a perspective camera).
+    pub fn project(&self, point: &Vector3<f64>) -> Option<(f64, f64)> {
+        self.projection().project(point)
+    }
+
+    /// Scene (x, y) in mm where the ray of pixel (row, col) crosses the plane z = 0.
+    pub fn pixel_centre_xy(&self, row: f64, col: f64) -> (f64, f64) {
+        let base = self.ray(row, col).base;
+        (base.x, base.y)
+    }
+
+    /// Continuous (row, col) of the scene point (x, y, 0); inverse of [`Self::pixel_centre_xy`].
     pub fn xy_to_pixel(&self, x: f64, y: f64) -> (f64, f64) {
-        let h = self.pitch_mm();
-        let col = x / h + self.width as f64 / 2.0 - 0.5;
-        let row = self.height as f64 / 2.0 - y / h - 0.5;
-        (row, col)
+        self.project(&Vector3::new(x, y, 0.0))
+            .unwrap_or((f64::NAN, f64::NAN))
     }
 }
 
@@ -176,9 +405,9 @@ pub struct Rig {
 impl Rig {
     /// Parses and validates a rig from TOML text; `origin` names it in errors.
     pub fn from_toml_str(text: &str, origin: &str) -> Result<Self, RigError> {
-        let rig: Rig = toml::from_str(text).map_err(|e| RigError::Parse {
+        let rig: Rig = toml::from_str(text).map_err(|source| RigError::Parse {
             path: origin.to_string(),
-            message: e.to_string(),
+            source,
         })?;
         rig.validate()?;
         Ok(rig)
@@ -220,6 +449,7 @@ impl Rig {
             distance_mm,
             fov_deg: Some(fov_deg),
             pixel_pitch_mm: None,
+            intrinsics: None,
         };
         let (camera, positions): (Camera, Vec<[f64; 3]>) = match name {
             // Four LEDs 100 mm left/right/top/bottom of a camera looking down from 460 mm.
@@ -282,15 +512,26 @@ impl Rig {
         if !(c.distance_mm.is_finite() && c.distance_mm > 0.0) {
             return Err(bad("camera.distance_mm", "must be a positive number"));
         }
-        match (c.pixel_pitch_mm, c.fov_deg) {
-            (Some(h), _) if !(h.is_finite() && h > 0.0) => {
+        match (c.intrinsics, c.pixel_pitch_mm, c.fov_deg) {
+            (Some(_), Some(_), _) | (Some(_), _, Some(_)) => {
+                return Err(bad(
+                    "camera.intrinsics",
+                    "a perspective camera takes its scale from the intrinsics: remove \
+                     `fov_deg` and `pixel_pitch_mm`",
+                ));
+            }
+            (Some(k), None, None) => validate_intrinsics(&k, c.width, c.height)?,
+            (None, Some(h), _) if !(h.is_finite() && h > 0.0) => {
                 return Err(bad("camera.pixel_pitch_mm", "must be a positive number"));
             }
-            (None, Some(f)) if !(f.is_finite() && f > 0.0 && f < 180.0) => {
+            (None, None, Some(f)) if !(f.is_finite() && f > 0.0 && f < 180.0) => {
                 return Err(bad("camera.fov_deg", "must be in (0, 180) degrees"));
             }
-            (None, None) => {
-                return Err(bad("camera", "needs `fov_deg` or `pixel_pitch_mm`"));
+            (None, None, None) => {
+                return Err(bad(
+                    "camera",
+                    "needs `fov_deg` or `pixel_pitch_mm` (orthographic) or `[camera.intrinsics]`",
+                ));
             }
             _ => {}
         }
@@ -323,6 +564,61 @@ impl Rig {
     }
 }
 
+/// Checks focal lengths, principal point and that the radial distortion is invertible
+/// (r_d = r_u·(1 + k1·r_u² + k2·r_u⁴) increasing) out to the image's farthest corner.
+fn validate_intrinsics(k: &Intrinsics, width: usize, height: usize) -> Result<(), RigError> {
+    let bad = |field: &str, reason: String| RigError::Invalid {
+        field: format!("camera.intrinsics.{field}"),
+        reason,
+    };
+    for (name, v) in [("fx", k.fx), ("fy", k.fy)] {
+        if !(v.is_finite() && v > 0.0) {
+            return Err(bad(name, "must be a positive number of pixels".into()));
+        }
+    }
+    for (name, v) in [("cx", k.cx), ("cy", k.cy), ("k1", k.k1), ("k2", k.k2)] {
+        if !v.is_finite() {
+            return Err(bad(name, "must be a finite number".into()));
+        }
+    }
+    // Farthest distorted radius of a pixel centre, in normalised units.
+    let corner = [(0.0, 0.0), (0.0, 1.0), (1.0, 0.0), (1.0, 1.0)]
+        .iter()
+        .map(|&(a, b)| {
+            let col = a * (width as f64 - 1.0);
+            let row = b * (height as f64 - 1.0);
+            ((col - k.cx) / k.fx).hypot((row - k.cy) / k.fy)
+        })
+        .fold(0.0, f64::max);
+    // Walk r_u outwards until r_d passes the corner; the map must keep increasing.
+    let mut r = 0.0;
+    let step = corner.max(1e-3) / 2000.0;
+    for _ in 0..1_000_000 {
+        let (f, df) = k.distortion(r * r);
+        if f + 2.0 * r * r * df <= 0.0 {
+            return Err(bad(
+                "k1",
+                format!(
+                    "k1 = {}, k2 = {} fold the image over itself before its corner \
+                     (radial distortion must increase with the radius)",
+                    k.k1, k.k2
+                ),
+            ));
+        }
+        if r * f > corner {
+            return Ok(());
+        }
+        r += step;
+    }
+    Err(bad(
+        "k1",
+        format!(
+            "k1 = {}, k2 = {} barely increase the radius: the image corner is not reached",
+            k.k1, k.k2
+        ),
+    ))
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -338,7 +634,7 @@ mod tests {
     }
 
     #[test]
-    fn issue_format_parses() {
+    fn documented_format_parses() {
         let text = r#"
             [camera]
             width = 1280
@@ -396,5 +692,114 @@ mod tests {
         let l1 = led.light_vector_at(&Vector3::new(100.0, 0.0, 0.0));
         let expected = Vector3::new(-1.0, 0.0, 1.0) / 2f64.sqrt() * (0.5f64.sqrt() / 2e4);
         assert!((l1 - expected).norm() < 1e-12);
+    }
+
+    fn perspective() -> Camera {
+        Camera {
+            width: 64,
+            height: 48,
+            fps: 960.0,
+            distance_mm: 400.0,
+            fov_deg: None,
+            pixel_pitch_mm: None,
+            intrinsics: Some(Intrinsics {
+                fx: 900.0,
+                fy: 880.0,
+                cx: 30.5,
+                cy: 25.0,
+                k1: -0.2,
+                k2: 0.05,
+            }),
+        }
+    }
+
+    #[test]
+    fn perspective_rays_project_back_to_their_pixel() {
+        let cam = perspective();
+        for (row, col) in [(0.0, 0.0), (25.0, 30.5), (47.0, 63.0), (10.3, 50.7)] {
+            let ray = cam.ray(row, col);
+            for z in [-30.0, 0.0, 25.0] {
+                let (r, c) = cam.project(&ray.at(z)).unwrap();
+                assert!((r - row).abs() < 1e-9 && (c - col).abs() < 1e-9, "{r} {c}");
+            }
+            // The ray passes through the camera centre (0, 0, D).
+            let centre = ray.at(cam.distance_mm);
+            assert!((centre.z - cam.distance_mm).abs() < 1e-9 && centre.xy().norm() < 1e-9);
+        }
+        // Principal point looks straight down; a pixel to the right sees +x, one below sees −y.
+        let (x, y) = cam.pixel_centre_xy(25.0, 30.5);
+        assert!(x.abs() < 1e-12 && y.abs() < 1e-12);
+        let (x, y) = cam.pixel_centre_xy(40.0, 60.0);
+        assert!(x > 0.0 && y < 0.0);
+        assert!((cam.pitch_mm() - 400.0 / 900.0).abs() < 1e-12);
+        assert!(cam.project(&Vector3::new(0.0, 0.0, 400.0)).is_none());
+    }
+
+    /// Every third pixel of a distorted camera sees along the ray of its full-grid pixel.
+    #[test]
+    fn sub_sampled_projection_keeps_each_pixels_ray() {
+        let full = perspective().projection();
+        let coarse = full.every(3);
+        for (row, col) in [(0.0, 0.0), (4.0, 7.0), (15.0, 20.0)] {
+            let (a, b) = (coarse.ray(row, col), full.ray(3.0 * row, 3.0 * col));
+            let (pa, pb) = (a.at(10.0), b.at(10.0));
+            assert!((pa - pb).norm() < 1e-9, "{pa} vs {pb}");
+        }
+    }
+
+    #[test]
+    fn distortion_jacobian_matches_finite_differences() {
+        let k = perspective().intrinsics.unwrap();
+        let (row, col) = (3.0, 60.0);
+        let j = k.jacobian(row, col);
+        let e = 1e-4;
+        let (xp, yp) = k.normalised(row, col + e);
+        let (xm, ym) = k.normalised(row, col - e);
+        let (xr, yr) = k.normalised(row + e, col);
+        let (xs, ys) = k.normalised(row - e, col);
+        let numeric = [
+            [(xp - xm) / (2.0 * e), (xr - xs) / (2.0 * e)],
+            [(yp - ym) / (2.0 * e), (yr - ys) / (2.0 * e)],
+        ];
+        for a in 0..2 {
+            for b in 0..2 {
+                assert!((j[a][b] - numeric[a][b]).abs() < 1e-9, "{j:?} {numeric:?}");
+            }
+        }
+    }
+
+    #[test]
+    fn perspective_rig_parses_and_bad_intrinsics_are_named() {
+        let text = r#"
+            [camera]
+            width = 640
+            height = 480
+            fps = 960.0
+            distance_mm = 420.0
+            [camera.intrinsics]
+            fx = 1500.0
+            fy = 1500.0
+            cx = 319.5
+            cy = 239.5
+            k1 = -0.1
+            [[led]]
+            position_mm = [-270.0, 420.0, 100.0]
+        "#;
+        let rig = Rig::from_toml_str(text, "test").unwrap();
+        assert!(rig.camera.is_perspective());
+        assert_eq!(rig.camera.intrinsics.unwrap().k2, 0.0);
+        assert_eq!(Rig::from_toml_str(&rig.to_toml_string(), "x").unwrap(), rig);
+        let with_fov = text.replace("fps = 960.0", "fps = 960.0\nfov_deg = 40.0");
+        let err = Rig::from_toml_str(&with_fov, "x").unwrap_err().to_string();
+        assert!(
+            err.contains("camera.intrinsics") && err.contains("fov_deg"),
+            "{err}"
+        );
+        let folded = text.replace("k1 = -0.1", "k1 = -4.0");
+        let err = Rig::from_toml_str(&folded, "x").unwrap_err().to_string();
+        assert!(err.contains("camera.intrinsics.k1"), "{err}");
+        let zero = text.replace("fy = 1500.0", "fy = 0.0");
+        let err = Rig::from_toml_str(&zero, "x").unwrap_err().to_string();
+        assert!(err.contains("camera.intrinsics.fy"), "{err}");
     }
 }

@@ -37,6 +37,61 @@ pub struct NormalField {
 pub struct DepthMap {
     /// H×W depth z in mm towards the camera; NaN where not reconstructed.
     pub depth_mm: Array2<f32>,
-    /// Grid pitch h in mm per pixel.
+    /// Grid pitch h in mm per pixel (for a perspective camera: on the plane z = 0).
     pub pitch_mm: f64,
+    /// The pinhole camera that saw it, `None` for the orthographic grid.
+    pub perspective: Option<crate::rig::Projection>,
+}
+
+impl DepthMap {
+    /// The 3-D point of pixel (row, col) in mm, `None` where there is no depth: on the
+    /// orthographic grid (x right, y up, z towards the camera, origin at the image centre), or
+    /// for a perspective camera in metric camera coordinates (origin at the camera centre, x
+    /// right, y down, z along the optical axis, as OpenCV's).
+    pub fn point(&self, row: usize, col: usize) -> Option<[f32; 3]> {
+        let z = *self.depth_mm.get((row, col))?;
+        if !z.is_finite() {
+            return None;
+        }
+        match &self.perspective {
+            Some(projection @ crate::rig::Projection::Perspective { distance_mm, .. }) => {
+                let p = projection.ray(row as f64, col as f64).at(f64::from(z));
+                Some([p.x as f32, -p.y as f32, (distance_mm - p.z) as f32])
+            }
+            _ => {
+                let (rows, cols) = self.depth_mm.dim();
+                let h = self.pitch_mm as f32;
+                let x = (col as f32 + 0.5 - cols as f32 / 2.0) * h;
+                let y = (rows as f32 / 2.0 - row as f32 - 0.5) * h;
+                Some([x, y, z])
+            }
+        }
+    }
+}
+
+/// A pixel lit by exactly two LEDs: its normal n lies on the great circle n·`across` = 0
+/// (across = A₂·L₁ − A₁·L₂ for values A and light vectors L) on the side n·`towards` > 0.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct NormalPlane {
+    /// Pixel (row, column).
+    pub pixel: (usize, usize),
+    /// The normal is perpendicular to it.
+    pub across: nalgebra::Vector3<f64>,
+    /// The normal has a positive component along it (e.g. L₁/|L₁| + L₂/|L₂|).
+    pub towards: nalgebra::Vector3<f64>,
+}
+
+/// How a reconstructed pixel's depth is known (written as `confidence.npy`, one byte a pixel).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, PartialOrd, Ord, Default)]
+#[repr(u8)]
+pub enum Confidence {
+    /// 0: not reconstructed.
+    #[default]
+    None = 0,
+    /// 1: filled by the integrator (a hole inside the object, lit by fewer than two LEDs).
+    Filled = 1,
+    /// 2: lit by two LEDs; normal from the two measurements and the surface's integrability.
+    TwoLeds = 2,
+    /// 3: full photometric-stereo normal from three or more LEDs.
+    Measured = 3,
 }

@@ -1,5 +1,6 @@
 //! Accuracy on public reference data: Quéau's vase (normal integration) and the DiLiGenT ball
-//! 4-light subset (photometric stereo). Targets from issue 5.
+//! 4-light subset (photometric stereo). Targets: vase NRMSE ≤ 0.2 % for the default integrator
+//! and least squares, the thesis' 2.5 % for Fast Marching; ball mean error ≤ 3.95°.
 
 use meb::datasets::{diligent::load_diligent, mat::read_mat_array};
 use meb::integrate::{IntegrateConfig, Integrator, SurfaceGradients, integrate_gradients};
@@ -50,6 +51,23 @@ fn vase_nrmse(integrator: Integrator) -> (f64, f64) {
         out.iterations
     );
     (e.nrmse.unwrap_or(f64::INFINITY), e.reconstructed_fraction)
+}
+
+/// The default integrator must reach NRMSE ≤ 0.2 % on this smooth surface.
+#[test]
+fn vase_default_integrator_nrmse_at_most_0_2_percent() {
+    let (nrmse, covered) = vase_nrmse(IntegrateConfig::default().integrator);
+    assert!(nrmse <= 0.002, "NRMSE {:.3} %", 100.0 * nrmse);
+    assert!(covered > 0.999);
+}
+
+/// Bilateral normal integration on the smooth vase: measured NRMSE 0.349 % (least squares
+/// 0.149 %), which is why it is not the default.
+#[test]
+fn vase_bilateral_nrmse_at_most_0_4_percent() {
+    let (nrmse, covered) = vase_nrmse(Integrator::Bilateral);
+    assert!(nrmse <= 0.004, "NRMSE {:.3} %", 100.0 * nrmse);
+    assert!(covered > 0.999);
 }
 
 #[test]

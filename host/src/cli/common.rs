@@ -8,7 +8,7 @@ use meb::export::files::{
 use meb::export::report::{ReportInputs, Summary, WrittenReport, write_report};
 use meb::metrics::{AngularErrors, DepthErrors};
 use meb::timing::StageTiming;
-use meb::types::{DepthMap, NormalField};
+use meb::types::{Confidence, DepthMap, NormalField};
 use ndarray::Array2;
 use std::path::Path;
 
@@ -74,6 +74,7 @@ pub fn write_outputs(
     depth: &DepthMap,
     depth_errors: Option<&DepthErrors>,
     angular_errors: Option<&AngularErrors>,
+    confidence: Option<&Array2<Confidence>>,
     timings: &[StageTiming],
     summary: Summary,
     mesh_formats: Vec<String>,
@@ -87,6 +88,7 @@ pub fn write_outputs(
             depth,
             depth_errors,
             angular_errors,
+            confidence,
             timings,
             summary,
             mesh_formats,

@@ -78,6 +78,7 @@ pub fn run(args: &DemoArgs) -> Result<()> {
             &out.reconstruction.integration.depth,
             Some(e),
             Some(&out.angular_errors),
+            Some(out.reconstruction.confidence()),
             &out.timings,
             summary,
             vec![],

@@ -43,6 +43,8 @@ pub struct IntegrateArgs {
 pub enum IntegratorArg {
     /// Masked least squares (default).
     LeastSquares,
+    /// Bilateral normal integration: keeps depth discontinuities.
+    Bilateral,
     /// The thesis' Fast Marching.
     FastMarching,
 }
@@ -50,6 +52,7 @@ pub enum IntegratorArg {
 impl From<IntegratorArg> for Integrator {
     fn from(a: IntegratorArg) -> Self {
         match a {
+            IntegratorArg::Bilateral => Integrator::Bilateral,
             IntegratorArg::LeastSquares => Integrator::LeastSquares,
             IntegratorArg::FastMarching => Integrator::FastMarching,
         }
@@ -95,6 +98,7 @@ pub fn run(args: &IntegrateArgs) -> Result<()> {
         &out.depth,
         None,
         None,
+        Some(&out.confidence),
         &timings,
         summary,
         super::common::mesh_extensions(&args.mesh),

@@ -94,6 +94,7 @@ pub fn run(args: &PhotometricArgs) -> Result<()> {
         &integration.depth,
         None,
         angular.as_ref(),
+        Some(&integration.confidence),
         &timings,
         summary,
         vec![],

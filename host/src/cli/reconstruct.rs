@@ -93,6 +93,7 @@ pub fn run(args: &ReconstructArgs) -> Result<()> {
         depth,
         depth_errors.as_ref(),
         angular_errors.as_ref(),
+        Some(reconstruction.confidence()),
         &reconstruction.timings,
         summary(args, &inputs, &config, &reconstruction),
         super::common::mesh_extensions(&args.mesh),

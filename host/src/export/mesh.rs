@@ -1,6 +1,7 @@
-//! Surface meshes from a depth map: one vertex per reconstructed pixel at (x, y, z) mm (x right,
-//! y up, origin at the image centre), two triangles per grid square whose corners exist, facing
-//! the camera. Written as binary PLY, OBJ or binary STL (via `stl_io`).
+//! Surface meshes from a depth map: one vertex per reconstructed pixel at its 3-D point in mm
+//! ([`DepthMap::point`]: x right, y up, origin at the image centre for the orthographic grid;
+//! metric camera coordinates for a perspective camera), two triangles per grid square whose
+//! corners exist, facing the camera. Written as binary PLY, OBJ or binary STL (via `stl_io`).
 
 use super::{ExportError, FilesError};
 use crate::types::DepthMap;
@@ -19,15 +20,14 @@ impl SurfaceMesh {
     /// Builds the mesh of `depth`.
     pub fn from_depth(depth: &DepthMap) -> Self {
         let (rows, cols) = depth.depth_mm.dim();
-        let h = depth.pitch_mm as f32;
         let mut index = vec![u32::MAX; rows * cols];
         let mut mesh = SurfaceMesh::default();
-        for ((r, c), &z) in depth.depth_mm.indexed_iter() {
-            if z.is_finite() {
-                index[r * cols + c] = mesh.vertices.len() as u32;
-                let x = (c as f32 + 0.5 - cols as f32 / 2.0) * h;
-                let y = (rows as f32 / 2.0 - r as f32 - 0.5) * h;
-                mesh.vertices.push([x, y, z]);
+        for r in 0..rows {
+            for c in 0..cols {
+                if let Some(p) = depth.point(r, c) {
+                    index[r * cols + c] = mesh.vertices.len() as u32;
+                    mesh.vertices.push(p);
+                }
             }
         }
         for r in 0..rows.saturating_sub(1) {
@@ -139,6 +139,7 @@ mod tests {
         let mesh = SurfaceMesh::from_depth(&DepthMap {
             depth_mm,
             pitch_mm: 0.5,
+            perspective: None,
         });
         assert_eq!(mesh.vertices.len(), 11);
         assert_eq!(mesh.triangles.len(), 2 * 2 * 3 - 1);

@@ -143,6 +143,7 @@ mod tests {
             &DepthMap {
                 depth_mm,
                 pitch_mm: 1.0,
+                perspective: None,
             },
             VIEWS[1],
             64,

@@ -11,9 +11,10 @@ use super::render::{VIEWS, render_surface};
 use super::viewer;
 use crate::metrics::{AngularErrors, DepthErrors};
 use crate::timing::StageTiming;
-use crate::types::{DepthMap, NormalField};
+use crate::types::{Confidence, DepthMap, NormalField};
 use base64::Engine;
 use image::RgbImage;
+use ndarray::Array2;
 use serde::{Deserialize, Serialize};
 use std::path::{Path, PathBuf};
 
@@ -128,6 +129,9 @@ pub struct Report {
     pub depth_accuracy: Option<DepthAccuracy>,
     /// Normal accuracy, when ground truth was given.
     pub normal_accuracy: Option<NormalAccuracy>,
+    /// How the reconstructed pixels' depth is known, when the integrator said.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub confidence: Option<ConfidenceCounts>,
     /// Settings and counts.
     pub summary: Summary,
     /// Each stage's total time, in the order the stages first ran.
@@ -138,6 +142,43 @@ pub struct Report {
     pub total_ms: f64,
     /// The preview files written.
     pub files: Vec<String>,
+}
+
+/// Reconstructed pixels by how their depth is known (`confidence.npy`).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+pub struct ConfidenceCounts {
+    /// Full photometric-stereo normal from three or more LEDs.
+    pub measured: usize,
+    /// Lit by two LEDs: normal from the two measurements and the surface's integrability.
+    pub two_leds: usize,
+    /// Holes inside the object filled by the integrator.
+    pub filled: usize,
+}
+
+impl ConfidenceCounts {
+    /// Counts the pixels of each reconstructed class.
+    pub fn of(confidence: &Array2<Confidence>) -> Self {
+        let count = |k: Confidence| confidence.iter().filter(|&&c| c == k).count();
+        Self {
+            measured: count(Confidence::Measured),
+            two_leds: count(Confidence::TwoLeds),
+            filled: count(Confidence::Filled),
+        }
+    }
+}
+
+/// The colour of each confidence class in `confidence.png`: green measured, amber two LEDs,
+/// red filled, black not reconstructed.
+fn confidence_image(confidence: &Array2<Confidence>) -> RgbImage {
+    let (rows, cols) = confidence.dim();
+    RgbImage::from_fn(cols as u32, rows as u32, |c, r| {
+        image::Rgb(match confidence[(r as usize, c as usize)] {
+            Confidence::Measured => [40, 170, 70],
+            Confidence::TwoLeds => [240, 170, 0],
+            Confidence::Filled => [220, 40, 40],
+            Confidence::None => [0, 0, 0],
+        })
+    })
 }
 
 /// Everything that goes into an output folder.
@@ -155,6 +196,8 @@ pub struct ReportInputs<'a> {
     pub depth_errors: Option<&'a DepthErrors>,
     /// Normal accuracy, when ground truth was given.
     pub angular_errors: Option<&'a AngularErrors>,
+    /// How each pixel's depth is known (written as `confidence.npy`, one byte a pixel).
+    pub confidence: Option<&'a Array2<Confidence>>,
     /// Per-stage timing.
     pub timings: &'a [StageTiming],
     /// Settings and counts for the report.
@@ -197,6 +240,9 @@ pub fn write_report(dir: &Path, inputs: &ReportInputs) -> Result<WrittenReport, 
     write_npy(&dir.join("normals.npy"), &inputs.normals.normals)?;
     write_npy(&dir.join("albedo.npy"), &inputs.normals.albedo)?;
     write_npy(&dir.join("depth.npy"), &inputs.depth.depth_mm)?;
+    if let Some(confidence) = inputs.confidence {
+        write_npy(&dir.join("confidence.npy"), &confidence.mapv(|k| k as u8))?;
+    }
     let mask = inputs.depth.depth_mm.mapv(f32::is_finite);
     let previews = previews(inputs, &mask);
     for preview in &previews {
@@ -230,6 +276,7 @@ pub fn write_report(dir: &Path, inputs: &ReportInputs) -> Result<WrittenReport, 
             median_deg: a.median_deg,
             compared_pixels: a.compared_pixels,
         }),
+        confidence: inputs.confidence.map(ConfidenceCounts::of),
         summary: inputs.summary.clone(),
         stages: stage_totals(inputs.timings),
         timings: inputs.timings.to_vec(),
@@ -276,6 +323,13 @@ fn previews(inputs: &ReportInputs, mask: &ndarray::Array2<bool>) -> Vec<Preview>
         grid("depth", "depth.png", depth_map(&inputs.depth.depth_mm)),
         grid("mask", "mask.png", mask_image(mask)),
     ];
+    if let Some(confidence) = inputs.confidence {
+        previews.push(grid(
+            "confidence (green ≥ 3 LEDs, amber 2 LEDs, red filled)",
+            "confidence.png",
+            confidence_image(confidence),
+        ));
+    }
     if let Some(e) = inputs.depth_errors {
         let limit = (3.0 * e.rmse_mm as f32).max(1e-3);
         previews.push(grid(
@@ -378,6 +432,19 @@ fn figure_rows(report: &Report) -> Vec<(String, String)> {
             "normal error mean / median".into(),
             format!("{:.2}° / {:.2}°", a.mean_deg, a.median_deg),
         ));
+    }
+    if let Some(k) = &report.confidence {
+        let total = (k.measured + k.two_leds + k.filled).max(1) as f64;
+        for (label, n) in [
+            ("depth from ≥ 3 LEDs", k.measured),
+            ("depth from 2 LEDs + integrability", k.two_leds),
+            ("holes filled by the integrator", k.filled),
+        ] {
+            rows.push((
+                label.into(),
+                format!("{n} px ({:.1} %)", 100.0 * n as f64 / total),
+            ));
+        }
     }
     let s = &report.summary;
     let mut text = |label: &str, value: &Option<String>| {

@@ -139,6 +139,7 @@ pub fn viewer_mesh(depth: &crate::types::DepthMap) -> SurfaceMesh {
     SurfaceMesh::from_depth(&crate::types::DepthMap {
         depth_mm: coarse,
         pitch_mm: depth.pitch_mm * step as f64,
+        perspective: depth.perspective.map(|p| p.every(step)),
     })
 }
 
@@ -153,6 +154,7 @@ mod tests {
         let depth = DepthMap {
             depth_mm: Array2::from_elem((3, 3), 1.0),
             pitch_mm: 1.0,
+            perspective: None,
         };
         let html = surface_viewer(&viewer_mesh(&depth));
         assert!(html.contains("data-viewer") || html.contains("dataset.viewer"));
@@ -178,6 +180,7 @@ mod tests {
         let depth = DepthMap {
             depth_mm: Array2::from_elem((720, 1280), 1.0),
             pitch_mm: 0.1,
+            perspective: None,
         };
         let mesh = viewer_mesh(&depth);
         assert!(

@@ -1,92 +1,226 @@
-//! Masked least-squares (Poisson) integration (Quéau, Durou, Aujol 2018, §3 "quadratic").
+//! Weighted least-squares integration on a mask (Quéau, Durou, Aujol 2018, §3 "quadratic").
 //!
 //! Every pair of 4-neighbouring mask pixels i, j (j right of or below i) gives one equation
-//! z_j − z_i = h·(g_i + g_j)/2 with g the slope along that edge (∂z/∂x to the right, −∂z/∂y
-//! downwards because y points up). The normal equations are a graph Laplacian on the mask
-//! (Neumann boundary, any shape), solved by conjugate gradients preconditioned with an
-//! aggregation multigrid V-cycle ([`super::multigrid`]), which keeps the iteration count nearly
-//! independent of the mask's size.
+//! z_j − z_i = t_ij with weight w_ij. Plain least squares uses w = 1 and the trapezoidal target
+//! t = h·(g_i + g_j)/2 (g the slope along the edge: ∂z/∂x to the right, −∂z/∂y downwards because
+//! y points up); the bilateral integrator ([`super::bilateral`]) and the coverage loop
+//! ([`super::coverage`]) reweight the two one-sided equations of each edge. The normal equations
+//! are a weighted graph Laplacian on the mask (Neumann boundary, any shape, one free constant per
+//! connected piece), solved by conjugate gradients preconditioned with an aggregation multigrid
+//! V-cycle ([`super::multigrid`]), which keeps the iteration count nearly independent of the
+//! mask's size.
 
 use super::multigrid::{GridLaplacian, Multigrid, NONE};
 use super::{IntegrateConfig, IntegrateError, SurfaceGradients};
 use ndarray::Array2;
 
 /// Diagonal shift that makes the Neumann Laplacian definite (fixes the free constant).
-const REGULARISATION: f64 = 1e-10;
+pub(crate) const REGULARISATION: f64 = 1e-10;
 
-/// The masked Laplacian: mask pixels with at least one mask neighbour, numbered in raster order.
-fn masked_laplacian(mask: &Array2<bool>) -> GridLaplacian {
-    let (rows, cols) = mask.dim();
-    let inside = |r: usize, c: usize| r < rows && c < cols && mask[(r, c)];
-    let mut index = vec![NONE; rows * cols];
-    let mut cells = Vec::new();
-    for r in 0..rows {
-        for c in 0..cols {
-            let connected = inside(r, c)
-                && ((r > 0 && inside(r - 1, c))
-                    || inside(r + 1, c)
-                    || (c > 0 && inside(r, c - 1))
-                    || inside(r, c + 1));
-            if connected {
-                index[r * cols + c] = cells.len() as u32;
-                cells.push((r, c));
-            }
-        }
-    }
-    let at = |r: usize, c: usize| {
-        if r < rows && c < cols {
-            index[r * cols + c]
-        } else {
-            NONE
-        }
-    };
-    let mut neighbours = Vec::with_capacity(cells.len());
-    let mut weights = Vec::with_capacity(cells.len());
-    let mut diag = Vec::with_capacity(cells.len());
-    for &(r, c) in &cells {
-        let nb = [
-            at(r, c + 1),
-            at(r + 1, c),
-            if c > 0 { at(r, c - 1) } else { NONE },
-            if r > 0 { at(r - 1, c) } else { NONE },
-        ];
-        let w = nb.map(|j| if j == NONE { 0.0 } else { 1.0 });
-        diag.push(REGULARISATION + w.iter().sum::<f64>());
-        neighbours.push(nb);
-        weights.push(w);
-    }
-    GridLaplacian::new((rows, cols), cells, neighbours, weights, diag)
+/// The integration graph: mask pixels with at least one mask neighbour, in raster order.
+#[derive(Debug, Clone)]
+pub(crate) struct Topology {
+    /// Grid size (rows, columns).
+    pub shape: (usize, usize),
+    /// Grid position of each node.
+    pub cells: Vec<(usize, usize)>,
+    /// Node of each grid pixel (row-major), [`NONE`] outside.
+    pub index: Vec<u32>,
+    /// Neighbour node (or [`NONE`]) right, down, left, up.
+    pub neighbours: Vec<[u32; 4]>,
 }
 
-/// Solves the masked least-squares problem; returns depth in mm (NaN outside) and CG iterations.
+impl Topology {
+    /// The graph of `mask`.
+    pub fn new(mask: &Array2<bool>) -> Self {
+        let (rows, cols) = mask.dim();
+        let inside = |r: usize, c: usize| r < rows && c < cols && mask[(r, c)];
+        let mut index = vec![NONE; rows * cols];
+        let mut cells = Vec::new();
+        for r in 0..rows {
+            for c in 0..cols {
+                let connected = inside(r, c)
+                    && ((r > 0 && inside(r - 1, c))
+                        || inside(r + 1, c)
+                        || (c > 0 && inside(r, c - 1))
+                        || inside(r, c + 1));
+                if connected {
+                    index[r * cols + c] = cells.len() as u32;
+                    cells.push((r, c));
+                }
+            }
+        }
+        let at = |r: usize, c: usize| {
+            if r < rows && c < cols {
+                index[r * cols + c]
+            } else {
+                NONE
+            }
+        };
+        let neighbours = cells
+            .iter()
+            .map(|&(r, c)| {
+                [
+                    at(r, c + 1),
+                    at(r + 1, c),
+                    if c > 0 { at(r, c - 1) } else { NONE },
+                    if r > 0 { at(r - 1, c) } else { NONE },
+                ]
+            })
+            .collect();
+        Self {
+            shape: (rows, cols),
+            cells,
+            index,
+            neighbours,
+        }
+    }
+
+    /// Number of nodes.
+    pub fn len(&self) -> usize {
+        self.cells.len()
+    }
+
+    /// Node of pixel `p`, if it is one.
+    pub fn node(&self, p: (usize, usize)) -> Option<usize> {
+        let k = self.index[p.0 * self.shape.1 + p.1];
+        (k != NONE).then_some(k as usize)
+    }
+
+    /// Connected piece of every node and the number of pieces.
+    pub fn components(&self) -> (Vec<u32>, usize) {
+        self.components_without(&[])
+    }
+
+    /// Connected pieces when the edges marked in `cut` (right, down of each node; empty for
+    /// none) are removed.
+    pub fn components_without(&self, cut: &[[bool; 2]]) -> (Vec<u32>, usize) {
+        let is_cut = |k: usize, d: usize| {
+            // Right/down edges are stored at k; left/up ones at the neighbour.
+            match d {
+                0 | 1 => cut.get(k).is_some_and(|c| c[d]),
+                _ => {
+                    let j = self.neighbours[k][d];
+                    j != NONE && cut.get(j as usize).is_some_and(|c| c[d - 2])
+                }
+            }
+        };
+        let mut label = vec![NONE; self.len()];
+        let mut count = 0u32;
+        let mut stack = Vec::new();
+        for start in 0..self.len() {
+            if label[start] != NONE {
+                continue;
+            }
+            label[start] = count;
+            stack.push(start);
+            while let Some(k) = stack.pop() {
+                for (d, &j) in self.neighbours[k].iter().enumerate() {
+                    if j != NONE && label[j as usize] == NONE && !is_cut(k, d) {
+                        label[j as usize] = count;
+                        stack.push(j as usize);
+                    }
+                }
+            }
+            count += 1;
+        }
+        (label, count as usize)
+    }
+
+    /// The weighted Laplacian of edge weights `weight[k]` = (right, down) edges of node k.
+    pub fn laplacian(&self, weight: &[[f64; 2]]) -> GridLaplacian {
+        let n = self.len();
+        let mut weights = vec![[0.0; 4]; n];
+        for (k, nb) in self.neighbours.iter().enumerate() {
+            for (d, &j) in nb.iter().take(2).enumerate() {
+                if j != NONE {
+                    weights[k][d] = weight[k][d];
+                    weights[j as usize][d + 2] = weight[k][d];
+                }
+            }
+        }
+        let diag = weights
+            .iter()
+            .map(|w| REGULARISATION + w.iter().sum::<f64>())
+            .collect();
+        GridLaplacian::new(
+            self.shape,
+            self.cells.clone(),
+            self.neighbours.clone(),
+            weights,
+            diag,
+        )
+    }
+}
+
+/// The edge equations z_j − z_i = target with weight, per node for its right and down edges.
+#[derive(Debug, Clone)]
+pub(crate) struct EdgeEquations {
+    /// Weight of the right and down edge of each node (0 where there is none).
+    pub weight: Vec<[f64; 2]>,
+    /// Target difference z_j − z_i of the right and down edge.
+    pub target: Vec<[f64; 2]>,
+}
+
+impl EdgeEquations {
+    /// Plain least squares: weight 1, trapezoidal targets from the slopes per node.
+    pub fn trapezoidal(topology: &Topology, sx: &[f64], sy: &[f64], step: f64) -> Self {
+        let n = topology.len();
+        let mut weight = vec![[0.0; 2]; n];
+        let mut target = vec![[0.0; 2]; n];
+        for (k, nb) in topology.neighbours.iter().enumerate() {
+            if nb[0] != NONE {
+                weight[k][0] = 1.0;
+                target[k][0] = 0.5 * step * (sx[k] + sx[nb[0] as usize]);
+            }
+            if nb[1] != NONE {
+                weight[k][1] = 1.0;
+                target[k][1] = -0.5 * step * (sy[k] + sy[nb[1] as usize]);
+            }
+        }
+        Self { weight, target }
+    }
+
+    /// Solves the normal equations from the given `x` (warm start); returns CG iterations.
+    pub fn solve(
+        &self,
+        topology: &Topology,
+        x: &mut [f64],
+        tolerance: f64,
+        max_iterations: usize,
+    ) -> usize {
+        let lap = topology.laplacian(&self.weight);
+        // Right-hand side Dᵀ W t: edge k→j with z_j − z_k = t adds −w·t at k and +w·t at j.
+        let mut b = vec![0.0; topology.len()];
+        for (k, nb) in topology.neighbours.iter().enumerate() {
+            for (d, &j) in nb.iter().take(2).enumerate() {
+                if j != NONE {
+                    let wt = self.weight[k][d] * self.target[k][d];
+                    b[k] -= wt;
+                    b[j as usize] += wt;
+                }
+            }
+        }
+        conjugate_gradients(&lap, &b, x, tolerance, max_iterations)
+    }
+}
+
+/// Solves the plain masked least-squares problem; returns depth in mm (NaN outside) and CG
+/// iterations.
 pub fn integrate(
     gradients: &SurfaceGradients,
     pitch_mm: f64,
     config: &IntegrateConfig,
     initial: Option<&Array2<f32>>,
 ) -> Result<(Array2<f64>, usize), IntegrateError> {
-    let lap = masked_laplacian(&gradients.mask);
-    let n = lap.len();
-    if n == 0 {
+    let topology = Topology::new(&gradients.mask);
+    if topology.len() == 0 {
         return Err(IntegrateError::EmptyMask);
     }
-    // Right-hand side Dᵀg: edge k→j with z_j − z_i = g adds −g at i and +g at j.
-    let mut b = vec![0.0; n];
-    for (k, &(r, c)) in lap.cells.iter().enumerate() {
-        let j = lap.neighbours[k][0];
-        if j != NONE {
-            let g = 0.5 * pitch_mm * (gradients.dzdx[(r, c)] + gradients.dzdx[(r, c + 1)]);
-            b[k] -= g;
-            b[j as usize] += g;
-        }
-        let j = lap.neighbours[k][1];
-        if j != NONE {
-            let g = -0.5 * pitch_mm * (gradients.dzdy[(r, c)] + gradients.dzdy[(r + 1, c)]);
-            b[k] -= g;
-            b[j as usize] += g;
-        }
-    }
-    let mut x: Vec<f64> = lap
+    let sx: Vec<f64> = topology.cells.iter().map(|&p| gradients.dzdx[p]).collect();
+    let sy: Vec<f64> = topology.cells.iter().map(|&p| gradients.dzdy[p]).collect();
+    let equations = EdgeEquations::trapezoidal(&topology, &sx, &sy, pitch_mm);
+    let mut x: Vec<f64> = topology
         .cells
         .iter()
         .map(|&p| {
@@ -96,9 +230,9 @@ pub fn integrate(
                 .map_or(0.0, f64::from)
         })
         .collect();
-    let iterations = conjugate_gradients(&lap, &b, &mut x, config.tolerance, config.max_iterations);
+    let iterations = equations.solve(&topology, &mut x, config.tolerance, config.max_iterations);
     let mut depth = Array2::from_elem(gradients.mask.dim(), f64::NAN);
-    for (k, &p) in lap.cells.iter().enumerate() {
+    for (k, &p) in topology.cells.iter().enumerate() {
         depth[p] = x[k];
     }
     Ok((depth, iterations))
@@ -106,7 +240,7 @@ pub fn integrate(
 
 /// Multigrid-preconditioned conjugate gradients on `lap` x = b from the given x; returns
 /// iterations.
-fn conjugate_gradients(
+pub(crate) fn conjugate_gradients(
     lap: &GridLaplacian,
     b: &[f64],
     x: &mut [f64],
@@ -168,38 +302,10 @@ mod tests {
         })
     }
 
-    /// Component label per pixel (4-connectivity), `usize::MAX` outside.
-    fn components(mask: &Array2<bool>) -> Array2<usize> {
-        let (rows, cols) = mask.dim();
-        let mut label = Array2::from_elem((rows, cols), usize::MAX);
-        let mut next = 0;
-        for start in (0..rows).flat_map(|r| (0..cols).map(move |c| (r, c))) {
-            if !mask[start] || label[start] != usize::MAX {
-                continue;
-            }
-            let mut stack = vec![start];
-            label[start] = next;
-            while let Some((r, c)) = stack.pop() {
-                for (rr, cc) in [
-                    (r + 1, c),
-                    (r.wrapping_sub(1), c),
-                    (r, c + 1),
-                    (r, c.wrapping_sub(1)),
-                ] {
-                    if rr < rows && cc < cols && mask[(rr, cc)] && label[(rr, cc)] == usize::MAX {
-                        label[(rr, cc)] = next;
-                        stack.push((rr, cc));
-                    }
-                }
-            }
-            next += 1;
-        }
-        label
-    }
-
     /// Straightforward reference: unpreconditioned CG on the same normal equations, to 1e-13.
     fn plain_cg(g: &SurfaceGradients, h: f64) -> Array2<f64> {
-        let lap = masked_laplacian(&g.mask);
+        let topology = Topology::new(&g.mask);
+        let lap = topology.laplacian(&vec![[1.0; 2]; topology.len()]);
         let n = lap.len();
         let mut b = vec![0.0; n];
         for (k, &(r, c)) in lap.cells.iter().enumerate() {
@@ -246,23 +352,20 @@ mod tests {
     fn worst_difference_per_component(a: &Array2<f64>, b: &Array2<f64>) -> f64 {
         let mask = a.mapv(f64::is_finite);
         assert_eq!(mask, b.mapv(f64::is_finite));
-        let label = components(&mask);
-        let count = label
-            .iter()
-            .filter(|&&l| l != usize::MAX)
-            .max()
-            .map_or(0, |m| m + 1);
+        let regions = crate::regions::label(&mask);
+        let count = regions.sizes.len();
         let (mut sum, mut n) = (vec![0.0; count], vec![0usize; count]);
-        for (p, &l) in label.indexed_iter() {
-            if l != usize::MAX {
-                sum[l] += a[p] - b[p];
-                n[l] += 1;
+        for (p, &l) in regions.label.indexed_iter() {
+            if l != crate::regions::OUTSIDE {
+                sum[l as usize] += a[p] - b[p];
+                n[l as usize] += 1;
             }
         }
-        label
+        regions
+            .label
             .indexed_iter()
-            .filter(|(_, l)| **l != usize::MAX)
-            .map(|(p, &l)| (a[p] - b[p] - sum[l] / n[l] as f64).abs())
+            .filter(|(_, l)| **l != crate::regions::OUTSIDE)
+            .map(|(p, &l)| (a[p] - b[p] - sum[l as usize] / n[l as usize] as f64).abs())
             .fold(0.0, f64::max)
     }
 
@@ -332,7 +435,11 @@ mod tests {
         let dzdx = Array2::from_shape_fn((rows, cols), |(r, c)| 0.02 * xy(r, c).0 + 0.3);
         let dzdy = Array2::from_shape_fn((rows, cols), |(r, c)| -0.04 * xy(r, c).1);
         let g = SurfaceGradients { dzdx, dzdy, mask };
-        let out = integrate_gradients(&g, h, &IntegrateConfig::default(), None).unwrap();
+        let config = IntegrateConfig {
+            integrator: crate::integrate::Integrator::LeastSquares,
+            ..IntegrateConfig::default()
+        };
+        let out = integrate_gradients(&g, h, &config, None).unwrap();
         let mut diffs = Vec::new();
         for ((r, c), &m) in g.mask.indexed_iter() {
             if m {

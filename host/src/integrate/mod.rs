@@ -1,46 +1,116 @@
 //! Normal integration: normals → depth on the camera grid (SPEC §6, thesis §3.2).
 //!
-//! Normals become slopes ∂z/∂x = −n_x/n_z, ∂z/∂y = −n_y/n_z with y up (towards row 0)
-//! ([`gradients`]). Two integrators work on arbitrary masks: masked least squares (the Poisson
-//! equation restricted to the mask, solved by conjugate gradients with an aggregation-multigrid
-//! preconditioner; [`least_squares`]) as the default, and the thesis' Fast Marching integrator
-//! on W = z + λf ([`fast_marching`]). The thesis' artefact filter ([`filter`]) then drops points
-//! that jump more than 10 mm from a neighbour. Both work on the mask's bounding box only.
+//! Normals become slopes of the unknown ([`grid`]): the height z with ∂z/∂x = −n_x/n_z,
+//! ∂z/∂y = −n_y/n_z (y up, towards row 0) for an orthographic camera, or a pixel-unit log depth
+//! for a perspective one (Quéau, Durou & Aujol, "Normal integration: a survey", 2018). Three
+//! integrators work on arbitrary masks:
+//!
+//! - masked least squares (the Poisson equation on the mask; [`least_squares`]), the default;
+//! - bilateral normal integration (Cao et al., ECCV 2022; [`bilateral`]): weighted least
+//!   squares whose weights let depth jump where the surface is discontinuous;
+//! - the thesis' Fast Marching integrator on W = z + λf ([`fast_marching`]).
+//!
+//! The least-squares solves use conjugate gradients with an aggregation-multigrid preconditioner
+//! ([`multigrid`]). Pixels lit by only two LEDs and holes inside the object are integrated too
+//! ([`coverage`]), so the object is not cut into islands; separate pieces of the mask are anchored
+//! (and Fast-Marched) separately. Depth zero is put on each piece's outline. The thesis' artefact
+//! filter ([`filter`]) then drops points that jump more than 10 mm from a neighbour. Everything
+//! runs on the mask's bounding box only.
 
+pub mod bilateral;
+pub mod coverage;
 pub mod fast_marching;
 pub mod filter;
 pub mod gradients;
+pub(crate) mod grid;
 pub mod least_squares;
 mod multigrid;
 
+pub use coverage::NormalPlane;
 pub use filter::{ArtefactFilter, filter_artefacts};
 pub use gradients::SurfaceGradients;
 
+use crate::rig::Projection;
+pub use crate::types::Confidence;
 use crate::types::{DepthMap, NormalField};
-use ndarray::{Array2, s};
+use grid::DepthGrid;
+use least_squares::{EdgeEquations, Topology};
+use multigrid::NONE;
+use nalgebra::Vector3;
+use ndarray::{Array2, Array3, s};
 use thiserror::Error;
 
 /// Which integrator to use.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default, serde::Serialize, serde::Deserialize)]
 #[serde(rename_all = "kebab-case")]
 pub enum Integrator {
-    /// Masked least squares (Poisson) with a preconditioned conjugate-gradient solver.
+    /// Bilateral normal integration: discontinuity-preserving weighted least squares. Better
+    /// across depth discontinuities (Suzanne 6.7 mm vs 8.0 mm), slightly worse on smooth
+    /// surfaces (vase NRMSE 0.35 % vs 0.15 %), so not the default.
+    Bilateral,
+    /// Masked least squares (Poisson) with a preconditioned conjugate-gradient solver (default).
     #[default]
     LeastSquares,
     /// The thesis' Fast Marching integrator (W = z + λf).
     FastMarching,
 }
 
-/// Where depth zero is put (integration fixes depth only up to a constant).
+/// Where depth zero is put (integration fixes depth only up to a constant per piece).
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default, serde::Serialize, serde::Deserialize)]
 #[serde(rename_all = "kebab-case")]
 pub enum DepthAnchor {
-    /// The mean depth along the mask's outline is zero (the silhouette lies on z = 0, as for a
+    /// The mean depth along each piece's outline is zero (the silhouette lies on z = 0, as for a
     /// sphere centred at the rig's origin).
     #[default]
     Outline,
-    /// The mean depth over the mask is zero.
+    /// The mean depth over each piece is zero.
     Mean,
+}
+
+/// Settings of bilateral normal integration (Cao et al. 2022).
+#[derive(Debug, Clone, PartialEq, serde::Serialize, serde::Deserialize)]
+pub struct BilateralConfig {
+    /// Stiffness k of the sigmoid weights (paper: 2); larger cuts at smaller jumps.
+    pub stiffness: f64,
+    /// Most reweighting iterations.
+    pub max_iterations: usize,
+    /// Relative energy change below which the iterations stop.
+    pub tolerance: f64,
+}
+
+impl Default for BilateralConfig {
+    fn default() -> Self {
+        Self {
+            stiffness: 2.0,
+            max_iterations: 100,
+            tolerance: 1e-4,
+        }
+    }
+}
+
+/// Settings of pixels without a full normal ([`coverage`]).
+#[derive(Debug, Clone, PartialEq, serde::Serialize, serde::Deserialize)]
+pub struct CoverageConfig {
+    /// Weight of a two-LED pixel's equations relative to a measured pixel's.
+    pub two_led_weight: f64,
+    /// Weight of a filled hole pixel's equations.
+    pub fill_weight: f64,
+    /// Most depth ↔ normal alternations for two-LED pixels (least squares; the bilateral
+    /// integrator alternates once per reweighting).
+    pub iterations: usize,
+    /// Relative energy change below which the alternations stop.
+    pub tolerance: f64,
+}
+
+impl Default for CoverageConfig {
+    fn default() -> Self {
+        Self {
+            two_led_weight: 1.0,
+            fill_weight: 0.1,
+            iterations: 50,
+            tolerance: 1e-4,
+        }
+    }
 }
 
 /// Settings of the integration stage.
@@ -56,6 +126,10 @@ pub struct IntegrateConfig {
     pub tolerance: f64,
     /// Iteration cap of conjugate gradients.
     pub max_iterations: usize,
+    /// Bilateral integrator settings.
+    pub bilateral: BilateralConfig,
+    /// Two-LED pixels and holes.
+    pub coverage: CoverageConfig,
     /// Where depth zero is put.
     pub anchor: DepthAnchor,
     /// Artefact filter (thesis: drop points jumping > 10 mm from a neighbour).
@@ -65,14 +139,58 @@ pub struct IntegrateConfig {
 impl Default for IntegrateConfig {
     fn default() -> Self {
         Self {
-            integrator: Integrator::LeastSquares,
+            integrator: Integrator::default(),
             max_slope: 20.0,
             lambda: 0.06,
             tolerance: 1e-7,
             max_iterations: 5000,
+            bilateral: BilateralConfig::default(),
+            coverage: CoverageConfig::default(),
             anchor: DepthAnchor::Outline,
             filter: ArtefactFilter::default(),
         }
+    }
+}
+
+impl IntegrateConfig {
+    /// Checks every setting; the error names the first bad one.
+    pub fn validate(&self) -> Result<(), IntegrateError> {
+        let positive = |name: &'static str, v: f64| {
+            if v.is_finite() && v > 0.0 {
+                Ok(())
+            } else {
+                Err(IntegrateError::BadSetting {
+                    name,
+                    value: v,
+                    reason: "must be a positive number",
+                })
+            }
+        };
+        positive("lambda", self.lambda)?;
+        positive("max_slope", self.max_slope)?;
+        positive("tolerance", self.tolerance)?;
+        positive("bilateral stiffness", self.bilateral.stiffness)?;
+        positive("bilateral tolerance", self.bilateral.tolerance)?;
+        positive("two-LED weight", self.coverage.two_led_weight)?;
+        positive("fill weight", self.coverage.fill_weight)?;
+        positive("coverage tolerance", self.coverage.tolerance)?;
+        if let Some(jump) = self.filter.max_jump_mm {
+            positive("artefact filter jump", jump)?;
+        }
+        for (name, count) in [
+            ("max_iterations", self.max_iterations),
+            ("bilateral max_iterations", self.bilateral.max_iterations),
+            ("coverage iterations", self.coverage.iterations),
+        ] {
+            if count == 0 {
+                return Err(IntegrateError::BadSetting {
+                    name,
+                    value: 0.0,
+                    reason: "must be at least 1",
+                });
+            }
+        }
+        Ok(())
     }
 }
 
@@ -108,6 +226,26 @@ pub enum IntegrateError {
     /// The grid pitch is not a positive number.
     #[error("grid pitch must be a positive number of mm per pixel, got {0}")]
     BadPitch(f64),
+    /// No normal inside the mask can be turned into slopes.
+    #[error(
+        "no usable normal inside the mask: {zero} are zero and {facing_away} face away from the camera or lie edge-on"
+    )]
+    NoUsableNormals {
+        /// Zero-length normals.
+        zero: usize,
+        /// Normals with n·v ≤ 0 (or nearly).
+        facing_away: usize,
+    },
+    /// A setting is out of range.
+    #[error("integration setting {name} = {value}: {reason}")]
+    BadSetting {
+        /// The setting.
+        name: &'static str,
+        /// Its value.
+        value: f64,
+        /// What is wrong.
+        reason: &'static str,
+    },
 }
 
 /// Result of integrating one normal field.
@@ -119,39 +257,188 @@ pub struct Integration {
     pub kept: Array2<bool>,
     /// Fraction of the integrated mask kept by the artefact filter (0..1).
     pub kept_fraction: f64,
-    /// Solver iterations (conjugate gradients) or accepted pixels (Fast Marching).
+    /// Solver iterations (conjugate gradients, summed over reweightings) or accepted pixels
+    /// (Fast Marching).
     pub iterations: usize,
+    /// Reweighting / coverage passes of the least-squares solver (1 for a plain solve).
+    pub passes: usize,
+    /// Separately anchored pieces of the integrated mask.
+    pub pieces: usize,
+    /// Piece of every kept pixel (`u32::MAX` elsewhere).
+    pub piece: Array2<u32>,
+    /// Parts: the pieces split further along depth discontinuities that the bilateral
+    /// integrator found all the way across one (the normals cannot tell their relative depth).
+    pub parts: usize,
+    /// Part of every kept pixel (`u32::MAX` elsewhere).
+    pub part: Array2<u32>,
+    /// How each pixel's depth is known ([`Confidence::None`] where not kept).
+    pub confidence: Array2<Confidence>,
+    /// Normals the integrator chose for two-LED and filled pixels (NaN elsewhere).
+    pub completed_normals: Array3<f32>,
 }
 
-/// Integrates a normal field with grid pitch `pitch_mm`; `initial` warm-starts least squares.
+/// What is known about the surface, for [`integrate_surface`].
+#[derive(Debug, Clone, Copy)]
+pub struct SurfaceEvidence<'a> {
+    /// Measured normals inside `field.mask`.
+    pub field: &'a NormalField,
+    /// Pixels lit by exactly two LEDs.
+    pub planes: &'a [NormalPlane],
+    /// Pixels to reconstruct with no normal information (holes inside the object).
+    pub fill: Option<&'a Array2<bool>>,
+}
+
+/// Integrates a normal field on an orthographic grid of pitch `pitch_mm`; `initial` (depth in
+/// mm) warm-starts the least-squares solvers.
 pub fn integrate_normals(
     field: &NormalField,
     pitch_mm: f64,
     config: &IntegrateConfig,
     initial: Option<&Array2<f32>>,
 ) -> Result<Integration, IntegrateError> {
-    gradients::check_field_shape(field)?;
-    let shape = field.mask.dim();
     check_pitch(pitch_mm)?;
-    let window = Window::around(&field.mask).ok_or(IntegrateError::EmptyMask)?;
-    let gradients = SurfaceGradients::from_normal_views(
-        field
-            .normals
-            .slice(s![window.rows.clone(), window.cols.clone(), ..]),
-        window.view(&field.mask),
-        config.max_slope,
+    let shape = field.mask.dim();
+    integrate_surface(
+        &SurfaceEvidence {
+            field,
+            planes: &[],
+            fill: None,
+        },
+        &Projection::Orthographic {
+            pitch_mm,
+            size: (shape.1, shape.0),
+        },
+        config,
+        initial,
     )
-    .map_err(|e| window.shift_error(e))?;
-    integrate_window(&gradients, &window, shape, pitch_mm, config, initial)
 }
 
-/// Integrates slopes ∂z/∂x, ∂z/∂y (dimensionless) with grid pitch `pitch_mm`.
+/// Integrates normals, two-LED pixels and holes ([`SurfaceEvidence`]) seen through `projection`.
+pub fn integrate_surface(
+    evidence: &SurfaceEvidence,
+    projection: &Projection,
+    config: &IntegrateConfig,
+    initial: Option<&Array2<f32>>,
+) -> Result<Integration, IntegrateError> {
+    config.validate()?;
+    let field = evidence.field;
+    gradients::check_field_shape(field)?;
+    let shape = field.mask.dim();
+    if let Projection::Orthographic { pitch_mm, .. } = projection {
+        check_pitch(*pitch_mm)?;
+    }
+    if let Some(fill) = evidence.fill
+        && fill.dim() != shape
+    {
+        return Err(IntegrateError::SizeMismatch {
+            what: "fill mask".into(),
+            got: fill.dim(),
+            expected: shape,
+        });
+    }
+    if let Some(p) = evidence
+        .planes
+        .iter()
+        .find(|p| p.pixel.0 >= shape.0 || p.pixel.1 >= shape.1)
+    {
+        return Err(IntegrateError::SizeMismatch {
+            what: format!("two-LED pixel {:?}", p.pixel),
+            got: p.pixel,
+            expected: shape,
+        });
+    }
+    let grid = DepthGrid::new(projection);
+    // Pixel classes over the whole grid, then the window around them.
+    let mut class = Array2::from_elem(shape, Confidence::None);
+    if let Some(fill) = evidence.fill {
+        class.zip_mut_with(fill, |k, &f| {
+            if f {
+                *k = Confidence::Filled;
+            }
+        });
+    }
+    for p in evidence.planes {
+        class[p.pixel] = Confidence::TwoLeds;
+    }
+    let mut bad = (0usize, 0, 0);
+    let mut zero = 0;
+    let mut slopes_full = Array2::from_elem(shape, (0.0, 0.0));
+    for ((r, c), &m) in field.mask.indexed_iter() {
+        if !m {
+            continue;
+        }
+        let n = Vector3::from([0, 1, 2].map(|j| f64::from(field.normals[(r, c, j)])));
+        if !n.iter().all(|v| v.is_finite()) {
+            if bad.0 == 0 {
+                bad = (0, r, c);
+            }
+            bad.0 += 1;
+            continue;
+        }
+        // A normal facing away from the camera carries no slope: treat the pixel as a hole.
+        if n.norm() == 0.0 {
+            zero += 1;
+        }
+        match grid.slopes(r, c, &n) {
+            Some((sx, sy)) => {
+                class[(r, c)] = Confidence::Measured;
+                slopes_full[(r, c)] = (
+                    sx.clamp(-config.max_slope, config.max_slope),
+                    sy.clamp(-config.max_slope, config.max_slope),
+                );
+            }
+            None if class[(r, c)] == Confidence::None => class[(r, c)] = Confidence::Filled,
+            None => {}
+        }
+    }
+    if bad.0 > 0 {
+        return Err(IntegrateError::NonFinite {
+            count: bad.0,
+            row: bad.1,
+            col: bad.2,
+        });
+    }
+    if !class
+        .iter()
+        .any(|&k| k == Confidence::Measured || k == Confidence::TwoLeds)
+    {
+        let total = field.mask.iter().filter(|&&m| m).count();
+        if total > 0 {
+            return Err(IntegrateError::NoUsableNormals {
+                zero,
+                facing_away: total - zero,
+            });
+        }
+        return Err(IntegrateError::EmptyMask);
+    }
+    let region = class.mapv(|k| k != Confidence::None);
+    let window = Window::around(&region).ok_or(IntegrateError::EmptyMask)?;
+    let problem = Problem {
+        class: window.view(&class).to_owned(),
+        slopes: window.view(&slopes_full).to_owned(),
+        planes: evidence
+            .planes
+            .iter()
+            .filter(|p| class[p.pixel] == Confidence::TwoLeds)
+            .map(|p| NormalPlane {
+                pixel: (p.pixel.0 - window.rows.start, p.pixel.1 - window.cols.start),
+                ..*p
+            })
+            .collect(),
+        origin: (window.rows.start, window.cols.start),
+        grid,
+    };
+    solve_window(&problem, &window, shape, config, initial)
+}
+
+/// Integrates slopes ∂z/∂x, ∂z/∂y (dimensionless) with grid pitch `pitch_mm` (orthographic).
 pub fn integrate_gradients(
     gradients: &SurfaceGradients,
     pitch_mm: f64,
     config: &IntegrateConfig,
     initial: Option<&Array2<f32>>,
 ) -> Result<Integration, IntegrateError> {
+    config.validate()?;
     check_pitch(pitch_mm)?;
     gradients.check_shapes()?;
     let shape = gradients.mask.dim();
@@ -161,7 +448,21 @@ pub fn integrate_gradients(
         dzdy: window.view(&gradients.dzdy).to_owned(),
         mask: window.view(&gradients.mask).to_owned(),
     };
-    integrate_window(&cropped, &window, shape, pitch_mm, config, initial)
+    cropped.validate().map_err(|e| window.shift_error(e))?;
+    let problem = Problem {
+        class: cropped.mask.mapv(|m| {
+            if m {
+                Confidence::Measured
+            } else {
+                Confidence::None
+            }
+        }),
+        slopes: Array2::from_shape_fn(cropped.mask.dim(), |p| (cropped.dzdx[p], cropped.dzdy[p])),
+        planes: Vec::new(),
+        origin: (window.rows.start, window.cols.start),
+        grid: DepthGrid::Orthographic { pitch_mm },
+    };
+    solve_window(&problem, &window, shape, config, initial)
 }
 
 /// Rejects a grid pitch that is not a positive finite number.
@@ -173,46 +474,314 @@ fn check_pitch(pitch_mm: f64) -> Result<(), IntegrateError> {
     }
 }
 
-/// Integrates `gradients` cropped to `window` of a `shape` grid and places the result in it.
-fn integrate_window(
-    gradients: &SurfaceGradients,
+/// One integration problem on a window of the grid.
+struct Problem {
+    /// Class of every window pixel.
+    class: Array2<Confidence>,
+    /// Slopes (s_x, s_y) of measured pixels (others are filled in).
+    slopes: Array2<(f64, f64)>,
+    /// Two-LED pixels, in window coordinates.
+    planes: Vec<NormalPlane>,
+    /// Window origin in the grid (row, column).
+    origin: (usize, usize),
+    /// The unknown and its slopes.
+    grid: DepthGrid,
+}
+
+/// Solves a window problem and places depth, confidence and normals in a `shape` grid.
+fn solve_window(
+    problem: &Problem,
     window: &Window,
     shape: (usize, usize),
-    pitch_mm: f64,
     config: &IntegrateConfig,
     initial: Option<&Array2<f32>>,
 ) -> Result<Integration, IntegrateError> {
-    gradients.validate().map_err(|e| window.shift_error(e))?;
-    let initial = initial
-        .filter(|d| d.dim() == shape)
-        .map(|d| window.view(d).to_owned());
-    let (mut depth, iterations) = match config.integrator {
-        Integrator::LeastSquares => {
-            least_squares::integrate(gradients, pitch_mm, config, initial.as_ref())?
-        }
-        Integrator::FastMarching => fast_marching::integrate(gradients, pitch_mm, config.lambda)?,
+    let region = problem.class.mapv(|k| k != Confidence::None);
+    let topology = Topology::new(&region);
+    if topology.len() == 0 {
+        return Err(IntegrateError::EmptyMask);
+    }
+    let grid = &problem.grid;
+    let step = grid.step();
+    let (r0, c0) = problem.origin;
+    // Fill in the slopes of two-LED pixels and holes from the measured ones.
+    let mut sx = problem.slopes.mapv(|s| s.0);
+    let mut sy = problem.slopes.mapv(|s| s.1);
+    let known = problem.class.mapv(|k| k == Confidence::Measured);
+    if known.iter().any(|&k| k) && known != region {
+        coverage::inpaint(&mut sx, &known, &region);
+        coverage::inpaint(&mut sy, &known, &region);
+    }
+    let mut slopes: Vec<(f64, f64)> = topology.cells.iter().map(|&p| (sx[p], sy[p])).collect();
+    let planes: Vec<(usize, NormalPlane)> = problem
+        .planes
+        .iter()
+        .filter_map(|p| topology.node(p.pixel).map(|k| (k, *p)))
+        .collect();
+    let clip = |s: (f64, f64)| {
+        (
+            s.0.clamp(-config.max_slope, config.max_slope),
+            s.1.clamp(-config.max_slope, config.max_slope),
+        )
     };
-    let valid = depth.mapv(f64::is_finite);
-    anchor(&mut depth, &valid, config.anchor);
-    let (kept, kept_fraction) = filter_artefacts(&depth, &valid, &config.filter);
-    let mut depth_mm = Array2::from_elem(shape, f32::NAN);
-    let mut kept_full = Array2::from_elem(shape, false);
-    ndarray::Zip::from(window.view_mut(&mut depth_mm))
-        .and(window.view_mut(&mut kept_full))
-        .and(&depth)
-        .and(&kept)
-        .for_each(|out, k_out, &z, &k| {
-            if k {
-                *out = z as f32;
-                *k_out = true;
+    // Two-LED pixels: the line a·s_x + b·s_y = c their circle is in slope space.
+    let lines: Vec<(f64, f64, f64)> = planes
+        .iter()
+        .map(|(_, plane)| {
+            let [a0, a1, a2] = grid.normal_affine(plane.pixel.0 + r0, plane.pixel.1 + c0);
+            let m = plane.across;
+            (m.dot(&a1), m.dot(&a2), -m.dot(&a0))
+        })
+        .collect();
+    // Keeps slopes on the lit half of the circle, within its tilt limit.
+    let on_circle = |plane: &NormalPlane, s: (f64, f64)| {
+        let (r, c) = (plane.pixel.0 + r0, plane.pixel.1 + c0);
+        plane
+            .project(&grid.normal(r, c, s.0, s.1))
+            .and_then(|n| grid.slopes(r, c, &n))
+            .map(clip)
+    };
+    for (k, plane) in &planes {
+        if let Some(s) = on_circle(plane, slopes[*k]) {
+            slopes[*k] = s;
+        }
+    }
+    let confidence: Vec<f64> = topology
+        .cells
+        .iter()
+        .map(|&p| match problem.class[p] {
+            Confidence::Measured => 1.0,
+            Confidence::TwoLeds => config.coverage.two_led_weight,
+            _ => config.coverage.fill_weight,
+        })
+        .collect();
+    let estimated: Vec<bool> = topology
+        .cells
+        .iter()
+        .map(|&p| problem.class[p] != Confidence::Measured)
+        .collect();
+    let warm: Option<Vec<f64>> = initial.filter(|d| d.dim() == shape).map(|d| {
+        topology
+            .cells
+            .iter()
+            .map(|&(r, c)| {
+                let u = grid.unknown_of(f64::from(d[(r + r0, c + c0)]));
+                if u.is_finite() { u } else { 0.0 }
+            })
+            .collect()
+    });
+    let mut x = warm.clone().unwrap_or_else(|| vec![0.0; topology.len()]);
+    let bilateral = config.integrator == Integrator::Bilateral;
+    let passes_allowed = match config.integrator {
+        Integrator::Bilateral => config.bilateral.max_iterations,
+        _ if planes.is_empty() => 1,
+        _ => config.coverage.iterations,
+    };
+    let (mut iterations, mut passes) = (0, 0);
+    let mut previous_energy: Option<f64> = None;
+    // Reweighting passes need solves only as exact as the weights are settled (inexact IRLS).
+    let mut solve_tolerance = config.tolerance;
+    for pass in 0..passes_allowed {
+        passes = pass + 1;
+        let sides = if bilateral && (pass > 0 || warm.is_some()) {
+            bilateral::bilateral(
+                &topology,
+                &x,
+                &slopes,
+                &confidence,
+                grid.pixel_units(),
+                config.bilateral.stiffness,
+            )
+        } else {
+            bilateral::uniform(&confidence, &slopes, &estimated)
+        };
+        let equations: EdgeEquations = bilateral::side_equations(&topology, &sides, &slopes, step);
+        iterations += equations.solve(&topology, &mut x, solve_tolerance, config.max_iterations);
+        for ((k, plane), &line) in planes.iter().zip(&lines) {
+            if let Some(s) = coverage::slopes_on_line(&topology, &x, *k, &sides[*k], step, line)
+                .and_then(|s| on_circle(plane, s))
+            {
+                slopes[*k] = s;
             }
-        });
-    Ok(Integration {
-        depth: DepthMap { depth_mm, pitch_mm },
-        kept: kept_full,
+        }
+        if passes_allowed == 1 {
+            break;
+        }
+        let e = bilateral::energy(&topology, &sides, &slopes, step, &x);
+        let relative = previous_energy.map(|p| (p - e).abs() / p.max(f64::MIN_POSITIVE));
+        previous_energy = Some(e);
+        if let Some(r) = relative {
+            solve_tolerance = (r * INEXACT_SOLVE).clamp(config.tolerance, LOOSEST_SOLVE);
+        }
+        let tolerance = if bilateral {
+            config.bilateral.tolerance
+        } else {
+            config.coverage.tolerance
+        };
+        if relative.is_some_and(|r| r < tolerance) {
+            break;
+        }
+    }
+    let (piece_of_node, pieces) = topology.components();
+    let mut depth = Array2::from_elem(region.dim(), f64::NAN);
+    if config.integrator == Integrator::FastMarching {
+        let gradients = SurfaceGradients {
+            dzdx: Array2::from_shape_fn(region.dim(), |p| {
+                topology.node(p).map_or(0.0, |k| slopes[k].0)
+            }),
+            dzdy: Array2::from_shape_fn(region.dim(), |p| {
+                topology.node(p).map_or(0.0, |k| slopes[k].1)
+            }),
+            mask: Array2::from_shape_fn(region.dim(), |p| topology.node(p).is_some()),
+        };
+        let (fm, accepted) = fast_marching::integrate(&gradients, step, config.lambda)?;
+        depth = fm;
+        iterations = accepted;
+        passes = 1;
+    } else {
+        for (k, &p) in topology.cells.iter().enumerate() {
+            depth[p] = x[k];
+        }
+    }
+    anchor(&mut depth, &topology, &piece_of_node, pieces, config.anchor);
+    // Parts: pieces further split where the bilateral integrator found a depth discontinuity
+    // all the way across (their relative depth is unknown to the normals).
+    let (part_of_node, parts) = if bilateral {
+        let cut = bilateral::discontinuities(
+            &topology,
+            &x,
+            &slopes,
+            grid.pixel_units(),
+            config.bilateral.stiffness,
+            DISCONTINUITY_WEIGHT,
+        );
+        let min_part = MIN_PART_PIXELS.max(topology.len() / 100);
+        absorb_small_parts(&topology, topology.components_without(&cut), min_part)
+    } else {
+        (piece_of_node.clone(), pieces)
+    };
+    let depth_mm = depth.mapv(|u| {
+        if u.is_finite() {
+            grid.depth_mm(u)
+        } else {
+            f64::NAN
+        }
+    });
+    let valid = depth_mm.mapv(f64::is_finite);
+    let (kept, kept_fraction) = filter_artefacts(&depth_mm, &valid, &config.filter);
+    let mut out = Integration {
+        depth: DepthMap {
+            depth_mm: Array2::from_elem(shape, f32::NAN),
+            pitch_mm: match grid {
+                DepthGrid::Orthographic { pitch_mm } => *pitch_mm,
+                DepthGrid::Perspective { .. } => f64::NAN,
+            },
+            perspective: match grid {
+                DepthGrid::Orthographic { .. } => None,
+                DepthGrid::Perspective {
+                    intrinsics,
+                    distance_mm,
+                } => Some(Projection::Perspective {
+                    intrinsics: *intrinsics,
+                    distance_mm: *distance_mm,
+                }),
+            },
+        },
+        kept: Array2::from_elem(shape, false),
         kept_fraction,
         iterations,
-    })
+        passes,
+        pieces,
+        piece: Array2::from_elem(shape, u32::MAX),
+        parts,
+        part: Array2::from_elem(shape, u32::MAX),
+        confidence: Array2::from_elem(shape, Confidence::None),
+        completed_normals: Array3::from_elem((shape.0, shape.1, 3), f32::NAN),
+    };
+    if let DepthGrid::Perspective {
+        distance_mm,
+        intrinsics,
+    } = grid
+    {
+        out.depth.pitch_mm = distance_mm / intrinsics.fx;
+    }
+    for (k, &(r, c)) in topology.cells.iter().enumerate() {
+        if !kept[(r, c)] {
+            continue;
+        }
+        let full = (r + window.rows.start, c + window.cols.start);
+        out.depth.depth_mm[full] = depth_mm[(r, c)] as f32;
+        out.kept[full] = true;
+        out.piece[full] = piece_of_node[k];
+        out.part[full] = part_of_node[k];
+        let class = problem.class[(r, c)];
+        out.confidence[full] = class;
+        if class != Confidence::Measured {
+            let n = grid.normal(full.0, full.1, slopes[k].0, slopes[k].1);
+            for j in 0..3 {
+                out.completed_normals[(full.0, full.1, j)] = n[j] as f32;
+            }
+        }
+    }
+    Ok(out)
+}
+
+/// Solve tolerance of a reweighting pass relative to the last pass's relative energy change.
+const INEXACT_SOLVE: f64 = 1e-2;
+
+/// Loosest relative residual of a reweighting pass's solve.
+const LOOSEST_SOLVE: f64 = 1e-4;
+
+/// A bilateral weight below which both sides of an edge have turned away from it.
+const DISCONTINUITY_WEIGHT: f64 = 0.05;
+
+/// Fewest pixels of a part (or 1 % of the mask, if more); smaller ones join a neighbour.
+const MIN_PART_PIXELS: usize = 200;
+
+/// Merges parts with fewer than `min` nodes into a neighbouring part and numbers the rest
+/// 0, 1, …; a small part with no neighbour (a piece of its own) stays.
+fn absorb_small_parts(
+    topology: &Topology,
+    (mut label, count): (Vec<u32>, usize),
+    min: usize,
+) -> (Vec<u32>, usize) {
+    let mut size = vec![0usize; count];
+    for &l in &label {
+        size[l as usize] += 1;
+    }
+    let small = |l: u32, size: &[usize]| size[l as usize] < min;
+    loop {
+        let mut changed = false;
+        for k in 0..topology.len() {
+            if !small(label[k], &size) {
+                continue;
+            }
+            let big = topology.neighbours[k]
+                .iter()
+                .filter(|&&j| j != NONE)
+                .map(|&j| label[j as usize])
+                .find(|&l| !small(l, &size));
+            if let Some(l) = big {
+                size[label[k] as usize] -= 1;
+                size[l as usize] += 1;
+                label[k] = l;
+                changed = true;
+            }
+        }
+        if !changed {
+            break;
+        }
+    }
+    let mut renumber = vec![NONE; count];
+    let mut next = 0u32;
+    for l in &mut label {
+        if renumber[*l as usize] == NONE {
+            renumber[*l as usize] = next;
+            next += 1;
+        }
+        *l = renumber[*l as usize];
+    }
+    (label, next as usize)
 }
 
 /// The bounding box of a mask: everything outside it is unmasked, so integrating inside it gives
@@ -247,11 +816,6 @@ impl Window {
         a.slice(s![self.rows.clone(), self.cols.clone()])
     }
 
-    /// The part of `a` inside the window, mutable.
-    fn view_mut<'a, T>(&self, a: &'a mut Array2<T>) -> ndarray::ArrayViewMut2<'a, T> {
-        a.slice_mut(s![self.rows.clone(), self.cols.clone()])
-    }
-
     /// Moves pixel positions in an error from window to grid coordinates.
     fn shift_error(&self, e: IntegrateError) -> IntegrateError {
         match e {
@@ -265,28 +829,326 @@ impl Window {
     }
 }
 
-/// Shifts `depth` by a constant according to `anchor`.
-fn anchor(depth: &mut Array2<f64>, valid: &Array2<bool>, anchor: DepthAnchor) {
-    let (rows, cols) = depth.dim();
-    let on_outline = |r: usize, c: usize| {
-        r == 0
-            || c == 0
-            || r + 1 == rows
-            || c + 1 == cols
-            || !valid[(r - 1, c)]
-            || !valid[(r + 1, c)]
-            || !valid[(r, c - 1)]
-            || !valid[(r, c + 1)]
-    };
-    let (mut sum, mut n) = (0.0, 0usize);
-    for ((r, c), &v) in valid.indexed_iter() {
-        if v && (anchor == DepthAnchor::Mean || on_outline(r, c)) {
-            sum += depth[(r, c)];
-            n += 1;
+/// Shifts each piece of `depth` by a constant according to `anchor`: its outline (nodes with a
+/// missing neighbour) or all of it gets mean zero.
+fn anchor(
+    depth: &mut Array2<f64>,
+    topology: &Topology,
+    piece: &[u32],
+    pieces: usize,
+    anchor: DepthAnchor,
+) {
+    let mut sum = vec![0.0; pieces];
+    let mut count = vec![0usize; pieces];
+    for (k, &p) in topology.cells.iter().enumerate() {
+        let on_outline = topology.neighbours[k].contains(&NONE);
+        if depth[p].is_finite() && (anchor == DepthAnchor::Mean || on_outline) {
+            sum[piece[k] as usize] += depth[p];
+            count[piece[k] as usize] += 1;
         }
     }
-    if n > 0 {
-        let offset = sum / n as f64;
-        depth.mapv_inplace(|z| z - offset);
+    for (k, &p) in topology.cells.iter().enumerate() {
+        let i = piece[k] as usize;
+        if count[i] > 0 {
+            depth[p] -= sum[i] / count[i] as f64;
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::rig::{Camera, Intrinsics};
+
+    /// Depth RMSE of `got` against `truth` over `mask` after removing the mean difference.
+    fn rmse(got: &Array2<f32>, truth: &Array2<f64>, mask: &Array2<bool>) -> f64 {
+        let d: Vec<f64> = mask
+            .indexed_iter()
+            .filter(|(p, m)| **m && got[*p].is_finite())
+            .map(|(p, _)| f64::from(got[p]) - truth[p])
+            .collect();
+        assert!(!d.is_empty());
+        let mean = d.iter().sum::<f64>() / d.len() as f64;
+        (d.iter().map(|v| (v - mean).powi(2)).sum::<f64>() / d.len() as f64).sqrt()
+    }
+
+    /// Unit normal of slopes (p, q) on an orthographic grid.
+    fn normal(p: f64, q: f64) -> Vector3<f64> {
+        Vector3::new(-p, -q, 1.0).normalize()
+    }
+
+    fn field_of(normals: &Array2<Vector3<f64>>, mask: &Array2<bool>) -> NormalField {
+        let (rows, cols) = mask.dim();
+        NormalField {
+            normals: Array3::from_shape_fn((rows, cols, 3), |(r, c, j)| {
+                if mask[(r, c)] {
+                    normals[(r, c)][j] as f32
+                } else {
+                    f32::NAN
+                }
+            }),
+            albedo: Array2::ones((rows, cols)),
+            mask: mask.clone(),
+        }
+    }
+
+    /// A tilted terrace: z = 0.3 x on the left, z = 0.3 x + 15 px on the right, and one column
+    /// of wall between them seen nearly edge-on, its measured slope wrong by a different amount
+    /// in every row (as at a real occluding contour). Least squares spreads that inconsistency
+    /// and bends both terraces; the bilateral integrator cuts at the wall and keeps each planar.
+    #[test]
+    fn bilateral_keeps_both_sides_of_a_step_planar() {
+        let (rows, cols) = (40usize, 60usize);
+        let wall = 30;
+        let truth = Array2::from_shape_fn((rows, cols), |(_, c)| {
+            0.3 * c as f64 + if c > wall { 15.0 } else { 0.0 }
+        });
+        let normals = Array2::from_shape_fn((rows, cols), |(r, c)| {
+            if c == wall {
+                normal(5.0 + 0.5 * r as f64, 0.0)
+            } else {
+                normal(0.3, 0.0)
+            }
+        });
+        let mask = Array2::from_elem((rows, cols), true);
+        let field = field_of(&normals, &mask);
+        let side_rmse = |integrator| {
+            let config = IntegrateConfig {
+                integrator,
+                filter: ArtefactFilter { max_jump_mm: None },
+                ..IntegrateConfig::default()
+            };
+            let out = integrate_normals(&field, 1.0, &config, None).unwrap();
+            let left = Array2::from_shape_fn((rows, cols), |(_, c)| c < wall);
+            let right = Array2::from_shape_fn((rows, cols), |(_, c)| c > wall);
+            rmse(&out.depth.depth_mm, &truth, &left).max(rmse(&out.depth.depth_mm, &truth, &right))
+        };
+        let ls = side_rmse(Integrator::LeastSquares);
+        let bilateral = side_rmse(Integrator::Bilateral);
+        assert!(
+            bilateral < 0.15 && ls > 5.0 * bilateral,
+            "least squares {ls} px vs bilateral {bilateral} px"
+        );
+    }
+
+    /// A hemisphere whose middle band is lit by two LEDs only: with the band's circles the
+    /// integrator joins both halves into one piece that matches the sphere; without them the
+    /// halves are separate pieces.
+    #[test]
+    fn two_led_band_joins_the_halves() {
+        let (rows, cols, radius) = (61usize, 61usize, 28.0);
+        let inside = |r: usize, c: usize| {
+            let (x, y) = (c as f64 - 30.0, 30.0 - r as f64);
+            x * x + y * y < radius * radius
+        };
+        let height = |r: usize, c: usize| {
+            let (x, y) = (c as f64 - 30.0, 30.0 - r as f64);
+            (radius * radius - x * x - y * y).max(0.0).sqrt()
+        };
+        let truth = Array2::from_shape_fn((rows, cols), |(r, c)| height(r, c));
+        let normals = Array2::from_shape_fn((rows, cols), |(r, c)| {
+            Vector3::new(c as f64 - 30.0, 30.0 - r as f64, height(r, c)).normalize()
+        });
+        let band = |r: usize| (27..34).contains(&r);
+        let measured = Array2::from_shape_fn((rows, cols), |(r, c)| inside(r, c) && !band(r));
+        let lights = [Vector3::new(0.5, 0.1, 0.86), Vector3::new(-0.4, 0.3, 0.87)];
+        let planes: Vec<NormalPlane> = measured
+            .indexed_iter()
+            .filter(|&((r, c), _)| inside(r, c) && band(r))
+            .filter(|&((r, c), _)| lights.iter().all(|l| normals[(r, c)].dot(l) > 0.05))
+            .map(|((r, c), _)| {
+                let n = normals[(r, c)];
+                let (a1, a2) = (n.dot(&lights[0]), n.dot(&lights[1]));
+                NormalPlane {
+                    pixel: (r, c),
+                    across: lights[0] * a2 - lights[1] * a1,
+                    towards: lights[0] + lights[1],
+                }
+            })
+            .collect();
+        let field = field_of(&normals, &measured);
+        let config = IntegrateConfig {
+            filter: ArtefactFilter { max_jump_mm: None },
+            ..IntegrateConfig::default()
+        };
+        let projection = Projection::Orthographic {
+            pitch_mm: 1.0,
+            size: (cols, rows),
+        };
+        let evidence = SurfaceEvidence {
+            field: &field,
+            planes: &planes,
+            fill: None,
+        };
+        let joined = integrate_surface(&evidence, &projection, &config, None).unwrap();
+        assert_eq!(joined.pieces, 1);
+        let in_band = Array2::from_shape_fn((rows, cols), |(r, c)| {
+            joined.confidence[(r, c)] == Confidence::TwoLeds
+        });
+        assert!(in_band.iter().filter(|&&b| b).count() > 250);
+        let everywhere = joined.kept.clone();
+        let e_all = rmse(&joined.depth.depth_mm, &truth, &everywhere);
+        let e_band = rmse(&joined.depth.depth_mm, &truth, &in_band);
+        // The rim (slopes up to 20) dominates `all`; measured 0.36 px and 0.028 px.
+        assert!(
+            e_all < 0.45 && e_band < 0.05,
+            "all {e_all} px, band {e_band} px"
+        );
+        let apart = integrate_normals(&field, 1.0, &config, None).unwrap();
+        assert_eq!(apart.pieces, 2);
+    }
+
+    /// A hole with no information inside a paraboloid is filled, marked as such, and close to
+    /// the surface.
+    #[test]
+    fn holes_are_filled() {
+        let (rows, cols) = (50usize, 50usize);
+        let truth = Array2::from_shape_fn((rows, cols), |(r, c)| {
+            0.01 * ((c as f64 - 25.0).powi(2) + (r as f64 - 25.0).powi(2))
+        });
+        let normals = Array2::from_shape_fn((rows, cols), |(r, c)| {
+            normal(0.02 * (c as f64 - 25.0), -0.02 * (r as f64 - 25.0))
+        });
+        let hole = Array2::from_shape_fn((rows, cols), |(r, c)| {
+            (20..27).contains(&r) && (18..30).contains(&c)
+        });
+        let measured = hole.mapv(|h| !h);
+        let field = field_of(&normals, &measured);
+        let out = integrate_surface(
+            &SurfaceEvidence {
+                field: &field,
+                planes: &[],
+                fill: Some(&hole),
+            },
+            &Projection::Orthographic {
+                pitch_mm: 1.0,
+                size: (cols, rows),
+            },
+            &IntegrateConfig {
+                integrator: Integrator::Bilateral,
+                ..IntegrateConfig::default()
+            },
+            None,
+        )
+        .unwrap();
+        assert_eq!(out.pieces, 1);
+        assert!(
+            hole.indexed_iter()
+                .all(|(p, &h)| !h || out.confidence[p] == Confidence::Filled)
+        );
+        let e = rmse(&out.depth.depth_mm, &truth, &hole);
+        assert!(e < 0.05, "hole rmse {e}");
+    }
+
+    /// A sphere seen by a pinhole camera with distortion: its exact normals integrate in
+    /// log depth to the true depth; read as orthographic they do not.
+    #[test]
+    fn perspective_sphere_integrates_in_log_depth() {
+        let camera = Camera {
+            width: 90,
+            height: 70,
+            fps: 960.0,
+            distance_mm: 200.0,
+            fov_deg: None,
+            pixel_pitch_mm: None,
+            intrinsics: Some(Intrinsics {
+                fx: 600.0,
+                fy: 600.0,
+                cx: 44.0,
+                cy: 35.0,
+                k1: -0.2,
+                k2: 0.0,
+            }),
+        };
+        let radius = 20.0;
+        let shape = (camera.height, camera.width);
+        let mut truth = Array2::from_elem(shape, f64::NAN);
+        let mut normals = Array2::from_elem(shape, Vector3::zeros());
+        for r in 0..shape.0 {
+            for c in 0..shape.1 {
+                let ray = camera.ray(r as f64, c as f64);
+                // |base + z·slope| = R, the root nearer the camera.
+                let (a, b, k) = (
+                    ray.slope.norm_squared(),
+                    2.0 * ray.base.dot(&ray.slope),
+                    ray.base.norm_squared() - radius * radius,
+                );
+                let disc = b * b - 4.0 * a * k;
+                if disc > 0.0 {
+                    let z = (-b + disc.sqrt()) / (2.0 * a);
+                    truth[(r, c)] = z;
+                    normals[(r, c)] = ray.at(z) / radius;
+                }
+            }
+        }
+        // Leave out the grazing rim, where slopes are clipped.
+        let mask = Array2::from_shape_fn(shape, |(r, c)| {
+            truth[(r, c)].is_finite()
+                && normals[(r, c)].dot(&camera.ray(r as f64, c as f64).towards_camera()) > 0.3
+        });
+        let field = field_of(&normals, &mask);
+        let config = IntegrateConfig {
+            integrator: Integrator::LeastSquares,
+            ..IntegrateConfig::default()
+        };
+        let evidence = SurfaceEvidence {
+            field: &field,
+            planes: &[],
+            fill: None,
+        };
+        let out = integrate_surface(&evidence, &camera.projection(), &config, None).unwrap();
+        // Log depth fixes the distance D − z only up to a scale (the near-field stage chooses
+        // it): compare after the best scale, s = Σab / Σa² for a = D − z_got, b = D − z_true.
+        let d = camera.distance_mm;
+        let (mut ab, mut aa) = (0.0, 0.0);
+        for (p, &m) in mask.indexed_iter() {
+            let z = f64::from(out.depth.depth_mm[p]);
+            if m && z.is_finite() {
+                ab += (d - z) * (d - truth[p]);
+                aa += (d - z) * (d - z);
+            }
+        }
+        let scale = ab / aa;
+        let scaled = out
+            .depth
+            .depth_mm
+            .mapv(|z| (d - scale * (d - f64::from(z))) as f32);
+        let e = rmse(&scaled, &truth, &mask);
+        let ortho = integrate_normals(&field, camera.pitch_mm(), &config, None).unwrap();
+        let e_ortho = rmse(&ortho.depth.depth_mm, &truth, &mask);
+        assert!(
+            e < 0.05 && e_ortho > 1.5 * e,
+            "perspective {e} mm, orthographic reading {e_ortho} mm"
+        );
+    }
+
+    #[test]
+    fn bad_settings_and_unusable_normals_are_named() {
+        let mask = Array2::from_elem((5, 6), true);
+        let field = NormalField {
+            normals: Array3::zeros((5, 6, 3)),
+            albedo: Array2::ones((5, 6)),
+            mask,
+        };
+        let err = integrate_normals(&field, 1.0, &IntegrateConfig::default(), None).unwrap_err();
+        assert!(
+            matches!(
+                err,
+                IntegrateError::NoUsableNormals {
+                    zero: 30,
+                    facing_away: 0
+                }
+            ),
+            "{err}"
+        );
+        for lambda in [f64::NAN, -0.06, 0.0, f64::INFINITY] {
+            let config = IntegrateConfig {
+                lambda,
+                ..IntegrateConfig::default()
+            };
+            let err = config.validate().unwrap_err();
+            assert!(err.to_string().contains("lambda"), "{err}");
+            assert!(integrate_normals(&field, 1.0, &config, None).is_err());
+        }
     }
 }

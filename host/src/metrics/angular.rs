@@ -1,6 +1,8 @@
 //! Angular normal errors and normals of a depth map (central differences).
 
 use super::MetricsError;
+use crate::rig::Projection;
+use nalgebra::Vector3;
 use ndarray::{Array2, Array3};
 
 /// Angular accuracy of a normal field.
@@ -68,35 +70,59 @@ pub fn compare_normals(
     })
 }
 
-/// Unit normals of a depth map (mm, NaN = none) with pitch h: n ∝ (−∂z/∂x, −∂z/∂y, 1) by
-/// central differences (one-sided at edges), y up; NaN where a neighbour is missing on both sides.
+/// Unit normals of a depth map (mm, NaN = none) on an orthographic grid of pitch h:
+/// n ∝ (−∂z/∂x, −∂z/∂y, 1) by central differences (one-sided at edges), y up; NaN where a
+/// neighbour is missing on both sides.
 pub fn normals_from_depth(depth: &Array2<f32>, pitch_mm: f64) -> Array3<f32> {
     let (rows, cols) = depth.dim();
-    let get = |r: isize, c: isize| -> Option<f64> {
+    normals_from_depth_seen_by(
+        depth,
+        &Projection::Orthographic {
+            pitch_mm,
+            size: (cols, rows),
+        },
+    )
+}
+
+/// Unit normals of a depth map seen through `projection`: the cross product of the central
+/// (one-sided at edges) differences of the pixels' 3-D points along the columns and up the rows,
+/// turned towards the camera; NaN where a neighbour is missing on both sides.
+pub fn normals_from_depth_seen_by(depth: &Array2<f32>, projection: &Projection) -> Array3<f32> {
+    let (rows, cols) = depth.dim();
+    let point = |r: isize, c: isize| -> Option<Vector3<f64>> {
         if r < 0 || c < 0 || r as usize >= rows || c as usize >= cols {
             return None;
         }
-        let v = depth[(r as usize, c as usize)];
-        v.is_finite().then_some(f64::from(v))
+        let z = depth[(r as usize, c as usize)];
+        z.is_finite()
+            .then(|| projection.ray(r as f64, c as f64).at(f64::from(z)))
     };
-    let diff = |minus: Option<f64>, centre: f64, plus: Option<f64>| match (minus, plus) {
-        (Some(m), Some(p)) => Some((p - m) / 2.0),
-        (None, Some(p)) => Some(p - centre),
-        (Some(m), None) => Some(centre - m),
-        (None, None) => None,
-    };
+    let diff =
+        |minus: Option<Vector3<f64>>, centre: Vector3<f64>, plus: Option<Vector3<f64>>| match (
+            minus, plus,
+        ) {
+            (Some(m), Some(p)) => Some((p - m) / 2.0),
+            (None, Some(p)) => Some(p - centre),
+            (Some(m), None) => Some(centre - m),
+            (None, None) => None,
+        };
     let mut out = Array3::from_elem((rows, cols, 3), f32::NAN);
     for r in 0..rows as isize {
         for c in 0..cols as isize {
-            let Some(z) = get(r, c) else { continue };
-            let dx = diff(get(r, c - 1), z, get(r, c + 1));
-            // y up: row − 1 is +y.
-            let dy = diff(get(r + 1, c), z, get(r - 1, c));
-            if let (Some(dx), Some(dy)) = (dx, dy) {
-                let n = [-dx / pitch_mm, -dy / pitch_mm, 1.0];
-                let len = (n[0] * n[0] + n[1] * n[1] + 1.0).sqrt();
-                for j in 0..3 {
-                    out[(r as usize, c as usize, j)] = (n[j] / len) as f32;
+            let Some(p) = point(r, c) else { continue };
+            let along = diff(point(r, c - 1), p, point(r, c + 1));
+            // Up the image: row − 1 is +y.
+            let up = diff(point(r + 1, c), p, point(r - 1, c));
+            if let (Some(a), Some(u)) = (along, up) {
+                let mut n = a.cross(&u);
+                let towards = projection.ray(r as f64, c as f64).slope;
+                if n.dot(&towards) < 0.0 {
+                    n = -n;
+                }
+                if let Some(n) = n.try_normalize(0.0) {
+                    for j in 0..3 {
+                        out[(r as usize, c as usize, j)] = n[j] as f32;
+                    }
                 }
             }
         }
@@ -121,5 +147,33 @@ mod tests {
         let e = compare_normals(&n, &flat, &mask).unwrap();
         let expected = (1.0 / len).acos().to_degrees();
         assert!((e.mean_deg - expected).abs() < 1e-4 && (e.median_deg - expected).abs() < 1e-4);
+    }
+
+    /// A plane seen by a pinhole camera: the normals of its depth map are the plane's normal.
+    #[test]
+    fn normals_of_a_plane_seen_in_perspective() {
+        let projection = Projection::Perspective {
+            intrinsics: crate::rig::Intrinsics {
+                fx: 300.0,
+                fy: 300.0,
+                cx: 10.0,
+                cy: 8.0,
+                k1: -0.2,
+                k2: 0.0,
+            },
+            distance_mm: 200.0,
+        };
+        let n = Vector3::new(0.2, -0.3, 0.9).normalize();
+        let depth = Array2::from_shape_fn((16, 20), |(r, c)| {
+            let ray = projection.ray(r as f64, c as f64);
+            // n·X = 0 through the origin.
+            (-n.dot(&ray.base) / n.dot(&ray.slope)) as f32
+        });
+        let got = normals_from_depth_seen_by(&depth, &projection);
+        for (r, c) in [(0, 0), (8, 10), (15, 19)] {
+            for j in 0..3 {
+                assert!((f64::from(got[(r, c, j)]) - n[j]).abs() < 1e-4, "{:?}", got);
+            }
+        }
     }
 }

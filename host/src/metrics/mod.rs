@@ -1,13 +1,13 @@
 //! Accuracy figures against ground truth (SPEC §6, §8): depth RMSE after removing the best
 //! constant offset, NRMSE = RMSE / (max − min of the true depth), % of the surface reconstructed,
 //! mean/median angular normal error, and per-pixel error maps. Ground truth is a depth map or a
-//! mesh rendered to depth in the rig's camera by a small orthographic rasteriser ([`mesh`]).
+//! mesh rendered to depth in the rig's camera ([`mesh`]).
 
 pub mod angular;
 pub mod depth;
 pub mod mesh;
 
-pub use angular::{AngularErrors, compare_normals, normals_from_depth};
+pub use angular::{AngularErrors, compare_normals, normals_from_depth, normals_from_depth_seen_by};
 pub use depth::{DepthErrors, compare_depth};
 pub use mesh::{MeshDepth, load_mesh_triangles, render_mesh_depth};
 
@@ -29,11 +29,6 @@ pub enum MetricsError {
     #[error("no pixel has both an estimate and ground truth")]
     NoOverlap,
     /// A mesh file could not be read.
-    #[error("mesh {path}: {reason}")]
-    Mesh {
-        /// The file.
-        path: std::path::PathBuf,
-        /// What went wrong.
-        reason: String,
-    },
+    #[error(transparent)]
+    Mesh(#[from] crate::mesh::MeshError),
 }

@@ -1,8 +1,11 @@
-//! Light vectors per pixel: the distant model L_i = L_i(0) or the near-field L_i(X(p)) with
-//! X(p) = (x, y, z(p)) from the current depth estimate (SPEC §5, thesis Eq. 3.3).
+//! Light and view vectors per pixel: the distant model L_i = L_i(0) or the near-field L_i(X(p))
+//! with X(p) the point of pixel p's ray at the current depth estimate z(p) (SPEC §5, thesis
+//! Eq. 3.3; for a perspective camera the ray runs through the camera centre), and checks of the
+//! light geometry (three independent directions are needed).
 
-use crate::rig::Rig;
-use nalgebra::Vector3;
+use super::PhotometricError;
+use crate::rig::{Projection, Rig};
+use nalgebra::{DMatrix, Vector3};
 use ndarray::Array2;
 
 /// Where each pixel's light vectors come from.
@@ -18,6 +21,8 @@ pub enum Lights<'a> {
         depth_mm: Option<&'a Array2<f32>>,
         /// Factor applied to every vector (see [`Lights::near_field_scale`]).
         scale: f64,
+        /// Every point moved this far towards the camera (see [`moved_depth`]).
+        offset_mm: f64,
     },
 }
 
@@ -29,6 +34,25 @@ impl<'a> Lights<'a> {
             rig,
             depth_mm,
             scale: Self::near_field_scale(rig),
+            offset_mm: 0.0,
+        }
+    }
+
+    /// The same lights with every point moved `offset_mm` towards the camera.
+    pub fn moved(self, offset_mm: f64) -> Self {
+        match self {
+            Lights::NearField {
+                rig,
+                depth_mm,
+                scale,
+                ..
+            } => Lights::NearField {
+                rig,
+                depth_mm,
+                scale,
+                offset_mm,
+            },
+            distant => distant,
         }
     }
 }
@@ -71,17 +95,129 @@ impl Lights<'_> {
                 rig,
                 depth_mm,
                 scale,
+                offset_mm,
             } => {
-                let (x, y) = rig.camera.pixel_centre_xy(row as f64, col as f64);
                 let z = depth_mm
                     .and_then(|d| d.get((row, col)).copied())
                     .filter(|z| z.is_finite())
                     .map_or(0.0, f64::from);
-                let point = Vector3::new(x, y, z);
+                let z = moved_depth(z, *offset_mm, &rig.camera.projection());
+                let point = rig.camera.ray(row as f64, col as f64).at(z);
                 for (slot, led) in out.iter_mut().zip(&rig.leds) {
                     *slot = led.light_vector_at(&point) * *scale;
                 }
             }
         }
     }
+
+    /// Unit vector from pixel (row, col)'s surface point towards the camera.
+    pub fn view_at(&self, row: usize, col: usize) -> Vector3<f64> {
+        match self {
+            Lights::Distant(_) => Vector3::z(),
+            Lights::NearField { rig, .. } => {
+                rig.camera.ray(row as f64, col as f64).towards_camera()
+            }
+        }
+    }
+
+    /// One light vector per LED for geometry checks: the distant vectors, or L_i at the origin.
+    fn representative(&self) -> Vec<Vector3<f64>> {
+        match self {
+            Lights::Distant(v) => v.clone(),
+            Lights::NearField { rig, .. } => rig.distant_light_vectors(),
+        }
+    }
+
+    /// Checks the vectors are finite and non-zero and that a near-field rig and depth fit
+    /// images of `shape`.
+    pub fn check(&self, shape: (usize, usize)) -> Result<(), PhotometricError> {
+        match self {
+            Lights::Distant(v) => {
+                for (i, l) in v.iter().enumerate() {
+                    if !l.iter().all(|c| c.is_finite()) || l.norm() == 0.0 {
+                        return Err(PhotometricError::BadLight(i + 1));
+                    }
+                }
+            }
+            Lights::NearField { rig, depth_mm, .. } => {
+                let cam = (rig.camera.height, rig.camera.width);
+                if cam != shape {
+                    return Err(PhotometricError::SizeMismatch {
+                        what: "LED images vs the rig's camera".into(),
+                        got_rows: shape.0,
+                        got_cols: shape.1,
+                        rows: cam.0,
+                        cols: cam.1,
+                    });
+                }
+                if let Some(d) = depth_mm {
+                    super::check_shape("depth estimate", d, shape)?;
+                }
+            }
+        }
+        Ok(())
+    }
+}
+
+/// Depth `z` moved `offset` mm towards the camera: a shift for an orthographic camera, a scale
+/// about the camera centre for a perspective one (the plane z = 0 moves by `offset`), so that
+/// a surface integrated from normals keeps its shape.
+pub fn moved_depth(z: f64, offset: f64, projection: &Projection) -> f64 {
+    match projection {
+        Projection::Orthographic { .. } => z + offset,
+        Projection::Perspective { distance_mm, .. } => {
+            distance_mm - (distance_mm - z) * (1.0 - offset / distance_mm)
+        }
+    }
+}
+
+/// Numerical rank of the light vectors (singular values above 10⁻⁶ of the largest).
+pub(crate) fn light_rank(lights: &Lights) -> usize {
+    let v = lights.representative();
+    if v.is_empty() {
+        return 0;
+    }
+    let m = DMatrix::from_fn(v.len(), 3, |i, j| {
+        v[i][j] / v[i].norm().max(f64::MIN_POSITIVE)
+    });
+    let singular = m.singular_values();
+    let largest = singular.max();
+    singular.iter().filter(|&&s| s > 1e-6 * largest).count()
+}
+
+/// What is wrong with the light geometry, in words: its rank, parallel (duplicated) pairs and
+/// vectors pointing away from the camera.
+pub(crate) fn describe_geometry(lights: &Lights) -> String {
+    let v = lights.representative();
+    let mut parts = vec![match light_rank(lights) {
+        0 | 1 => "all light vectors point the same way".to_string(),
+        2 => "the light vectors span only a plane (coplanar or collinear LEDs)".to_string(),
+        _ => "the light vectors span space".to_string(),
+    }];
+    for i in 0..v.len() {
+        for j in i + 1..v.len() {
+            let (a, b) = (v[i].normalize(), v[j].normalize());
+            if a.cross(&b).norm() < 1e-6 {
+                let how = if a.dot(&b) > 0.0 {
+                    "parallel (duplicated?)"
+                } else {
+                    "opposite"
+                };
+                parts.push(format!("LEDs {} and {} are {how}", i + 1, j + 1));
+            }
+        }
+    }
+    let away: Vec<String> = v
+        .iter()
+        .enumerate()
+        .filter(|(_, l)| l.z < 0.0)
+        .map(|(i, _)| (i + 1).to_string())
+        .collect();
+    if !away.is_empty() {
+        parts.push(format!(
+            "LED {} points away from the camera (negative intensity?)",
+            away.join(", ")
+        ));
+    }
+    parts.join("; ")
 }

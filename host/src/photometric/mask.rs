@@ -1,13 +1,19 @@
-//! Automatic object mask from the decoded albedo and the per-pixel signal-to-noise ratio.
+//! The object: which pixels belong to it, and the holes it encloses.
 //!
-//! The thesis needed a black background; here a pixel belongs to the object when it was solved
-//! (lit by enough LEDs), its brightest LED stands `snr_threshold` noise σ above zero (or, without
-//! a noise map, above `relative_brightness` of the image's bright pixels) and its albedo reaches
+//! The thesis needed a black background; here, unless a mask is given, a pixel belongs to the
+//! object when it was solved from three or more LEDs or lies on a two-LED circle, its brightest
+//! LED stands `snr_threshold` noise σ above zero (or, without a noise map, above
+//! `relative_brightness` of the image's bright pixels) and, where an albedo is known, it reaches
 //! `relative_albedo` of the object's. Specks smaller than `min_component_pixels` are removed.
+//! Pixels the object encloses (pieces of the rest no larger than `max_hole_fraction` of the
+//! object, not touching the image border) are holes: shadowed or flagged pixels of the object
+//! that the integrator fills. With a given mask the object is its solved and two-LED pixels and
+//! their holes inside it.
 
+use super::solve::Outcome;
+use crate::regions::{enclosed_holes, remove_small};
 use crate::types::LedImages;
 use ndarray::Array2;
-use std::collections::VecDeque;
 
 /// Thresholds of the automatic mask.
 #[derive(Debug, Clone, PartialEq, serde::Serialize, serde::Deserialize)]
@@ -20,6 +26,8 @@ pub struct MaskConfig {
     pub relative_albedo: f32,
     /// Connected pieces smaller than this are dropped.
     pub min_component_pixels: usize,
+    /// Largest hole the integrator fills, as a fraction of the object's pixels.
+    pub max_hole_fraction: f64,
 }
 
 impl Default for MaskConfig {
@@ -29,6 +37,7 @@ impl Default for MaskConfig {
             relative_brightness: 0.05,
             relative_albedo: 0.1,
             min_component_pixels: 64,
+            max_hole_fraction: 0.25,
         }
     }
 }
@@ -38,11 +47,48 @@ fn quantile(values: impl Iterator<Item = f32>, q: f64) -> f32 {
     crate::stats::quantile(values, q).unwrap_or(0.0)
 }
 
-/// Object mask from LED images, solved albedo, the solved-pixel mask and an optional noise map.
-pub fn object_mask(
+/// The object and its holes.
+#[derive(Debug, Clone)]
+pub(crate) struct ObjectRegion {
+    /// Object pixels, holes included.
+    pub object: Array2<bool>,
+    /// Holes: object pixels with neither a normal nor a two-LED circle.
+    pub fill: Array2<bool>,
+}
+
+/// The object from the solve's outcomes (module docs).
+pub(crate) fn object_region(
     images: &LedImages,
     albedo: &Array2<f32>,
-    solved: &Array2<bool>,
+    outcome: &Array2<Outcome>,
+    given: Option<&Array2<bool>>,
+    noise: Option<&Array2<f32>>,
+    config: &MaskConfig,
+) -> ObjectRegion {
+    let usable = |o: &Outcome| matches!(o, Outcome::Solved(..) | Outcome::TwoLeds(..));
+    let mut core = match given {
+        Some(m) => Array2::from_shape_fn(m.dim(), |p| m[p] && usable(&outcome[p])),
+        None => found_object(images, albedo, outcome, noise, config),
+    };
+    if given.is_none() {
+        remove_small(&mut core, config.min_component_pixels);
+    }
+    let size = core.iter().filter(|&&m| m).count();
+    let max_hole = (config.max_hole_fraction * size as f64) as usize;
+    let mut fill = enclosed_holes(&core, max_hole);
+    if let Some(m) = given {
+        fill.zip_mut_with(m, |f, &inside| *f &= inside);
+    }
+    let mut object = core;
+    object.zip_mut_with(&fill, |o, &f| *o |= f);
+    ObjectRegion { object, fill }
+}
+
+/// Usable pixels that pass the brightness and albedo tests (module docs).
+fn found_object(
+    images: &LedImages,
+    albedo: &Array2<f32>,
+    outcome: &Array2<Outcome>,
     noise: Option<&Array2<f32>>,
     config: &MaskConfig,
 ) -> Array2<bool> {
@@ -55,94 +101,68 @@ pub fn object_mask(
             .fold(f32::NEG_INFINITY, f32::max)
     });
     let bright_ref = quantile(brightest.iter().copied(), 0.99);
-    let albedo_ref = quantile(
-        albedo
-            .iter()
-            .zip(solved.iter())
-            .filter(|(_, s)| **s)
-            .map(|(a, _)| *a),
-        0.99,
-    );
-    let mut mask = Array2::from_shape_fn(shape, |p| {
-        if !solved[p] {
-            return false;
-        }
+    let albedo_ref = quantile(albedo.iter().copied(), 0.99);
+    Array2::from_shape_fn(shape, |p| {
+        let albedo_ok = match outcome[p] {
+            Outcome::Solved(..) => albedo[p] >= config.relative_albedo * albedo_ref,
+            Outcome::TwoLeds(..) => true,
+            _ => return false,
+        };
         let signal_ok = match noise {
             Some(n) => brightest[p] >= config.snr_threshold * n[p].max(f32::MIN_POSITIVE),
             None => brightest[p] >= config.relative_brightness * bright_ref,
         };
-        signal_ok && albedo[p] >= config.relative_albedo * albedo_ref
-    });
-    remove_small_components(&mut mask, config.min_component_pixels);
-    mask
-}
-
-/// Clears 4-connected pieces of `mask` with fewer than `min_pixels` pixels.
-pub fn remove_small_components(mask: &mut Array2<bool>, min_pixels: usize) {
-    let (rows, cols) = mask.dim();
-    let mut seen = Array2::from_elem((rows, cols), false);
-    let mut queue = VecDeque::new();
-    let mut piece = Vec::new();
-    for start in 0..rows * cols {
-        let p = (start / cols, start % cols);
-        if !mask[p] || seen[p] {
-            continue;
-        }
-        piece.clear();
-        seen[p] = true;
-        queue.push_back(p);
-        while let Some((r, c)) = queue.pop_front() {
-            piece.push((r, c));
-            let neighbours = [
-                (r.wrapping_sub(1), c),
-                (r + 1, c),
-                (r, c.wrapping_sub(1)),
-                (r, c + 1),
-            ];
-            for q in neighbours {
-                if q.0 < rows && q.1 < cols && mask[q] && !seen[q] {
-                    seen[q] = true;
-                    queue.push_back(q);
-                }
-            }
-        }
-        if piece.len() < min_pixels {
-            for &q in &piece {
-                mask[q] = false;
-            }
-        }
-    }
+        signal_ok && albedo_ok
+    })
 }
 
 #[cfg(test)]
 mod tests {
     use super::*;
+    use nalgebra::Vector3;
 
+    /// A bright disc with a dark hole and a bright speck: the object is the disc, the speck is
+    /// dropped and the hole is kept for the integrator to fill.
     #[test]
-    fn finds_bright_disc_and_drops_specks() {
+    fn finds_the_disc_its_hole_and_drops_specks() {
         let shape = (40, 40);
-        let disc = Array2::from_shape_fn(shape, |(r, c)| {
+        let inside = |(r, c): (usize, usize)| {
             let d2 = (r as f32 - 20.0).powi(2) + (c as f32 - 20.0).powi(2);
-            if d2 < 100.0 { 0.5 } else { 0.001 }
-        });
-        let mut speck = disc.clone();
-        speck[(2, 2)] = 0.5;
-        let images = LedImages {
-            images: vec![speck.clone(), disc.clone(), disc.clone()],
+            d2 < 100.0
         };
-        let solved = Array2::from_elem(shape, true);
+        let hole = |(r, c): (usize, usize)| (19..22).contains(&r) && (19..22).contains(&c);
+        let value = Array2::from_shape_fn(shape, |p| {
+            if (inside(p) && !hole(p)) || p == (2, 2) {
+                0.5
+            } else {
+                0.001
+            }
+        });
+        let images = LedImages {
+            images: vec![value.clone(), value.clone(), value.clone()],
+        };
+        let outcome = value.mapv(|v| {
+            if v > 0.1 {
+                Outcome::Solved(Vector3::z(), 0.5, 3)
+            } else {
+                Outcome::Dark
+            }
+        });
+        let albedo = value.mapv(|v| if v > 0.1 { 0.5 } else { f32::NAN });
         let noise = Array2::from_elem(shape, 0.002f32);
-        let mask = object_mask(
+        let region = object_region(
             &images,
-            &speck,
-            &solved,
+            &albedo,
+            &outcome,
+            None,
             Some(&noise),
             &MaskConfig::default(),
         );
-        assert!(mask[(20, 20)]);
-        assert!(!mask[(0, 0)]);
-        assert!(!mask[(2, 2)], "speck removed");
-        let count = mask.iter().filter(|&&m| m).count();
+        assert!(region.object[(20, 20)] && region.fill[(20, 20)]);
+        assert!(!region.object[(0, 0)] && !region.fill[(0, 0)]);
+        assert!(!region.object[(2, 2)], "speck removed");
+        assert_eq!(region.fill.iter().filter(|&&f| f).count(), 9);
+        let count = region.object.iter().filter(|&&m| m).count();
         assert!((250..=330).contains(&count), "{count}");
     }
 }

@@ -1,17 +1,21 @@
 //! Photometric stereo: per-LED images → unit normals and albedo (SPEC §5, thesis Eqs. 3.1–3.5).
 //!
 //! Lambertian model A_i(p) = ρ(p) · max(0, n(p)·L_i(p)). Per pixel the LEDs that light it are
-//! chosen ([`solve`]), G = L⁺A is solved by least squares over them, ρ = |G| and n = G/ρ. A pixel
-//! lit by fewer than three LEDs is flagged, never invented. Light vectors come from the distant
-//! model or, in the near field, from the current depth estimate ([`lights`]). Unless a mask is
-//! supplied the object is found from the albedo and the per-pixel signal-to-noise ratio ([`mask`]).
+//! chosen by a statistical test against each LED's noise ([`solve`], [`noise`]), G = L⁺A is
+//! solved by weighted least squares over them, ρ = |G| and n = G/ρ. A pixel lit by exactly two
+//! LEDs yields the circle its normal lies on, for the integrator to close; fewer is never
+//! invented. Light vectors come from the distant model or, in the near field, from the current
+//! depth estimate ([`lights`]). Unless a mask is supplied the object is found from the albedo and
+//! the per-pixel signal-to-noise ratio, with its holes ([`mask`]).
 
 pub mod lights;
 pub mod mask;
+pub mod noise;
 pub mod solve;
 
 pub use lights::Lights;
-pub use mask::{MaskConfig, object_mask};
+pub use mask::MaskConfig;
+pub use noise::led_noise_gains;
 pub use solve::{PhotometricResult, estimate_normals, model_misfit};
 
 use thiserror::Error;
@@ -19,10 +23,17 @@ use thiserror::Error;
 /// Settings of the per-pixel solve.
 #[derive(Debug, Clone, PartialEq, serde::Serialize, serde::Deserialize)]
 pub struct PhotometricConfig {
-    /// An LED counts as shadowed when its value is below this fraction of the pixel's brightest LED.
+    /// Without a noise map: an LED counts as shadowed below this fraction of the pixel's
+    /// brightest LED.
     pub shadow_fraction: f32,
-    /// An LED counts as shadowed when its value is below this many noise σ (needs a noise map).
+    /// With a noise map: an LED counts as shadowed below this many of its noise σ.
     pub shadow_sigmas: f32,
+    /// With a noise map and four or more lit LEDs: the Lambertian fit's χ² must stay below the
+    /// quantile of this one-sided normal deviate (3.7 ≈ a false alarm in 10⁴ pixels).
+    pub consistency_sigmas: f32,
+    /// Relative model error ε added to each LED's noise in the consistency test (light-vector
+    /// and gain errors of a few percent).
+    pub model_error: f32,
     /// Fewest lit LEDs a pixel needs for a normal (3 for a unique solution).
     pub min_lit_leds: usize,
     /// Automatic object mask settings (used when no mask is given).
@@ -34,6 +45,8 @@ impl Default for PhotometricConfig {
         Self {
             shadow_fraction: 0.02,
             shadow_sigmas: 3.0,
+            consistency_sigmas: 3.7,
+            model_error: 0.03,
             min_lit_leds: 3,
             mask: MaskConfig::default(),
         }
@@ -75,6 +88,12 @@ pub enum PhotometricError {
     /// The mask (given or found) holds no pixel that can be solved.
     #[error("empty mask: {0}")]
     EmptyMask(String),
+    /// The light vectors cannot determine normals (fewer than three independent directions).
+    #[error("singular light set-up: {0}")]
+    SingularLights(String),
+    /// Pixels are lit but the Lambertian model cannot explain them.
+    #[error("no pixel could be solved: {0}")]
+    Unsolvable(String),
 }
 
 /// Checks that `array` has `shape`; names it `what` in the error.

@@ -1,42 +1,296 @@
-//! The per-pixel, shadow-aware least-squares solve G = L⁺A, ρ = |G|, n = G/ρ (SPEC §5).
+//! The per-pixel solve G = L⁺A, ρ = |G|, n = G/ρ (SPEC §5) with a statistical shadow test.
 //!
-//! For each pixel the LEDs whose value is below `shadow_fraction` of the brightest one (or below
-//! `shadow_sigmas` noise σ) are treated as shadowed and left out; the normal equations
-//! (Σ L_i L_iᵀ) G = Σ A_i L_i over the remaining LEDs are solved (3×3). LEDs the solution itself
-//! says cannot light the pixel (n·L_i ≤ 0) are dropped and the pixel solved again. Pixels with
-//! fewer than `min_lit_leds` usable LEDs are flagged, not filled in. For distant lights the 3×3
-//! inverses are cached per subset of lit LEDs.
+//! Which LEDs light a pixel is decided from its values and their noise ([`PixelSolver`]):
+//!
+//! 1. LED i counts as lit when A_i > k·σ_i, σ_i = g_i·σ(p) the pixel's level noise times the
+//!    LED's noise gain ([`super::noise`]); k = `shadow_sigmas`. Without a noise map, when A_i >
+//!    `shadow_fraction` of the pixel's brightest LED.
+//! 2. G solves the weighted normal equations (Σ w_i L_i L_iᵀ) G = Σ w_i A_i L_i over the lit LEDs,
+//!    w_i = 1/g_i² (3×3; cached per lit subset for distant lights).
+//! 3. Lit LEDs the solution says cannot light the pixel (n·L_i ≤ 0) are dropped and the pixel
+//!    solved again.
+//! 4. With four or more lit LEDs and a noise map the Lambertian fit must be consistent:
+//!    χ² = Σ r_i²/(σ_i² + (ε·A_i)²) of the residuals r = A − L·G against the χ² quantile of
+//!    `consistency_sigmas` (Wilson–Hilferty), ε the `model_error`. A failing pixel loses the one
+//!    LED that reads most below its prediction from the others (a partial shadow only darkens).
+//!
+//! A pixel left with three or more LEDs gets a normal and an albedo; one left with exactly two
+//! gets the circle its normal lies on ([`NormalPlane`]), which the integrator closes with the
+//! surface's integrability; fewer is dark. [`estimate_normals`] runs the phases: check the
+//! inputs, solve every pixel in parallel row bands, find the object and its holes ([`super::mask`]),
+//! and, when nothing could be solved, say why.
 
-use super::{Lights, PhotometricConfig, PhotometricError, check_shape, mask::object_mask};
-use crate::types::{LedImages, NormalField};
+use super::lights::{describe_geometry, light_rank};
+use super::mask::object_region;
+use super::{Lights, PhotometricConfig, PhotometricError, check_shape, noise::led_noise_gains};
+use crate::types::{LedImages, NormalField, NormalPlane};
 use nalgebra::{Matrix3, Vector3};
 use ndarray::{Array2, Array3};
 use rayon::prelude::*;
 
-/// Normals and albedo plus the number of LEDs each pixel was solved from.
+/// Normals and albedo plus what else photometric stereo learnt about each pixel.
 #[derive(Debug, Clone)]
 pub struct PhotometricResult {
-    /// Normals, albedo and the mask of solved pixels (inside the object mask).
+    /// Normals, albedo and the mask of pixels solved from three or more LEDs.
     pub field: NormalField,
-    /// LEDs used per pixel (0 where not solved).
+    /// LEDs used per pixel: ≥ 3 where solved, 2 for two-LED pixels, 0 or 1 elsewhere.
     pub lit_count: Array2<u8>,
-    /// The object mask used (given, or found automatically).
+    /// The object: solved and two-LED pixels (inside the given mask, if any) and its holes.
     pub object_mask: Array2<bool>,
+    /// Pixels of the object lit by exactly two LEDs.
+    pub planes: Vec<NormalPlane>,
+    /// Holes inside the object: pixels it encloses that no LED pair could describe.
+    pub fill: Array2<bool>,
+    /// Noise gain g_i of each LED image (1 without a noise map).
+    pub noise_gains: Vec<f64>,
+}
+
+/// What the solve found at one pixel.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub(crate) enum Outcome {
+    /// Outside the given mask.
+    Outside,
+    /// A value is NaN or infinite (e.g. flagged by the decoder).
+    Unusable,
+    /// Fewer than two LEDs light it.
+    Dark,
+    /// Lit by two LEDs: the normal is on a circle.
+    TwoLeds(Vector3<f64>, Vector3<f64>),
+    /// Normal, albedo and LEDs used.
+    Solved(Vector3<f64>, f64, u8),
+    /// Three or more LEDs light it but their light vectors do not span space.
+    Singular,
+    /// Every lit LED's solution contradicts it (e.g. light vectors pointing away).
+    Contradictory,
 }
 
 /// Image rows per parallel task.
 const ROWS_PER_TASK: usize = 8;
 
-/// One solved pixel: normal, albedo, LEDs used.
-type PixelSolution = Option<(Vector3<f64>, f64, u8)>;
-
 /// Largest LED count for which inverses are cached per lit subset (2^k entries).
 const MAX_CACHED_LEDS: usize = 10;
 
+/// The per-pixel decisions and solve of the module docs, prepared once per image set.
+pub(crate) struct PixelSolver {
+    config: PhotometricConfig,
+    gains: Vec<f64>,
+    weights: Vec<f64>,
+    with_noise: bool,
+    cache: Option<Vec<Option<Matrix3<f64>>>>,
+}
+
+impl PixelSolver {
+    /// A solver for `lights` with per-LED noise `gains`; `with_noise` when σ(p) will be given.
+    pub fn new(
+        lights: &Lights,
+        config: &PhotometricConfig,
+        gains: Vec<f64>,
+        with_noise: bool,
+    ) -> Self {
+        let weights: Vec<f64> = gains.iter().map(|g| 1.0 / (g * g)).collect();
+        let cache = match lights {
+            Lights::Distant(v) if v.len() <= MAX_CACHED_LEDS => Some(
+                (0..1usize << v.len())
+                    .map(|bits| {
+                        if bits.count_ones() < 3 {
+                            return None;
+                        }
+                        well_conditioned_inverse(&normal_matrix(v, &weights, bits))
+                    })
+                    .collect(),
+            ),
+            _ => None,
+        };
+        Self {
+            config: config.clone(),
+            gains,
+            weights,
+            with_noise,
+            cache,
+        }
+    }
+
+    /// Solves one pixel from its LED values `a`, light vectors `l`, view vector `v` (towards
+    /// the camera) and level noise `sigma`.
+    pub fn solve(&self, a: &[f64], l: &[Vector3<f64>], v: &Vector3<f64>, sigma: f64) -> Outcome {
+        if a.iter().any(|v| !v.is_finite()) {
+            return Outcome::Unusable;
+        }
+        let brightest = a.iter().copied().fold(0.0, f64::max);
+        if brightest <= 0.0 {
+            return Outcome::Dark;
+        }
+        let statistical = self.with_noise && sigma > 0.0;
+        let sigma_of = |i: usize| self.gains[i] * sigma;
+        let mut bits = 0usize;
+        for (i, (&v, li)) in a.iter().zip(l).enumerate() {
+            let threshold = if statistical {
+                f64::from(self.config.shadow_sigmas) * sigma_of(i)
+            } else {
+                f64::from(self.config.shadow_fraction) * brightest
+            };
+            if v > threshold && li.norm_squared() > 0.0 {
+                bits |= 1 << i;
+            }
+        }
+        let min_lit = self.config.min_lit_leds.max(3);
+        let mut dropped_inconsistent = false;
+        for _ in 0..4 {
+            let lit = bits.count_ones() as usize;
+            if lit == 2 {
+                return two_led_plane(a, l, bits);
+            }
+            if lit < min_lit {
+                return Outcome::Dark;
+            }
+            let Some(inverse) = self.inverse(l, bits) else {
+                return Outcome::Singular;
+            };
+            let mut b = Vector3::zeros();
+            for i in members(bits) {
+                b += l[i] * (self.weights[i] * a[i]);
+            }
+            let g = inverse * b;
+            let rho = g.norm();
+            if !rho.is_finite() || rho <= 0.0 {
+                return Outcome::Contradictory;
+            }
+            let n = g / rho;
+            if n.dot(v) <= 0.0 {
+                return Outcome::Contradictory; // a visible surface faces the camera
+            }
+            // Attached shadows: a lit LED the solution turns away from cannot light the pixel.
+            let refined = members(bits)
+                .filter(|&i| n.dot(&l[i]) <= 0.0)
+                .fold(bits, |acc, i| acc & !(1 << i));
+            if refined != bits {
+                if refined.count_ones() < 2 {
+                    return Outcome::Contradictory;
+                }
+                bits = refined;
+                continue;
+            }
+            if statistical && lit >= 4 && !dropped_inconsistent {
+                let variance = |i: usize| {
+                    sigma_of(i).powi(2) + (f64::from(self.config.model_error) * a[i]).powi(2)
+                };
+                let chi2: f64 = members(bits)
+                    .map(|i| (a[i] - g.dot(&l[i])).powi(2) / variance(i))
+                    .sum();
+                if chi2 > chi2_quantile(lit - 3, f64::from(self.config.consistency_sigmas)) {
+                    // The LED reading furthest below its prediction from the others.
+                    let darkest = members(bits)
+                        .filter_map(|i| {
+                            let others = bits & !(1 << i);
+                            let inv = self.inverse(l, others)?;
+                            let mut b = Vector3::zeros();
+                            for j in members(others) {
+                                b += l[j] * (self.weights[j] * a[j]);
+                            }
+                            let predicted = (inv * b).dot(&l[i]);
+                            let deficit = (predicted - a[i]) / variance(i).sqrt();
+                            (deficit > 0.0).then_some((deficit, i))
+                        })
+                        .max_by(|x, y| x.0.total_cmp(&y.0));
+                    if let Some((_, i)) = darkest {
+                        dropped_inconsistent = true;
+                        bits &= !(1 << i);
+                        continue;
+                    }
+                }
+            }
+            return Outcome::Solved(n, rho, lit as u8);
+        }
+        Outcome::Contradictory
+    }
+
+    /// (Σ_{i∈bits} w_i L_i L_iᵀ)⁻¹, cached for distant lights.
+    fn inverse(&self, l: &[Vector3<f64>], bits: usize) -> Option<Matrix3<f64>> {
+        match &self.cache {
+            Some(table) => table[bits],
+            None => well_conditioned_inverse(&normal_matrix(l, &self.weights, bits)),
+        }
+    }
+
+    /// Relative misfit Σ w‖A − L·G‖² and energy Σ w‖A‖² of one pixel over its lit LEDs
+    /// (zero for pixels that are not solved from four or more).
+    fn misfit(&self, a: &[f64], l: &[Vector3<f64>], v: &Vector3<f64>, sigma: f64) -> (f64, f64) {
+        let Outcome::Solved(n, rho, used) = self.solve(a, l, v, sigma) else {
+            return (0.0, 0.0);
+        };
+        if used < 4 {
+            return (0.0, 0.0);
+        }
+        let g = n * rho;
+        let (mut misfit, mut energy) = (0.0, 0.0);
+        for (i, (v, li)) in a.iter().zip(l).enumerate() {
+            if g.dot(li) > 0.0 && *v > 0.0 {
+                misfit += self.weights[i] * (v - g.dot(li)).powi(2);
+                energy += self.weights[i] * v * v;
+            }
+        }
+        (misfit, energy)
+    }
+}
+
+/// Indices of the set bits.
+fn members(bits: usize) -> impl Iterator<Item = usize> {
+    (0..usize::BITS as usize).filter(move |i| bits & (1 << i) != 0)
+}
+
+/// Σ_{i∈bits} w_i L_i L_iᵀ.
+fn normal_matrix(l: &[Vector3<f64>], weights: &[f64], bits: usize) -> Matrix3<f64> {
+    members(bits)
+        .filter(|&i| i < l.len())
+        .fold(Matrix3::zeros(), |m, i| {
+            m + l[i] * l[i].transpose() * weights[i]
+        })
+}
+
+/// The circle of normals of a pixel lit by the two LEDs in `bits` (module docs).
+fn two_led_plane(a: &[f64], l: &[Vector3<f64>], bits: usize) -> Outcome {
+    let mut lit = members(bits);
+    let (Some(i), Some(j)) = (lit.next(), lit.next()) else {
+        return Outcome::Dark;
+    };
+    let across = l[i] * a[j] - l[j] * a[i];
+    let (ui, uj) = (l[i].normalize(), l[j].normalize());
+    if ui.cross(&uj).norm() < 1e-6 || across.norm() <= 0.0 {
+        return Outcome::Dark; // parallel lights carry one direction only
+    }
+    Outcome::TwoLeds(across, ui + uj)
+}
+
+/// The upper quantile of χ² with `dof` degrees of freedom at a one-sided normal deviate `z`
+/// (Wilson & Hilferty 1931).
+fn chi2_quantile(dof: usize, z: f64) -> f64 {
+    let k = dof.max(1) as f64;
+    let h = 2.0 / (9.0 * k);
+    k * (1.0 - h + z * h.sqrt()).powi(3)
+}
+
+/// Inverse of a symmetric 3×3 matrix unless it is (nearly) singular.
+fn well_conditioned_inverse(m: &Matrix3<f64>) -> Option<Matrix3<f64>> {
+    let scale = m.trace();
+    if scale.is_nan() || scale <= 0.0 || m.determinant().abs() < 1e-9 * scale.powi(3) {
+        return None;
+    }
+    m.try_inverse()
+}
+
+/// Per-pixel outcomes of a whole image set.
+struct Solved {
+    normals: Array3<f32>,
+    albedo: Array2<f32>,
+    lit_count: Array2<u8>,
+    outcome: Array2<Outcome>,
+}
+
 /// Estimates normals and albedo from per-LED images.
 ///
-/// `mask` restricts the solve (otherwise the object is found with [`object_mask`]); `noise` is a
-/// per-pixel σ of the LED images in the same units, used for shadow and mask decisions.
+/// `mask` restricts the solve (otherwise the object is found with [`super::mask`]); `noise` is
+/// the per-pixel level noise σ of the LED images in the same units, used for the shadow test
+/// and the mask.
 pub fn estimate_normals(
     images: &LedImages,
     lights: &Lights,
@@ -44,6 +298,36 @@ pub fn estimate_normals(
     noise: Option<&Array2<f32>>,
     config: &PhotometricConfig,
 ) -> Result<PhotometricResult, PhotometricError> {
+    check_inputs(images, lights, mask, noise)?;
+    let gains = led_noise_gains(images, noise);
+    let solver = PixelSolver::new(lights, config, gains.clone(), noise.is_some());
+    let solved = solve_all(images, lights, mask, noise, &solver);
+    let region = object_region(
+        images,
+        &solved.albedo,
+        &solved.outcome,
+        mask,
+        noise,
+        &config.mask,
+    );
+    let usable = region
+        .object
+        .iter()
+        .zip(solved.outcome.iter())
+        .any(|(&o, out)| o && matches!(out, Outcome::Solved(..) | Outcome::TwoLeds(..)));
+    if !usable {
+        return Err(diagnose(&solved.outcome, lights, mask.is_some(), config));
+    }
+    Ok(assemble(solved, region, gains))
+}
+
+/// Checks counts and shapes of images, lights, mask and noise, and the light geometry.
+fn check_inputs(
+    images: &LedImages,
+    lights: &Lights,
+    mask: Option<&Array2<bool>>,
+    noise: Option<&Array2<f32>>,
+) -> Result<(), PhotometricError> {
     let k = images.images.len();
     if k < 3 {
         return Err(PhotometricError::TooFewLeds(k));
@@ -69,173 +353,200 @@ pub fn estimate_normals(
     if let Some(n) = noise {
         check_shape("noise map", n, shape)?;
     }
-    match lights {
-        Lights::Distant(v) => {
-            for (i, l) in v.iter().enumerate() {
-                if !l.iter().all(|c| c.is_finite()) || l.norm() == 0.0 {
-                    return Err(PhotometricError::BadLight(i + 1));
-                }
-            }
-        }
-        Lights::NearField { rig, depth_mm, .. } => {
-            let cam = (rig.camera.height, rig.camera.width);
-            if cam != shape {
-                return Err(PhotometricError::SizeMismatch {
-                    what: "LED images vs the rig's camera".into(),
-                    got_rows: shape.0,
-                    got_cols: shape.1,
-                    rows: cam.0,
-                    cols: cam.1,
-                });
-            }
-            if let Some(d) = depth_mm {
-                check_shape("depth estimate", d, shape)?;
-            }
-        }
+    lights.check(shape)?;
+    if light_rank(lights) < 3 {
+        return Err(PhotometricError::SingularLights(describe_geometry(lights)));
     }
-    let cache = subset_inverses(lights, config.min_lit_leds);
+    Ok(())
+}
+
+/// Solves every pixel (inside `mask`, if given) in parallel bands of rows.
+fn solve_all(
+    images: &LedImages,
+    lights: &Lights,
+    mask: Option<&Array2<bool>>,
+    noise: Option<&Array2<f32>>,
+    solver: &PixelSolver,
+) -> Solved {
+    let k = images.images.len();
+    let shape = images.images[0].dim();
     let (rows, cols) = shape;
-    // Zero-filled outputs are allocated lazily; each row band then writes every one of its pixels.
-    let mut normals = Array3::<f32>::zeros((rows, cols, 3));
-    let mut albedo = Array2::<f32>::zeros(shape);
-    let mut lit_count = Array2::<u8>::zeros(shape);
-    let mut valid = Array2::from_elem(shape, false);
+    let mut out = Solved {
+        normals: Array3::from_elem((rows, cols, 3), f32::NAN),
+        albedo: Array2::from_elem(shape, f32::NAN),
+        lit_count: Array2::zeros(shape),
+        outcome: Array2::from_elem(shape, Outcome::Outside),
+    };
     // Freshly allocated arrays are contiguous in row-major order.
-    let (Some(n_all), Some(rho_all), Some(lit_all), Some(valid_all)) = (
-        normals.as_slice_mut(),
-        albedo.as_slice_mut(),
-        lit_count.as_slice_mut(),
-        valid.as_slice_mut(),
+    let (Some(n_all), Some(rho_all), Some(lit_all), Some(outcome_all)) = (
+        out.normals.as_slice_mut(),
+        out.albedo.as_slice_mut(),
+        out.lit_count.as_slice_mut(),
+        out.outcome.as_slice_mut(),
     ) else {
         unreachable!("new arrays are in standard layout")
     };
     let band = ROWS_PER_TASK * cols;
-    let solved: usize = n_all
+    n_all
         .par_chunks_mut(3 * band)
         .zip(rho_all.par_chunks_mut(band))
         .zip(lit_all.par_chunks_mut(band))
-        .zip(valid_all.par_chunks_mut(band))
+        .zip(outcome_all.par_chunks_mut(band))
         .enumerate()
-        .map(|(chunk, (((n_out, rho_out), lit_out), valid_out))| {
+        .for_each(|(chunk, (((n_out, rho_out), lit_out), outcome_out))| {
             let mut values = vec![0.0f64; k];
             let mut l = vec![Vector3::zeros(); k];
-            if let Lights::Distant(v) = lights {
-                l.copy_from_slice(v);
-            }
-            let mut count = 0;
             for dr in 0..rho_out.len() / cols {
                 let r = chunk * ROWS_PER_TASK + dr;
                 let image_rows: Vec<_> = images.images.iter().map(|im| im.row(r)).collect();
                 let mask_row = mask.map(|m| m.row(r));
                 for c in 0..cols {
-                    let solution = if mask_row.is_some_and(|m| !m[c]) {
-                        None
-                    } else {
-                        for (v, im) in values.iter_mut().zip(&image_rows) {
-                            *v = f64::from(im[c]);
-                        }
-                        if !lights.is_distant() {
-                            lights.at(r, c, &mut l);
-                        }
-                        let sigma = noise.map_or(0.0, |n| f64::from(n[(r, c)]));
-                        solve_pixel(&values, &l, sigma, config, cache.as_deref())
-                    };
                     let p = dr * cols + c;
-                    match solution {
-                        Some((n, rho, used)) => {
+                    if mask_row.is_some_and(|m| !m[c]) {
+                        continue;
+                    }
+                    for (v, im) in values.iter_mut().zip(&image_rows) {
+                        *v = f64::from(im[c]);
+                    }
+                    lights.at(r, c, &mut l);
+                    let view = lights.view_at(r, c);
+                    let sigma = noise.map_or(0.0, |n| f64::from(n[(r, c)]));
+                    let outcome = solver.solve(&values, &l, &view, sigma);
+                    match outcome {
+                        Outcome::Solved(n, rho, used) => {
                             for j in 0..3 {
                                 n_out[3 * p + j] = n[j] as f32;
                             }
                             rho_out[p] = rho as f32;
                             lit_out[p] = used;
-                            valid_out[p] = true;
-                            count += 1;
                         }
-                        None => {
-                            n_out[3 * p..3 * p + 3].fill(f32::NAN);
-                            rho_out[p] = f32::NAN;
-                        }
+                        Outcome::TwoLeds(..) => lit_out[p] = 2,
+                        _ => {}
                     }
+                    outcome_out[p] = outcome;
                 }
             }
-            count
-        })
-        .sum();
-
-    // A given mask was applied during the solve; a found one is applied now.
-    let (object, any) = match mask {
-        Some(m) => (m.clone(), solved > 0),
-        None => {
-            let object = object_mask(images, &albedo, &valid, noise, &config.mask);
-            let mut any = false;
-            for ((r, c), v) in valid.indexed_iter_mut() {
-                if !object[(r, c)] && *v {
-                    *v = false;
-                    albedo[(r, c)] = f32::NAN;
-                    lit_count[(r, c)] = 0;
-                    for j in 0..3 {
-                        normals[(r, c, j)] = f32::NAN;
-                    }
-                }
-                any |= *v;
-            }
-            (object, any)
-        }
-    };
-    if !any {
-        return Err(PhotometricError::EmptyMask(format!(
-            "no pixel inside the object mask is lit by {} or more LEDs",
-            config.min_lit_leds
-        )));
-    }
-    Ok(PhotometricResult {
-        field: NormalField {
-            normals,
-            albedo,
-            mask: valid,
-        },
-        lit_count,
-        object_mask: object,
-    })
+        });
+    out
 }
 
-/// Relative least-squares misfit Σ‖A − L·G‖² / Σ‖A‖² of the Lambertian model over `pixels`
-/// (lit LEDs only). With more lit LEDs than three it depends on the light vectors, which lets the
-/// near-field stage find the object's absolute depth.
+/// The result: solved normals inside the object, its two-LED pixels and holes.
+fn assemble(
+    mut solved: Solved,
+    region: super::mask::ObjectRegion,
+    gains: Vec<f64>,
+) -> PhotometricResult {
+    let shape = solved.albedo.dim();
+    let mut valid = Array2::from_elem(shape, false);
+    let mut planes = Vec::new();
+    for ((r, c), outcome) in solved.outcome.indexed_iter() {
+        let inside = region.object[(r, c)];
+        match outcome {
+            Outcome::Solved(..) if inside => valid[(r, c)] = true,
+            Outcome::TwoLeds(across, towards) if inside => planes.push(NormalPlane {
+                pixel: (r, c),
+                across: *across,
+                towards: *towards,
+            }),
+            _ => {
+                if !inside {
+                    solved.lit_count[(r, c)] = 0;
+                }
+                solved.albedo[(r, c)] = f32::NAN;
+                for j in 0..3 {
+                    solved.normals[(r, c, j)] = f32::NAN;
+                }
+            }
+        }
+    }
+    PhotometricResult {
+        field: NormalField {
+            normals: solved.normals,
+            albedo: solved.albedo,
+            mask: valid,
+        },
+        lit_count: solved.lit_count,
+        object_mask: region.object,
+        planes,
+        fill: region.fill,
+        noise_gains: gains,
+    }
+}
+
+/// Why no pixel could be solved: the most common failure among the pixels considered.
+fn diagnose(
+    outcome: &Array2<Outcome>,
+    lights: &Lights,
+    masked: bool,
+    config: &PhotometricConfig,
+) -> PhotometricError {
+    let (mut dark, mut singular, mut contradictory, mut unusable, mut solved) = (0, 0, 0, 0, 0);
+    for o in outcome {
+        match o {
+            Outcome::Dark => dark += 1,
+            Outcome::Singular => singular += 1,
+            Outcome::Contradictory => contradictory += 1,
+            Outcome::Unusable => unusable += 1,
+            Outcome::Solved(..) | Outcome::TwoLeds(..) => solved += 1,
+            Outcome::Outside => {}
+        }
+    }
+    if singular > 0 && singular >= dark.max(contradictory) {
+        return PhotometricError::SingularLights(format!(
+            "{singular} pixels are lit only by LEDs whose light vectors do not span space ({})",
+            describe_geometry(lights)
+        ));
+    }
+    if contradictory > 0 && contradictory >= dark {
+        return PhotometricError::Unsolvable(format!(
+            "in {contradictory} pixels the Lambertian solution faces away from the LEDs that light \
+             them: are light vectors flipped (negative intensities, or lights behind the object)? \
+             ({})",
+            describe_geometry(lights)
+        ));
+    }
+    let place = if masked {
+        "inside the given mask"
+    } else if solved > 0 {
+        "inside the object found"
+    } else {
+        "in the image"
+    };
+    PhotometricError::EmptyMask(format!(
+        "no pixel {place} is lit by {} or more LEDs ({dark} lit by fewer than two above the noise, \
+         {unusable} with unusable values)",
+        config.min_lit_leds.max(2)
+    ))
+}
+
+/// Relative least-squares misfit Σ w‖A − L·G‖² / Σ w‖A‖² of the Lambertian model over `pixels`
+/// lit by four or more LEDs. It depends on the light vectors, which lets the near-field stage
+/// find the object's absolute depth.
 pub fn model_misfit(
     images: &LedImages,
     lights: &Lights,
     pixels: &[(usize, usize)],
+    noise: Option<&Array2<f32>>,
+    noise_gains: &[f64],
     config: &PhotometricConfig,
 ) -> f64 {
+    let solver = PixelSolver::new(lights, config, noise_gains.to_vec(), noise.is_some());
     let k = images.images.len();
     let (misfit, energy) = pixels
         .par_chunks(1024)
         .map(|chunk| {
             let mut values = vec![0.0f64; k];
             let mut l = vec![Vector3::zeros(); k];
-            if let Lights::Distant(v) = lights {
-                l.copy_from_slice(v);
-            }
             let (mut misfit, mut energy) = (0.0, 0.0);
             for &(r, c) in chunk {
                 for (v, im) in values.iter_mut().zip(&images.images) {
                     *v = f64::from(im[(r, c)]);
                 }
-                if !lights.is_distant() {
-                    lights.at(r, c, &mut l);
-                }
-                if let Some((n, rho, _)) = solve_pixel(&values, &l, 0.0, config, None) {
-                    let g = n * rho;
-                    let threshold = f64::from(config.shadow_fraction)
-                        * values.iter().copied().fold(0.0, f64::max);
-                    for (v, li) in values.iter().zip(&l) {
-                        if *v > threshold {
-                            misfit += (v - g.dot(li)).powi(2);
-                            energy += v * v;
-                        }
-                    }
-                }
+                lights.at(r, c, &mut l);
+                let sigma = noise.map_or(0.0, |n| f64::from(n[(r, c)]));
+                let (m, e) = solver.misfit(&values, &l, &lights.view_at(r, c), sigma);
+                misfit += m;
+                energy += e;
             }
             (misfit, energy)
         })
@@ -245,105 +556,6 @@ pub fn model_misfit(
     } else {
         f64::INFINITY
     }
-}
-
-/// For distant lights with few LEDs: (Σ_{i∈S} L_i L_iᵀ)⁻¹ for every subset S (bit i = LED i).
-fn subset_inverses(lights: &Lights, min_lit: usize) -> Option<Vec<Option<Matrix3<f64>>>> {
-    let Lights::Distant(v) = lights else {
-        return None;
-    };
-    if v.len() > MAX_CACHED_LEDS {
-        return None;
-    }
-    let table = (0..1usize << v.len())
-        .map(|bits| {
-            if (bits.count_ones() as usize) < min_lit.max(3) {
-                return None;
-            }
-            let m = v
-                .iter()
-                .enumerate()
-                .filter(|(i, _)| bits & (1 << i) != 0)
-                .fold(Matrix3::zeros(), |m, (_, l)| m + l * l.transpose());
-            well_conditioned_inverse(&m)
-        })
-        .collect();
-    Some(table)
-}
-
-/// Inverse of a symmetric 3×3 matrix unless it is (nearly) singular.
-fn well_conditioned_inverse(m: &Matrix3<f64>) -> Option<Matrix3<f64>> {
-    let scale = m.trace();
-    if scale.is_nan() || scale <= 0.0 || m.determinant().abs() < 1e-9 * scale.powi(3) {
-        return None;
-    }
-    m.try_inverse()
-}
-
-/// Solves one pixel from its LED values `a` and light vectors `l` (see the module docs).
-fn solve_pixel(
-    a: &[f64],
-    l: &[Vector3<f64>],
-    sigma: f64,
-    config: &PhotometricConfig,
-    cache: Option<&[Option<Matrix3<f64>>]>,
-) -> PixelSolution {
-    if a.iter().any(|v| !v.is_finite()) {
-        return None;
-    }
-    let brightest = a.iter().copied().fold(0.0, f64::max);
-    if brightest <= 0.0 {
-        return None;
-    }
-    let threshold = (f64::from(config.shadow_fraction) * brightest)
-        .max(f64::from(config.shadow_sigmas) * sigma);
-    let mut bits = 0usize;
-    for (i, (&v, li)) in a.iter().zip(l).enumerate() {
-        if v > threshold && li.norm_squared() > 0.0 {
-            bits |= 1 << i;
-        }
-    }
-    let min_lit = config.min_lit_leds.max(3);
-    // At most one refinement: drop LEDs that the first solution says cannot light the pixel.
-    for _ in 0..2 {
-        if (bits.count_ones() as usize) < min_lit {
-            return None;
-        }
-        let mut b = Vector3::zeros();
-        for (i, (&v, li)) in a.iter().zip(l).enumerate() {
-            if bits & (1 << i) != 0 {
-                b += li * v;
-            }
-        }
-        let inverse = match cache {
-            Some(table) => table[bits],
-            None => {
-                let m = l
-                    .iter()
-                    .enumerate()
-                    .filter(|(i, _)| bits & (1 << i) != 0)
-                    .fold(Matrix3::zeros(), |m, (_, li)| m + li * li.transpose());
-                well_conditioned_inverse(&m)
-            }
-        }?;
-        let g = inverse * b;
-        let rho = g.norm();
-        if !rho.is_finite() || rho <= 0.0 {
-            return None;
-        }
-        let n = g / rho;
-        let mut refined = bits;
-        for (i, li) in l.iter().enumerate() {
-            if bits & (1 << i) != 0 && n.dot(li) <= 0.0 {
-                refined &= !(1 << i);
-            }
-        }
-        if refined == bits {
-            return Some((n, rho, bits.count_ones() as u8));
-        }
-        bits = refined;
-    }
-    None
 }
 
 #[cfg(test)]
@@ -370,26 +582,25 @@ mod tests {
         }
     }
 
+    fn all() -> Array2<bool> {
+        Array2::from_elem((4, 5), true)
+    }
+
     #[test]
     fn recovers_normal_and_albedo() {
         let n = Vector3::new(0.2, -0.1, 1.0).normalize();
         let im = render(n, 0.7, &lights());
-        let mask = Array2::from_elem((4, 5), true);
         let res = estimate_normals(
             &im,
             &Lights::Distant(lights()),
-            Some(&mask),
+            Some(&all()),
             None,
             &PhotometricConfig::default(),
         )
         .unwrap();
-        let got = [
-            res.field.normals[(2, 3, 0)],
-            0.0,
-            res.field.normals[(2, 3, 2)],
-        ];
-        assert!((f64::from(got[0]) - n.x).abs() < 1e-5);
-        assert!((f64::from(got[2]) - n.z).abs() < 1e-5);
+        for j in 0..3 {
+            assert!((f64::from(res.field.normals[(2, 3, j)]) - n[j]).abs() < 1e-5);
+        }
         assert!((res.field.albedo[(0, 0)] - 0.7).abs() < 1e-5);
         assert_eq!(res.lit_count[(1, 1)], 4);
     }
@@ -400,11 +611,10 @@ mod tests {
         let n = Vector3::new(0.8, 0.0, 0.4).normalize();
         let im = render(n, 1.0, &lights());
         assert_eq!(im.images[1][(0, 0)], 0.0);
-        let mask = Array2::from_elem((4, 5), true);
         let res = estimate_normals(
             &im,
             &Lights::Distant(lights()),
-            Some(&mask),
+            Some(&all()),
             None,
             &PhotometricConfig::default(),
         )
@@ -413,22 +623,83 @@ mod tests {
         assert!((f64::from(res.field.normals[(0, 0, 0)]) - n.x).abs() < 1e-5);
     }
 
+    /// Lit by LEDs 2 and 4 only: the pixel gets the circle its true normal lies on.
     #[test]
-    fn pixel_lit_by_two_is_flagged() {
+    fn pixel_lit_by_two_gets_its_circle() {
         let l = lights();
-        let mut im = render(Vector3::z(), 1.0, &l);
+        let n = Vector3::new(-0.3, -0.2, 0.9).normalize();
+        let mut im = render(n, 0.8, &l);
         im.images[0].fill(0.0);
         im.images[2].fill(0.0);
-        let mask = Array2::from_elem((4, 5), true);
-        let err = estimate_normals(
+        let res = estimate_normals(
             &im,
             &Lights::Distant(l),
-            Some(&mask),
+            Some(&all()),
             None,
             &PhotometricConfig::default(),
         )
-        .unwrap_err();
-        assert!(matches!(err, PhotometricError::EmptyMask(_)), "{err}");
+        .unwrap();
+        assert!(!res.field.mask.iter().any(|&m| m));
+        assert_eq!(res.planes.len(), 20);
+        assert_eq!(res.lit_count[(2, 2)], 2);
+        let plane = res.planes[7];
+        assert!(
+            plane.across.normalize().dot(&n).abs() < 1e-6,
+            "n is on the circle"
+        );
+        assert!(plane.towards.dot(&n) > 0.0);
+    }
+
+    /// A cast shadow that halves LED 3 (still above the noise) makes the four-LED fit
+    /// inconsistent; the χ² test drops LED 3 and the three others give the true normal.
+    #[test]
+    fn partly_shadowed_led_fails_the_consistency_test() {
+        let l = lights();
+        let n = Vector3::new(0.1, 0.2, 0.95).normalize();
+        let mut im = render(n, 0.5, &l);
+        im.images[2].mapv_inplace(|v| 0.5 * v);
+        let noise = Array2::from_elem((4, 5), 0.001f32);
+        let res = estimate_normals(
+            &im,
+            &Lights::Distant(l.clone()),
+            Some(&all()),
+            Some(&noise),
+            &PhotometricConfig::default(),
+        )
+        .unwrap();
+        assert_eq!(res.lit_count[(1, 1)], 3);
+        for j in 0..3 {
+            assert!((f64::from(res.field.normals[(1, 1, j)]) - n[j]).abs() < 1e-5);
+        }
+        // Without a noise map there is no test: all four are used and the normal is off.
+        let res = estimate_normals(
+            &im,
+            &Lights::Distant(l),
+            Some(&all()),
+            None,
+            &PhotometricConfig::default(),
+        )
+        .unwrap();
+        assert_eq!(res.lit_count[(1, 1)], 4);
+    }
+
+    /// A noisy LED image in shadow is below its own 3σ (σ scaled by the LED's noise gain), so
+    /// it is not counted as lit even where it exceeds 3σ of the level noise.
+    #[test]
+    fn shadow_threshold_uses_the_led_noise_gain() {
+        let l = lights();
+        let solver = PixelSolver::new(
+            &Lights::Distant(l.clone()),
+            &PhotometricConfig::default(),
+            vec![1.0, 1.0, 1.0, 3.0],
+            true,
+        );
+        let n = Vector3::new(0.0, 0.9, 0.4).normalize();
+        let mut a: Vec<f64> = l.iter().map(|li| 0.5 * n.dot(li).max(0.0)).collect();
+        assert_eq!(a[3], 0.0);
+        a[3] = 0.005; // 5σ of the level noise, 1.7σ of LED 4's own noise
+        let outcome = solver.solve(&a, &l, &Vector3::z(), 0.001);
+        assert!(matches!(outcome, Outcome::Solved(_, _, 3)), "{outcome:?}");
     }
 
     #[test]
@@ -455,5 +726,53 @@ mod tests {
             estimate_normals(&im, &Lights::Distant(l), Some(&empty), None, &cfg),
             Err(PhotometricError::EmptyMask(_))
         ));
+    }
+
+    /// Duplicated or coplanar lights, and flipped ones, are named instead of "empty mask".
+    #[test]
+    fn singular_and_flipped_lights_say_what_is_wrong() {
+        let cfg = PhotometricConfig::default();
+        let n = Vector3::new(0.1, 0.1, 1.0).normalize();
+        // Four lights in one plane through the origin (y = 0): rank 2.
+        let coplanar = vec![
+            Vector3::new(0.5, 0.0, 0.866),
+            Vector3::new(-0.5, 0.0, 0.866),
+            Vector3::new(0.2, 0.0, 0.98),
+            Vector3::new(-0.3, 0.0, 0.95),
+        ];
+        let err = estimate_normals(
+            &render(n, 1.0, &coplanar),
+            &Lights::Distant(coplanar),
+            None,
+            None,
+            &cfg,
+        )
+        .unwrap_err();
+        assert!(matches!(err, PhotometricError::SingularLights(_)), "{err}");
+        assert!(err.to_string().contains("plane"), "{err}");
+        // Two pairs of duplicated LEDs: rank 2 as well, and the pairs are named.
+        let l = lights();
+        let duplicated = vec![l[0], l[0], l[2], l[2]];
+        let err = estimate_normals(
+            &render(n, 1.0, &duplicated),
+            &Lights::Distant(duplicated),
+            None,
+            None,
+            &cfg,
+        )
+        .unwrap_err();
+        assert!(err.to_string().contains("LEDs 1 and 2"), "{err}");
+        // Lights given with negative intensities: the images cannot be explained.
+        let flipped: Vec<Vector3<f64>> = l.iter().map(|v| -v).collect();
+        let err = estimate_normals(
+            &render(n, 1.0, &l),
+            &Lights::Distant(flipped),
+            Some(&all()),
+            None,
+            &cfg,
+        )
+        .unwrap_err();
+        assert!(matches!(err, PhotometricError::Unsolvable(_)), "{err}");
+        assert!(err.to_string().contains("negative intensities"), "{err}");
     }
 }

@@ -178,11 +178,11 @@ impl SimulatedCapture {
             field: field.into(),
             reason,
         };
-        rig.validate().map_err(|e| bad("rig", e.to_string()))?;
+        rig.validate()?;
         super::check_camera_size(rig.camera.width, rig.camera.height, rig.leds.len())?;
         validate(&config, &scene)?;
         let leds = rig.leds.len();
-        let table = ChipTable::new(leds as u8).map_err(|e| bad("rig", e.to_string()))?;
+        let table = ChipTable::new(leds as u8)?;
         let n = table.chips();
         let phases = match &config.phases_chips {
             Some(p) if p.len() == leds => p.clone(),
@@ -532,6 +532,7 @@ mod tests {
             distance_mm: 420.0,
             fov_deg: None,
             pixel_pitch_mm: Some(pitch),
+            intrinsics: None,
         };
         rig
     }

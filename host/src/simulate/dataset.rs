@@ -46,6 +46,7 @@ impl DatasetConfig {
                 distance_mm: 460.0,
                 fov_deg: Some(43.0),
                 pixel_pitch_mm: None,
+                intrinsics: None,
             },
             leds: Vec::new(),
         });

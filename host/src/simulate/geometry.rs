@@ -1,11 +1,14 @@
 //! Ray casting the scene into a height field on the camera's pixel grid.
 //!
-//! The camera is orthographic and looks along −z (SPEC §5), so the ray through a pixel centre
-//! (x, y) is the line {(x, y, z)} and the visible surface is the hit with the largest z.
-//! Analytic shapes are intersected exactly per pixel (one rayon task per row); triangle
-//! meshes are rasterised into the same depth buffer (z-test, flat or smooth normals).
+//! Every pixel's ray is parametrised by the height z of its points ([`crate::rig::PixelRay`]:
+//! parallel rays along −z for the orthographic camera of SPEC §5, rays through the camera centre
+//! for a perspective one), so the visible surface is the hit with the largest z. Analytic shapes
+//! are intersected exactly per pixel (one rayon task per row); triangle meshes go through the
+//! shared rasteriser [`crate::mesh::rasterise_triangle`] into the same depth buffer (z-test, flat
+//! or smooth normals).
 
 use super::scene::{Scene, Shape, intersect_analytic};
+use crate::mesh::{RayHit, rasterise_triangle};
 use crate::rig::Camera;
 use nalgebra::Vector3;
 use rayon::prelude::*;
@@ -43,13 +46,13 @@ impl SurfaceMap {
             .map(|row| {
                 (0..width)
                     .map(|col| {
-                        let (x, y) = camera.pixel_centre_xy(row as f64, col as f64);
+                        let ray = camera.ray(row as f64, col as f64);
                         let mut best: Hit = (f64::NEG_INFINITY, Vector3::zeros(), 0.0, false);
                         if let Some(g) = &scene.ground {
                             best = (g.z_mm, Vector3::z(), g.albedo, false);
                         }
                         for (object, (c, r)) in scene.objects.iter().zip(&poses) {
-                            if let Some((z, n)) = intersect_analytic(&object.shape, c, r, x, y)
+                            if let Some((z, n)) = intersect_analytic(&object.shape, c, r, &ray)
                                 && z > best.0
                             {
                                 best = (z, n, object.albedo, true);
@@ -99,86 +102,42 @@ impl SurfaceMap {
         albedo: f64,
     ) {
         let p = tri.map(|i| world[i]);
-        let mut face = (p[1] - p[0]).cross(&(p[2] - p[0]));
-        let len = face.norm();
-        if len == 0.0 || face.z == 0.0 {
-            return; // degenerate or seen edge-on
-        }
-        face /= len;
-        if face.z < 0.0 {
-            face = -face;
-        }
-        // Continuous pixel coordinates (row, col) of the corners.
-        let q = p.map(|v| camera.xy_to_pixel(v.x, v.y));
-        let rmin = q
-            .iter()
-            .map(|v| v.0)
-            .fold(f64::INFINITY, f64::min)
-            .ceil()
-            .max(0.0);
-        let rmax = q
-            .iter()
-            .map(|v| v.0)
-            .fold(f64::NEG_INFINITY, f64::max)
-            .floor();
-        let cmin = q
-            .iter()
-            .map(|v| v.1)
-            .fold(f64::INFINITY, f64::min)
-            .ceil()
-            .max(0.0);
-        let cmax = q
-            .iter()
-            .map(|v| v.1)
-            .fold(f64::NEG_INFINITY, f64::max)
-            .floor();
-        if rmax < 0.0 || cmax < 0.0 || rmin > rmax || cmin > cmax {
-            return;
-        }
-        let rmax = rmax.min(self.height as f64 - 1.0);
-        let cmax = cmax.min(self.width as f64 - 1.0);
-        let area = (q[1].0 - q[0].0) * (q[2].1 - q[0].1) - (q[2].0 - q[0].0) * (q[1].1 - q[0].1);
-        if area.abs() < 1e-15 {
-            return;
-        }
-        let eps = 1e-9;
-        for row in rmin as usize..=rmax as usize {
-            for col in cmin as usize..=cmax as usize {
-                let (r, c) = (row as f64, col as f64);
-                let edge = |a: (f64, f64), b: (f64, f64)| {
-                    ((b.0 - a.0) * (c - a.1) - (r - a.0) * (b.1 - a.1)) / area
-                };
-                let w0 = edge(q[1], q[2]);
-                let w1 = edge(q[2], q[0]);
-                let w2 = edge(q[0], q[1]);
-                if w0 < -eps || w1 < -eps || w2 < -eps {
-                    continue;
-                }
-                let z = w0 * p[0].z + w1 * p[1].z + w2 * p[2].z;
-                let i = row * self.width + col;
-                if z <= self.z_mm[i] {
-                    continue;
-                }
-                let normal = match vertex_normals {
-                    Some(ns) => {
-                        let n = w0 * ns[tri[0]] + w1 * ns[tri[1]] + w2 * ns[tri[2]];
-                        let n = n.try_normalize(1e-12).unwrap_or(face);
-                        if n.dot(&face) < 0.0 { -n } else { n }
-                    }
-                    None => face,
-                };
-                self.z_mm[i] = z;
-                self.normals[i] = normal;
-                self.albedo[i] = albedo;
-                self.is_object[i] = true;
+        let Some(face) = (p[1] - p[0]).cross(&(p[2] - p[0])).try_normalize(0.0) else {
+            return; // degenerate
+        };
+        rasterise_triangle(camera, &p, |hit: RayHit| {
+            let i = hit.pixel;
+            if hit.z <= self.z_mm[i] {
+                return;
             }
-        }
+            // Turned towards the camera along this pixel's ray.
+            let towards = hit.ray.slope;
+            let face = if face.dot(&towards) < 0.0 {
+                -face
+            } else {
+                face
+            };
+            let w = hit.weights;
+            let normal = match vertex_normals {
+                Some(ns) => {
+                    let n = w[0] * ns[tri[0]] + w[1] * ns[tri[1]] + w[2] * ns[tri[2]];
+                    let n = n.try_normalize(1e-12).unwrap_or(face);
+                    if n.dot(&face) < 0.0 { -n } else { n }
+                }
+                None => face,
+            };
+            self.z_mm[i] = hit.z;
+            self.normals[i] = normal;
+            self.albedo[i] = albedo;
+            self.is_object[i] = true;
+        });
     }
 
-    /// Scene point X of pixel `i` (x, y of the pixel centre, z of the surface).
+    /// Scene point X of pixel `i`: where its ray meets the surface.
     pub fn point(&self, camera: &Camera, i: usize) -> Vector3<f64> {
-        let (x, y) = camera.pixel_centre_xy((i / self.width) as f64, (i % self.width) as f64);
-        Vector3::new(x, y, self.z_mm[i])
+        camera
+            .ray((i / self.width) as f64, (i % self.width) as f64)
+            .at(self.z_mm[i])
     }
 }
 
@@ -197,6 +156,7 @@ mod tests {
             distance_mm: 400.0,
             fov_deg: None,
             pixel_pitch_mm: Some(1.0),
+            intrinsics: None,
         }
     }
 
@@ -248,18 +208,71 @@ mod tests {
             half_extents_mm: [10.0; 3],
         });
         b.rotation = rot;
-        let ma = SurfaceMap::render(&Scene::single(a), &camera(), 0.0);
-        let mb = SurfaceMap::render(&Scene::single(b), &camera(), 0.0);
-        let mut compared = 0;
-        for i in 0..ma.z_mm.len() {
-            if ma.is_object[i] && mb.is_object[i] {
-                assert!((ma.z_mm[i] - mb.z_mm[i]).abs() < 1e-6);
-                // Pixels on a face edge may pick either neighbouring face.
-                if (ma.normals[i] - mb.normals[i]).norm() < 1e-9 {
-                    compared += 1;
+        for camera in [camera(), perspective_camera()] {
+            let ma = SurfaceMap::render(&Scene::single(a.clone()), &camera, 0.0);
+            let mb = SurfaceMap::render(&Scene::single(b.clone()), &camera, 0.0);
+            let mut compared = 0;
+            for i in 0..ma.z_mm.len() {
+                assert_eq!(ma.is_object[i], mb.is_object[i] && ma.is_object[i]);
+                if ma.is_object[i] && mb.is_object[i] {
+                    assert!((ma.z_mm[i] - mb.z_mm[i]).abs() < 1e-6);
+                    // Pixels on a face edge may pick either neighbouring face.
+                    if (ma.normals[i] - mb.normals[i]).norm() < 1e-9 {
+                        compared += 1;
+                    }
                 }
             }
+            assert!(compared > 500, "{compared}");
         }
-        assert!(compared > 500, "{compared}");
+    }
+
+    /// A 64×48 pinhole camera 400 mm away with f = 1500 px (≈ 0.27 mm per pixel at the origin)
+    /// and barrel distortion.
+    fn perspective_camera() -> Camera {
+        Camera {
+            width: 64,
+            height: 48,
+            fps: 960.0,
+            distance_mm: 400.0,
+            fov_deg: None,
+            pixel_pitch_mm: None,
+            intrinsics: Some(crate::rig::Intrinsics {
+                fx: 1500.0,
+                fy: 1500.0,
+                cx: 31.5,
+                cy: 23.5,
+                k1: -0.5,
+                k2: 0.0,
+            }),
+        }
+    }
+
+    /// Seen in perspective, every sphere pixel's point lies on the sphere with the radial normal,
+    /// and the silhouette is the cone of rays tangent to it: a disc of angular radius
+    /// asin(R/D), larger than the orthographic R.
+    #[test]
+    fn perspective_sphere_points_lie_on_the_sphere() {
+        let camera = perspective_camera();
+        let radius = 5.0;
+        let scene = Scene::single(SceneObject::new(Shape::Sphere { radius_mm: radius }));
+        let map = SurfaceMap::render(&scene, &camera, 0.0);
+        let mut inside = 0usize;
+        for i in 0..map.z_mm.len() {
+            let ray = camera.ray((i / 64) as f64, (i % 64) as f64);
+            // The ray's closest approach to the centre decides whether it hits.
+            let dir = ray.slope.normalize();
+            let miss = (ray.base - dir * ray.base.dot(&dir)).norm();
+            if !map.is_object[i] {
+                assert!(miss >= radius - 1e-6, "pixel {i} should hit");
+                continue;
+            }
+            inside += 1;
+            let x = map.point(&camera, i);
+            assert!((x.norm() - radius).abs() < 1e-9);
+            assert!((map.normals[i] - x / radius).norm() < 1e-9);
+            // The front hit is the one nearer the camera.
+            assert!(x.dot(&ray.towards_camera()) >= -1e-9);
+        }
+        assert!(inside > 900, "{inside}");
     }
 }

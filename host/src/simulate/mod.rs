@@ -22,8 +22,8 @@ pub mod scene;
 pub mod sensor;
 pub mod waveform;
 
+pub use crate::mesh::TriMesh;
 pub use capture::{GroundTruth, SimConfig, SimulatedCapture, TruthInfo};
-pub use mesh::TriMesh;
 pub use scene::{GroundPlane, Scene, SceneObject, Shape, Spin};
 pub use sensor::{NoiseModel, ToneCurve};
 pub use waveform::{CarrierWaveform, LedWaveform};
@@ -43,13 +43,14 @@ pub enum SimulateError {
         reason: String,
     },
     /// A mesh file cannot be used.
-    #[error("mesh {path}: {reason}")]
-    Mesh {
-        /// The file.
-        path: String,
-        /// What is wrong.
-        reason: String,
-    },
+    #[error(transparent)]
+    Mesh(#[from] crate::mesh::MeshError),
+    /// The rig is invalid.
+    #[error(transparent)]
+    Rig(#[from] crate::rig::RigError),
+    /// The rig's LED count has no carrier set.
+    #[error("rig: {0}")]
+    Carriers(#[from] protocol::carriers::CarrierError),
     /// Writing the output failed.
     #[error(transparent)]
     Files(#[from] crate::export::files::FilesError),

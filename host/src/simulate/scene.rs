@@ -7,6 +7,7 @@
 //! spins (thesis Ch. 5: ellipsoid 100×60 mm turning at 7.5 rpm about a vertical axis).
 
 use super::mesh::TriMesh;
+use crate::rig::PixelRay;
 use nalgebra::{Unit, UnitQuaternion, Vector3};
 use std::sync::Arc;
 
@@ -142,19 +143,18 @@ impl Scene {
     }
 }
 
-/// Front-most ray hit of an analytic shape along the camera ray through (x, y):
-/// returns (z, unit normal) in scene coordinates.
+/// Front-most hit of an analytic shape along a pixel's ray: returns (z, unit normal) in scene
+/// coordinates.
 pub(crate) fn intersect_analytic(
     shape: &Shape,
     centre: &Vector3<f64>,
     rotation: &UnitQuaternion<f64>,
-    x: f64,
-    y: f64,
+    ray: &PixelRay,
 ) -> Option<(f64, Vector3<f64>)> {
-    // Ray X(z) = (x, y, z); in the object frame q(z) = a + z·b.
+    // Ray X(z) = base + z·slope; in the object frame q(z) = a + z·b.
     let inv = rotation.inverse();
-    let a = inv * (Vector3::new(x, y, 0.0) - centre);
-    let b = inv * Vector3::z();
+    let a = inv * (ray.base - centre);
+    let b = inv * ray.slope;
     let (z, local_normal) = match shape {
         Shape::Sphere { radius_mm } => quadric_hit(&a, &b, &Vector3::repeat(*radius_mm))?,
         Shape::Ellipsoid { semi_axes_mm } => quadric_hit(&a, &b, &Vector3::from(*semi_axes_mm))?,
@@ -220,6 +220,14 @@ fn box_hit(a: &Vector3<f64>, b: &Vector3<f64>, h: &Vector3<f64>) -> Option<(f64,
 mod tests {
     use super::*;
 
+    /// The orthographic ray through (x, y).
+    fn down(x: f64, y: f64) -> PixelRay {
+        PixelRay {
+            base: Vector3::new(x, y, 0.0),
+            slope: Vector3::z(),
+        }
+    }
+
     #[test]
     fn sphere_hit_is_front_most() {
         let shape = Shape::Sphere { radius_mm: 10.0 };
@@ -227,8 +235,7 @@ mod tests {
             &shape,
             &Vector3::zeros(),
             &UnitQuaternion::identity(),
-            6.0,
-            0.0,
+            &down(6.0, 0.0),
         )
         .unwrap();
         assert!((z - 8.0).abs() < 1e-12);
@@ -238,8 +245,7 @@ mod tests {
                 &shape,
                 &Vector3::zeros(),
                 &UnitQuaternion::identity(),
-                11.0,
-                0.0
+                &down(11.0, 0.0)
             )
             .is_none()
         );
@@ -251,7 +257,7 @@ mod tests {
             half_extents_mm: [5.0, 5.0, 5.0],
         };
         let rot = UnitQuaternion::from_axis_angle(&Vector3::y_axis(), 0.3);
-        let (z, n) = intersect_analytic(&shape, &Vector3::zeros(), &rot, 0.0, 0.0).unwrap();
+        let (z, n) = intersect_analytic(&shape, &Vector3::zeros(), &rot, &down(0.0, 0.0)).unwrap();
         assert!((n - rot * Vector3::z()).norm() < 1e-12);
         assert!((z - 5.0 / 0.3f64.cos()).abs() < 1e-9);
     }

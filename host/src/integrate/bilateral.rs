@@ -1,0 +1,234 @@
+//! Bilateral normal integration (Cao, Lin, Matsushita, Tao, "Bilateral Normal Integration",
+//! ECCV 2022): a discontinuity-preserving weighted least-squares integrator.
+//!
+//! Every pixel i has one-sided equations along each axis, forward z_{i+1} − z_i = h·s_i and
+//! backward z_i − z_{i−1} = h·s_i, scaled by n_z as in the paper (residual n_z·(Δz − h·s)). Their
+//! weights w⁺ + w⁻ = 1 favour the side on which the surface continues smoothly:
+//!
+//! ```text
+//! w⁺_i = σ(k · n_z² · ((z_i − z_{i−1})² − (z_{i+1} − z_i)²)),   σ(t) = 1/(1 + e^{−t})
+//! ```
+//!
+//! with depth differences in pixel units and stiffness k (paper: 2). Across a depth jump the
+//! weights of both pixels beside it turn away from it, so the jump no longer pulls the surfaces
+//! together. The weights are updated from the current depth and the weighted problem re-solved
+//! (iteratively reweighted least squares) until the energy changes by less than a tolerance.
+//! Each edge collects the forward equation of its left/upper pixel and the backward equation of
+//! its right/lower one; their weighted mean is the edge's target ([`side_equations`]), so every
+//! solve is a weighted graph Laplacian for the multigrid-preconditioned CG of
+//! [`super::least_squares`]. With w⁺ = w⁻ = ½ and no n_z factor this is plain least squares.
+
+use super::least_squares::{EdgeEquations, Topology};
+use super::multigrid::NONE;
+
+/// Weights of a node's one-sided equations: right (forward x), down (forward row), left, up.
+pub(crate) type SideWeights = [f64; 4];
+
+/// Smallest edge weight kept, relative to the weights of its two pixels: across a cut the two
+/// sides stay weakly tied (the near-field stage places them anyway), which keeps the system well
+/// conditioned.
+const WEIGHT_FLOOR: f64 = 1e-4;
+
+/// ½·confidence on both sides of both axes: plain (confidence-weighted) least squares. Nodes
+/// marked `scaled` get the n_z² factor of the bilateral equations, so a steep slope guessed
+/// for a pixel without a measured normal cannot dominate its neighbours.
+pub(crate) fn uniform(
+    confidence: &[f64],
+    slopes: &[(f64, f64)],
+    scaled: &[bool],
+) -> Vec<SideWeights> {
+    confidence
+        .iter()
+        .zip(slopes)
+        .zip(scaled)
+        .map(|((&c, &(sx, sy)), &scale)| {
+            let nz2 = if scale {
+                1.0 / (1.0 + sx * sx + sy * sy)
+            } else {
+                1.0
+            };
+            [0.5 * c * nz2; 4]
+        })
+        .collect()
+}
+
+/// The bilateral weights at the current solution `x` (module docs); `units` turns differences of
+/// `x` into pixels, `stiffness` is k.
+pub(crate) fn bilateral(
+    topology: &Topology,
+    x: &[f64],
+    slopes: &[(f64, f64)],
+    confidence: &[f64],
+    units: f64,
+    stiffness: f64,
+) -> Vec<SideWeights> {
+    sigmoid_weights(topology, x, slopes, units, stiffness)
+        .into_iter()
+        .enumerate()
+        .map(|(k, w)| {
+            let (sx, sy) = slopes[k];
+            let scale = confidence[k] / (1.0 + sx * sx + sy * sy);
+            w.map(|v| v * scale)
+        })
+        .collect()
+}
+
+/// The sigmoid weights w⁺, w⁻ of every node along both axes (right, down, left, up), before the
+/// n_z² and confidence factors.
+fn sigmoid_weights(
+    topology: &Topology,
+    x: &[f64],
+    slopes: &[(f64, f64)],
+    units: f64,
+    stiffness: f64,
+) -> Vec<SideWeights> {
+    let sigmoid = |t: f64| 1.0 / (1.0 + (-t).exp());
+    topology
+        .neighbours
+        .iter()
+        .enumerate()
+        .map(|(k, nb)| {
+            let (sx, sy) = slopes[k];
+            let nz2 = 1.0 / (1.0 + sx * sx + sy * sy);
+            let mut w = [0.0; 4];
+            // Axis 0: right (0) / left (2); axis 1: down (1) / up (3).
+            for (forward, backward) in [(0, 2), (1, 3)] {
+                let (f, b) = (nb[forward], nb[backward]);
+                (w[forward], w[backward]) = match (f != NONE, b != NONE) {
+                    (true, true) => {
+                        let ahead = (x[f as usize] - x[k]) * units;
+                        let behind = (x[k] - x[b as usize]) * units;
+                        let wf = sigmoid(stiffness * nz2 * (behind * behind - ahead * ahead));
+                        (wf, 1.0 - wf)
+                    }
+                    (true, false) => (1.0, 0.0),
+                    (false, true) => (0.0, 1.0),
+                    (false, false) => (0.0, 0.0),
+                };
+            }
+            w
+        })
+        .collect()
+}
+
+/// Edges (right, down of each node) where both one-sided equations have turned away — the
+/// forward weight of the node and the backward weight of its neighbour both below `cut`: the
+/// depth discontinuities the bilateral integrator found.
+pub(crate) fn discontinuities(
+    topology: &Topology,
+    x: &[f64],
+    slopes: &[(f64, f64)],
+    units: f64,
+    stiffness: f64,
+    cut: f64,
+) -> Vec<[bool; 2]> {
+    let w = sigmoid_weights(topology, x, slopes, units, stiffness);
+    topology
+        .neighbours
+        .iter()
+        .enumerate()
+        .map(|(k, nb)| {
+            [0, 1].map(|d| {
+                let j = nb[d];
+                j != NONE && w[k][d] < cut && w[j as usize][d + 2] < cut
+            })
+        })
+        .collect()
+}
+
+/// Edge equations from one-sided equations: edge k→j (right or down) has weight
+/// W = w_k(forward) + w_j(backward) and target the weighted mean of h·s_k and h·s_j (with the
+/// sign of y up for the down edges).
+pub(crate) fn side_equations(
+    topology: &Topology,
+    sides: &[SideWeights],
+    slopes: &[(f64, f64)],
+    step: f64,
+) -> EdgeEquations {
+    let n = topology.len();
+    let mut weight = vec![[0.0; 2]; n];
+    let mut target = vec![[0.0; 2]; n];
+    for (k, nb) in topology.neighbours.iter().enumerate() {
+        for d in 0..2 {
+            let j = nb[d];
+            if j == NONE {
+                continue;
+            }
+            let j = j as usize;
+            let (wk, wj) = (sides[k][d], sides[j][d + 2]);
+            let (gk, gj) = match d {
+                0 => (slopes[k].0, slopes[j].0),
+                _ => (-slopes[k].1, -slopes[j].1),
+            };
+            let floor =
+                WEIGHT_FLOOR * (sides[k].iter().sum::<f64>() + sides[j].iter().sum::<f64>());
+            let total = wk + wj;
+            weight[k][d] = total.max(floor).max(f64::MIN_POSITIVE);
+            target[k][d] = if total > 0.0 {
+                step * (wk * gk + wj * gj) / total
+            } else {
+                0.5 * step * (gk + gj)
+            };
+        }
+    }
+    EdgeEquations { weight, target }
+}
+
+/// Σ over one-sided equations of w·(Δz − h·s)² at `x` (the bilateral energy).
+pub(crate) fn energy(
+    topology: &Topology,
+    sides: &[SideWeights],
+    slopes: &[(f64, f64)],
+    step: f64,
+    x: &[f64],
+) -> f64 {
+    let mut sum = 0.0;
+    for (k, nb) in topology.neighbours.iter().enumerate() {
+        for d in 0..2 {
+            let j = nb[d];
+            if j == NONE {
+                continue;
+            }
+            let j = j as usize;
+            let delta = x[j] - x[k];
+            let (gk, gj) = match d {
+                0 => (slopes[k].0, slopes[j].0),
+                _ => (-slopes[k].1, -slopes[j].1),
+            };
+            sum += sides[k][d] * (delta - step * gk).powi(2)
+                + sides[j][d + 2] * (delta - step * gj).powi(2);
+        }
+    }
+    sum
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use ndarray::Array2;
+
+    /// Two flat terraces 10 pixels apart in height with zero slopes everywhere except the
+    /// (wrongly smooth) slope across the step: the weights beside the step turn away from it.
+    #[test]
+    fn weights_turn_away_from_a_step() {
+        let mask = Array2::from_elem((3, 8), true);
+        let topology = Topology::new(&mask);
+        let x: Vec<f64> = topology
+            .cells
+            .iter()
+            .map(|&(_, c)| if c < 4 { 0.0 } else { 10.0 })
+            .collect();
+        let slopes = vec![(0.0, 0.0); topology.len()];
+        let w = bilateral(&topology, &x, &slopes, &vec![1.0; topology.len()], 1.0, 2.0);
+        let left_of_step = topology.node((1, 3)).unwrap();
+        let right_of_step = topology.node((1, 4)).unwrap();
+        assert!(w[left_of_step][0] < 1e-6 && w[left_of_step][2] > 1.0 - 1e-6);
+        assert!(w[right_of_step][2] < 1e-6 && w[right_of_step][0] > 1.0 - 1e-6);
+        let flat = topology.node((1, 1)).unwrap();
+        assert!((w[flat][0] - 0.5).abs() < 1e-12);
+        // The edge across the step keeps only the floor weight.
+        let eq = side_equations(&topology, &w, &slopes, 1.0);
+        assert!(eq.weight[left_of_step][0] < 1e-3);
+        assert!((eq.weight[flat][0] - 1.0).abs() < 1e-12);
+    }
+}

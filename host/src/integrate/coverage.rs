@@ -1,0 +1,213 @@
+//! Pixels without a full normal: those lit by exactly two LEDs, and holes inside the object.
+//!
+//! Two Lambertian measurements A₁ = ρ·n·L₁ and A₂ = ρ·n·L₂ fix the normal up to one angle:
+//! n·m = 0 with m = A₂·L₁ − A₁·L₂, and n·L₁ > 0 picks the lit half of that great circle. The
+//! missing angle comes from the integrability of the surface (Onn & Bruckstein, "Integrability
+//! disambiguates surface recovery in two-image photometric stereo", IJCV 1990). Since the normal
+//! is an affine function of the slopes ([`super::grid`]), the circle is a line in slope space, and
+//! the integrator alternates between solving for depth and moving each such pixel's slopes to the
+//! point of its line that best fits the current depth ([`slopes_on_line`]): a block-coordinate
+//! descent on the integrator's own energy, kept on the lit half of the circle and within a tilt
+//! limit ([`NormalPlane::project`]). Holes (pixels lit by fewer than two LEDs that the object surrounds)
+//! get slopes interpolated from their surroundings by push–pull ([`inpaint`]) and a low weight,
+//! so the integrator bridges them instead of cutting the object into islands.
+
+use super::least_squares::Topology;
+use super::multigrid::NONE;
+pub use crate::types::NormalPlane;
+use nalgebra::Vector3;
+use ndarray::Array2;
+
+/// Largest angle between a two-LED pixel's normal and the middle of its lit half-circle.
+const MAX_TILT_RAD: f64 = 80.0 * std::f64::consts::PI / 180.0;
+
+/// Gauss–Seidel sweeps that smooth the push–pull interpolation.
+const SMOOTHING_SWEEPS: usize = 30;
+
+impl NormalPlane {
+    /// The normal on the circle nearest `n` in angle, within [`MAX_TILT_RAD`] of the direction
+    /// of `towards` in the plane; `None` when the constraint is degenerate.
+    pub fn project(&self, n: &Vector3<f64>) -> Option<Vector3<f64>> {
+        let m = self.across.try_normalize(0.0)?;
+        let e1 = (self.towards - m * m.dot(&self.towards)).try_normalize(1e-12)?;
+        let e2 = m.cross(&e1);
+        let theta = n
+            .dot(&e2)
+            .atan2(n.dot(&e1))
+            .clamp(-MAX_TILT_RAD, MAX_TILT_RAD);
+        Some(e1 * theta.cos() + e2 * theta.sin())
+    }
+}
+
+/// Fills `values` at the pixels of `wanted` that are not `known`, from the known ones: a
+/// push–pull pyramid (coarser levels average the known values, finer ones blend them in) and a
+/// few Gauss–Seidel sweeps of the Laplace equation over the filled pixels.
+pub(crate) fn inpaint(values: &mut Array2<f64>, known: &Array2<bool>, wanted: &Array2<bool>) {
+    // Pull: levels of (value, weight) with weight in [0, 1].
+    let mut levels = vec![(values.clone(), known.mapv(|k| if k { 1.0 } else { 0.0 }))];
+    loop {
+        let (v, w) = &levels[levels.len() - 1];
+        let (rows, cols) = v.dim();
+        if (rows <= 1 && cols <= 1) || w.iter().all(|&x| x > 0.0) {
+            break;
+        }
+        let shape = (rows.div_ceil(2), cols.div_ceil(2));
+        let mut cv = Array2::zeros(shape);
+        let mut cw = Array2::zeros(shape);
+        for ((r, c), &wi) in w.indexed_iter() {
+            if wi > 0.0 {
+                cv[(r / 2, c / 2)] += wi * v[(r, c)];
+                cw[(r / 2, c / 2)] += wi;
+            }
+        }
+        for (value, weight) in cv.iter_mut().zip(cw.iter_mut()) {
+            if *weight > 0.0 {
+                *value /= *weight;
+                *weight = f64::min(*weight, 1.0);
+            }
+        }
+        levels.push((cv, cw));
+    }
+    // Push: blend every level with its parent where it is not fully known.
+    for l in (0..levels.len() - 1).rev() {
+        let (upper, lower) = levels.split_at_mut(l + 1);
+        let (fine_v, fine_w) = &mut upper[l];
+        let (coarse_v, _) = &lower[0];
+        for ((r, c), v) in fine_v.indexed_iter_mut() {
+            let w = fine_w[(r, c)];
+            if w < 1.0 {
+                *v = w * *v + (1.0 - w) * coarse_v[(r / 2, c / 2)];
+                fine_w[(r, c)] = 1.0;
+            }
+        }
+    }
+    let filled = &levels[0].0;
+    let (rows, cols) = values.dim();
+    let free: Vec<(usize, usize)> = wanted
+        .indexed_iter()
+        .filter(|&(p, &w)| w && !known[p])
+        .map(|(p, _)| p)
+        .collect();
+    for &p in &free {
+        values[p] = if filled[p].is_finite() {
+            filled[p]
+        } else {
+            0.0
+        };
+    }
+    for _ in 0..SMOOTHING_SWEEPS {
+        for &p in &free {
+            let (mut sum, mut n) = (0.0, 0);
+            for q in crate::regions::neighbours4(p, (rows, cols)) {
+                if wanted[q] || known[q] {
+                    sum += values[q];
+                    n += 1;
+                }
+            }
+            if n > 0 {
+                values[p] = sum / f64::from(n);
+            }
+        }
+    }
+}
+
+/// The slopes on the line a·s_x + b·s_y = c that minimise node `k`'s one-sided equations at
+/// the solution `x`: Σ w·(Δz − h·s)² over its sides is W_x(s_x − ŝ_x)² + W_y(s_y − ŝ_y)² + const,
+/// so the answer is the (W_x, W_y)-weighted projection of (ŝ_x, ŝ_y) onto the line. This is
+/// the exact minimiser of the integrator's energy over the pixel's circle, so alternating it
+/// with the depth solve never increases the energy.
+pub(crate) fn slopes_on_line(
+    topology: &Topology,
+    x: &[f64],
+    k: usize,
+    sides: &[f64; 4],
+    step: f64,
+    (a, b, c): (f64, f64, f64),
+) -> Option<(f64, f64)> {
+    let nb = topology.neighbours[k];
+    let side = |d: usize| {
+        let j = nb[d];
+        (j != NONE).then(|| {
+            let j = j as usize;
+            let delta = if d < 2 { x[j] - x[k] } else { x[k] - x[j] };
+            (sides[d], delta)
+        })
+    };
+    // Right/left measure h·s_x, down/up measure −h·s_y.
+    let mean = |forward: usize, backward: usize, sign: f64| {
+        let (mut w, mut sum) = (0.0, 0.0);
+        for (wd, delta) in [side(forward), side(backward)].into_iter().flatten() {
+            w += wd;
+            sum += wd * delta;
+        }
+        (
+            w * step * step,
+            if w > 0.0 {
+                sign * sum / (w * step)
+            } else {
+                0.0
+            },
+        )
+    };
+    let (wx, sx) = mean(0, 2, 1.0);
+    let (wy, sy) = mean(1, 3, -1.0);
+    // Keep both slopes in play when a pixel has no neighbour along an axis.
+    let floor = 1e-9 * (wx + wy).max(f64::MIN_POSITIVE);
+    let (wx, wy) = (wx.max(floor), wy.max(floor));
+    let denominator = a * a / wx + b * b / wy;
+    if !denominator.is_finite() || denominator <= 0.0 {
+        return None;
+    }
+    let lambda = (a * sx + b * sy - c) / denominator;
+    Some((sx - lambda * a / wx, sy - lambda * b / wy))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn projection_stays_on_the_lit_half_circle() {
+        let plane = NormalPlane {
+            pixel: (0, 0),
+            across: Vector3::x(),
+            towards: Vector3::z(),
+        };
+        // Nearest point of the y–z circle to a normal leaning towards +x and +y.
+        let n = plane.project(&Vector3::new(0.7, 0.3, 0.5)).unwrap();
+        assert!(n.x.abs() < 1e-12);
+        assert!((n - Vector3::new(0.0, 0.3, 0.5).normalize()).norm() < 1e-12);
+        // A normal pointing away from `towards` is clamped to the tilt limit.
+        let n = plane.project(&Vector3::new(0.0, 0.1, -1.0)).unwrap();
+        assert!((n.z - MAX_TILT_RAD.cos()).abs() < 1e-12 && n.y > 0.0);
+        let degenerate = NormalPlane {
+            across: Vector3::z(),
+            ..plane
+        };
+        assert!(degenerate.project(&Vector3::z()).is_none());
+    }
+
+    #[test]
+    fn inpainting_fills_a_hole_in_a_linear_ramp_exactly_enough() {
+        let shape = (20, 24);
+        let ramp = Array2::from_shape_fn(shape, |(r, c)| 0.1 * c as f64 - 0.05 * r as f64);
+        let hole =
+            Array2::from_shape_fn(shape, |(r, c)| (6..12).contains(&r) && (8..16).contains(&c));
+        let known = hole.mapv(|h| !h);
+        let mut values = ramp.mapv(|v| v);
+        values.zip_mut_with(&hole, |v, &h| {
+            if h {
+                *v = 99.0;
+            }
+        });
+        let wanted = Array2::from_elem(shape, true);
+        inpaint(&mut values, &known, &wanted);
+        let worst = values
+            .iter()
+            .zip(ramp.iter())
+            .map(|(a, b)| (a - b).abs())
+            .fold(0.0, f64::max);
+        // A harmonic fill of a linear function is the function; 30 sweeps get close.
+        assert!(worst < 0.05, "worst {worst}");
+    }
+}
