@@ -132,7 +132,7 @@ fn the_turning_ellipsoid_is_scored_frame_by_frame_within_the_thesis_accuracy() {
     );
     let json = video_json(&out);
     assert_eq!(json["schema"], "meb-video v1");
-    assert_eq!(json["summary"]["reconstructed"], 5);
+    assert_eq!(json["summary"]["reconstructed"], 5, "{:#}", json["frames"]);
     assert_eq!(json["settings"]["rate_3d_fps"], 25.0);
     let records = frames(&json);
     assert_eq!(records.len(), 5);
@@ -350,7 +350,11 @@ fn motion_is_found_while_the_object_turns_and_not_once_it_stops() {
     let json = video_json(&out);
     let moving: Vec<bool> = frames(&json)
         .iter()
-        .map(|f| f["motion"]["moving"].as_bool().unwrap())
+        .map(|f| {
+            f["motion"]["moving"]
+                .as_bool()
+                .unwrap_or_else(|| panic!("{f:#}"))
+        })
         .collect();
     assert_eq!(moving, [true, true, true, true, false, false, false, false]);
     assert_eq!(json["summary"]["moving"], 4);
