@@ -125,6 +125,10 @@ fn the_turning_ellipsoid_is_scored_frame_by_frame_within_the_thesis_accuracy() {
         &s(&clip),
         "--save",
         "normals,albedo",
+        // The decoder's verdict finds a turning object's windows implausible (modulation
+        // left unexplained by a still-scene model); --force keeps them, verdict recorded, so
+        // the accuracy below is what judges them.
+        "--force",
     ]);
     assert!(
         stdout.contains("5 3-D frames from 200 camera frames"),
@@ -196,6 +200,7 @@ fn the_turning_ellipsoid_is_scored_frame_by_frame_within_the_thesis_accuracy() {
             hop,
             "--fit-every-window",
             "--apng",
+            "--force",
         ]);
     }
     let json = video_json(&sliding);
@@ -343,6 +348,8 @@ fn motion_is_found_while_the_object_turns_and_not_once_it_stops() {
             "0".into(),
             "--motion".into(),
             policy.into(),
+            // Keep the windows the decoder's verdict refuses while the object turns.
+            "--force".into(),
         ]
     };
     let marked: Vec<String> = args(&out, "mark").to_vec();
@@ -375,23 +382,6 @@ fn motion_is_found_while_the_object_turns_and_not_once_it_stops() {
     assert_eq!(
         serde_json::to_value(FrameStatus::Skipped).unwrap(),
         "skipped"
-    );
-
-    // Placed: windows every 48 frames; window 2 (frames 96..128) catches the turn, and moving
-    // it 4 frames at a time finds the object still from frame 128 on.
-    let out = tmp.path().join("placed");
-    let mut placed: Vec<String> = args(&out, "place").to_vec();
-    placed.extend(["--hop".into(), "48".into()]);
-    run_ok(&placed.iter().map(String::as_str).collect::<Vec<_>>());
-    let json = video_json(&out);
-    let window = &frames(&json)[2];
-    assert_eq!(window["placed_by"], 32, "{window}");
-    assert_eq!(window["frames"][0], 128);
-    assert_eq!(window["motion"]["moving"], false);
-    assert_eq!(
-        frames(&json)[0]["motion"]["moving"],
-        true,
-        "no still frames before 128"
     );
 }
 
