@@ -25,3 +25,4 @@ pub mod stats;
 pub mod timing;
 pub mod tof;
 pub mod types;
+pub mod video;

@@ -33,6 +33,8 @@ enum Command {
     Reconstruct(Box<cli::reconstruct::ReconstructArgs>),
     /// Time of flight: range maps from SPAD histograms, ToF → camera calibration, object masks.
     Tof(cli::tof::TofArgs),
+    /// Make a 3-D video from a long or live capture: a 3-D frame per window of frames.
+    Video(Box<cli::video::VideoArgs>),
 }
 
 fn main() -> ExitCode {
@@ -47,6 +49,7 @@ fn main() -> ExitCode {
         Command::Simulate(args) => cli::simulate::run(&args),
         Command::Reconstruct(args) => cli::reconstruct::run(&args),
         Command::Tof(args) => cli::tof::run(&args),
+        Command::Video(args) => cli::video::run(&args),
     };
     match result {
         Ok(()) => ExitCode::SUCCESS,

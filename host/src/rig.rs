@@ -380,7 +380,14 @@ impl Led {
         if cos_theta <= 0.0 {
             return Vector3::zeros();
         }
-        dir * (self.intensity * cos_theta.powf(self.lambert_order) / d2)
+        // m = 1 (a Lambertian emitter, every preset) is the common case: powf costs more than
+        // the rest of this function and the near-field loops call it per pixel and LED.
+        let falloff = if self.lambert_order == 1.0 {
+            cos_theta
+        } else {
+            cos_theta.powf(self.lambert_order)
+        };
+        dir * (self.intensity * falloff / d2)
     }
 }
 

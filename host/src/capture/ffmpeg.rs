@@ -210,21 +210,7 @@ impl FfmpegSource {
 
     /// Reads exactly `buf.len()` bytes; returns the count read before end of stream.
     fn fill(&mut self, buf: &mut [u8]) -> Result<usize, CaptureError> {
-        let mut filled = 0;
-        while filled < buf.len() {
-            match self.stdout.read(&mut buf[filled..]) {
-                Ok(0) => break,
-                Ok(n) => filled += n,
-                Err(e) if e.kind() == std::io::ErrorKind::Interrupted => {}
-                Err(source) => {
-                    return Err(CaptureError::Io {
-                        path: self.path.clone(),
-                        source,
-                    });
-                }
-            }
-        }
-        Ok(filled)
+        super::read_up_to(&mut self.stdout, buf, &self.path)
     }
 
     /// Ends the stream: checks ffmpeg's exit status and error output.

@@ -23,7 +23,7 @@ pub fn is_frame_file(path: &Path) -> bool {
 }
 
 /// Decodes one still image into native greyscale samples and its bit depth.
-fn load_still(path: &Path) -> Result<(usize, usize, u8, Samples), CaptureError> {
+fn load_still(path: &Path) -> Result<Still, CaptureError> {
     let image = ImageReader::open(path)
         .map_err(|source| CaptureError::Io {
             path: path.to_path_buf(),
@@ -43,7 +43,7 @@ fn load_still(path: &Path) -> Result<(usize, usize, u8, Samples), CaptureError> 
 }
 
 /// Greyscale samples of a decoded image (8 or 16 bits kept).
-fn grey(image: DynamicImage) -> (usize, usize, u8, Samples) {
+fn grey(image: DynamicImage) -> Still {
     let (w, h) = (image.width() as usize, image.height() as usize);
     match image {
         DynamicImage::ImageLuma8(im) => (w, h, 8, Samples::U8(im.into_raw())),
@@ -55,13 +55,22 @@ fn grey(image: DynamicImage) -> (usize, usize, u8, Samples) {
     }
 }
 
-/// A directory of still frames, read one at a time in name order.
+/// Frames decoded ahead of the reader: [`ImageSequence`] decodes this many files at once,
+/// in parallel (PNG decoding is single-threaded per file; a 720p frame takes ~3 ms).
+const DECODE_AHEAD: usize = 8;
+
+/// A decoded still: width, height, bit depth and samples.
+type Still = (usize, usize, u8, Samples);
+
+/// A directory of still frames, read in name order; files are decoded [`DECODE_AHEAD`] at a
+/// time in parallel, so memory holds at most that many frames beyond the caller's.
 #[derive(Debug)]
 pub struct ImageSequence {
     format: FrameFormat,
     files: Vec<PathBuf>,
     next: usize,
     first: Option<Samples>,
+    ahead: std::collections::VecDeque<Result<Still, CaptureError>>,
 }
 
 impl ImageSequence {
@@ -90,6 +99,26 @@ impl ImageSequence {
             files,
             next: 0,
             first: Some(samples),
+            ahead: Default::default(),
+        })
+    }
+
+    /// The decoded still at `index` (the next one to deliver), decoding the following
+    /// [`DECODE_AHEAD`] files in parallel when none is waiting.
+    fn decoded(&mut self, index: usize) -> Result<Still, CaptureError> {
+        if self.ahead.is_empty() {
+            use rayon::prelude::*;
+            let end = (index + DECODE_AHEAD).min(self.files.len());
+            let batch: Vec<Result<Still, CaptureError>> = self.files[index..end]
+                .par_iter()
+                .map(|path| load_still(path))
+                .collect();
+            self.ahead.extend(batch);
+        }
+        self.ahead.pop_front().unwrap_or_else(|| {
+            Err(CaptureError::Other(format!(
+                "frame {index} was not decoded ahead"
+            )))
         })
     }
 }
@@ -105,14 +134,15 @@ impl FrameSource for ImageSequence {
             return Ok(None);
         };
         self.next += 1;
+        let path = path.clone();
         let samples = match self.first.take() {
             Some(s) => s,
             None => {
-                let (w, h, bits, samples) = load_still(path)?;
+                let (w, h, bits, samples) = self.decoded(index)?;
                 check_frame(index, w, h, &self.format)?;
                 if bits != self.format.bit_depth {
                     return Err(CaptureError::Format {
-                        path: path.clone(),
+                        path,
                         reason: format!(
                             "{bits}-bit frame in a {}-bit sequence",
                             self.format.bit_depth

@@ -158,8 +158,32 @@ pub enum CaptureError {
     Other(String),
 }
 
-/// A stream of frames.
-pub trait FrameSource {
+/// Reads from `reader` until `buf` is full or the stream ends, and returns the bytes read
+/// (fewer than `buf.len()` only at the end of the stream); `path` names the stream in errors.
+pub(crate) fn read_up_to(
+    reader: &mut impl std::io::Read,
+    buf: &mut [u8],
+    path: &std::path::Path,
+) -> Result<usize, CaptureError> {
+    let mut filled = 0;
+    while filled < buf.len() {
+        match reader.read(&mut buf[filled..]) {
+            Ok(0) => break,
+            Ok(n) => filled += n,
+            Err(e) if e.kind() == std::io::ErrorKind::Interrupted => {}
+            Err(source) => {
+                return Err(CaptureError::Io {
+                    path: path.to_path_buf(),
+                    source,
+                });
+            }
+        }
+    }
+    Ok(filled)
+}
+
+/// A stream of frames (`Send`, so a reader thread can run ahead of the consumer).
+pub trait FrameSource: Send {
     /// The stream's format.
     fn format(&self) -> &FrameFormat;
     /// The next frame, or `None` at the end of the stream.
@@ -175,6 +199,7 @@ pub mod images;
 pub mod memory;
 pub mod open;
 pub mod raw;
+pub mod stdin;
 pub mod y4m;
 
 pub use open::{OpenOptions, open};

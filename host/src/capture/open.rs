@@ -1,5 +1,5 @@
-//! Choosing a frame reader for a path: directory of frames, multi-page TIFF, y4m, raw, or a
-//! video container through FFmpeg.
+//! Choosing a frame reader for a path: directory of frames, multi-page TIFF, y4m, raw, a
+//! video container through FFmpeg, or `-` for a y4m or raw stream on standard input.
 
 use super::ffmpeg::FfmpegSource;
 use super::images::{ImageSequence, TiffStack};
@@ -18,8 +18,12 @@ pub struct OpenOptions {
     pub raw: Option<RawLayout>,
 }
 
-/// Opens `path` with the reader its kind calls for.
+/// Opens `path` with the reader its kind calls for; `-` is standard input (a y4m stream, or
+/// raw frames with `options.raw`).
 pub fn open(path: &Path, options: &OpenOptions) -> Result<Box<dyn FrameSource>, CaptureError> {
+    if super::stdin::is_stdin(path) {
+        return super::stdin::open_stdin(options.raw, options.fps);
+    }
     if !path.exists() {
         return Err(CaptureError::Io {
             path: path.to_path_buf(),

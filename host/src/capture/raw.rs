@@ -1,4 +1,7 @@
-//! Headerless raw frames: width × height samples per frame, 8-bit or 16-bit little-endian.
+//! Headerless raw frames: width × height samples per frame, 8-bit or 16-bit little-endian,
+//! from a file (whose size must be a whole number of frames) or any byte stream (standard
+//! input, [`super::stdin`]), where a stream ending inside a frame is an error that names the
+//! frame and how many of its bytes arrived, after the whole frames before it were delivered.
 
 use super::{CaptureError, Frame, FrameFormat, FrameSource, Samples};
 use std::io::{BufReader, Read};
@@ -22,13 +25,37 @@ impl std::fmt::Display for RawLayout {
     }
 }
 
-/// A raw frame file read one frame at a time.
-pub struct RawSource {
+/// Raw frames read one at a time from `R` (a file unless said otherwise).
+pub struct RawSource<R = BufReader<std::fs::File>> {
     format: FrameFormat,
     path: PathBuf,
-    reader: BufReader<std::fs::File>,
-    frames: usize,
+    reader: R,
+    /// Frames in the file; `None` for a stream of unknown length.
+    frames: Option<usize>,
     index: usize,
+}
+
+/// Bytes of one frame of `layout`, after checking the layout.
+fn frame_bytes(layout: RawLayout) -> Result<usize, CaptureError> {
+    if layout.width == 0 || layout.height == 0 {
+        return Err(CaptureError::Other(format!(
+            "raw layout {layout}: width and height must be at least 1"
+        )));
+    }
+    if !(1..=16).contains(&layout.bit_depth) {
+        return Err(CaptureError::Other(format!(
+            "raw layout {layout}: bits per sample must be 1 to 16"
+        )));
+    }
+    layout
+        .width
+        .checked_mul(layout.height)
+        .and_then(|p| p.checked_mul(Samples::bytes_per_sample(layout.bit_depth)))
+        .ok_or_else(|| {
+            CaptureError::Other(format!(
+                "raw layout {layout}: a frame is too large to address"
+            ))
+        })
 }
 
 impl RawSource {
@@ -38,27 +65,9 @@ impl RawSource {
             path: path.to_path_buf(),
             source,
         };
-        if layout.width == 0 || layout.height == 0 {
-            return Err(CaptureError::Other(format!(
-                "raw layout {layout}: width and height must be at least 1"
-            )));
-        }
-        if !(1..=16).contains(&layout.bit_depth) {
-            return Err(CaptureError::Other(format!(
-                "raw layout {layout}: bits per sample must be 1 to 16"
-            )));
-        }
+        let frame_bytes = frame_bytes(layout)?;
         let file = std::fs::File::open(path).map_err(io)?;
         let size = file.metadata().map_err(io)?.len() as usize;
-        let frame_bytes = layout
-            .width
-            .checked_mul(layout.height)
-            .and_then(|p| p.checked_mul(Samples::bytes_per_sample(layout.bit_depth)))
-            .ok_or_else(|| {
-                CaptureError::Other(format!(
-                    "raw layout {layout}: a frame is too large to address"
-                ))
-            })?;
         if !size.is_multiple_of(frame_bytes) {
             return Err(CaptureError::Format {
                 path: path.to_path_buf(),
@@ -71,29 +80,63 @@ impl RawSource {
         Ok(Self {
             format: FrameFormat::full_range(layout.width, layout.height, layout.bit_depth, fps),
             path: path.to_path_buf(),
-            reader: BufReader::new(file),
-            frames: size / frame_bytes,
+            reader: BufReader::with_capacity(1 << 20, file),
+            frames: Some(size / frame_bytes),
             index: 0,
         })
     }
 }
 
-impl FrameSource for RawSource {
+impl<R: Read> RawSource<R> {
+    /// Reads raw frames of `layout` from a stream of unknown length, named `path` in errors.
+    pub fn from_stream(
+        reader: R,
+        path: &Path,
+        layout: RawLayout,
+        fps: f64,
+    ) -> Result<Self, CaptureError> {
+        frame_bytes(layout)?;
+        Ok(Self {
+            format: FrameFormat::full_range(layout.width, layout.height, layout.bit_depth, fps),
+            path: path.to_path_buf(),
+            reader,
+            frames: None,
+            index: 0,
+        })
+    }
+
+    /// Fills `buf` from the stream; returns the bytes read before its end.
+    fn fill(&mut self, buf: &mut [u8]) -> Result<usize, CaptureError> {
+        super::read_up_to(&mut self.reader, buf, &self.path)
+    }
+}
+
+impl<R: Read + Send> FrameSource for RawSource<R> {
     fn format(&self) -> &FrameFormat {
         &self.format
     }
 
     fn next_frame(&mut self) -> Result<Option<Frame>, CaptureError> {
-        if self.index >= self.frames {
+        if self.frames.is_some_and(|frames| self.index >= frames) {
             return Ok(None);
         }
         let pixels = self.format.pixels();
-        let io = |source| CaptureError::Io {
-            path: self.path.clone(),
-            source,
-        };
         let mut bytes = vec![0u8; Samples::bytes_per_sample(self.format.bit_depth) * pixels];
-        self.reader.read_exact(&mut bytes).map_err(io)?;
+        let got = self.fill(&mut bytes)?;
+        if got == 0 && self.frames.is_none() {
+            return Ok(None);
+        }
+        if got < bytes.len() {
+            let index = self.index;
+            return Err(CaptureError::Format {
+                path: self.path.clone(),
+                reason: format!(
+                    "stream is truncated inside frame {index}: {got} of its {} bytes arrived \
+                     (the {index} frames before it are whole)",
+                    bytes.len()
+                ),
+            });
+        }
         let samples = Samples::from_le_bytes(bytes, self.format.bit_depth);
         let frame = Frame {
             index: self.index,
@@ -104,6 +147,6 @@ impl FrameSource for RawSource {
     }
 
     fn frame_count_hint(&self) -> Option<usize> {
-        Some(self.frames - self.index)
+        self.frames.map(|frames| frames - self.index)
     }
 }

@@ -1,17 +1,22 @@
 //! YUV4MPEG2 (`.y4m`) reader: the luma plane of every frame, 8-bit or high bit depth
-//! (`Cmono16`, `C420p10`, … stored little-endian in two bytes). A file ending inside a frame is
-//! an error, not a short stream. FFmpeg's `XCOLORRANGE=LIMITED` marks limited ("tv") range:
-//! black 16·2^(b−8), white 235·2^(b−8), as for video containers.
+//! (`Cmono16`, `C420p10`, … stored little-endian in two bytes), from a file or any byte stream
+//! (standard input, [`super::stdin`]). A stream ending inside a frame is an error that names
+//! the frame and how many of its bytes arrived, not a short stream; the frames before it have
+//! been delivered. FFmpeg's `XCOLORRANGE=LIMITED` marks limited ("tv") range: black
+//! 16·2^(b−8), white 235·2^(b−8), as for video containers.
 
 use super::{CaptureError, Frame, FrameFormat, FrameSource, Samples};
 use std::io::{BufRead, BufReader, Read};
 use std::path::{Path, PathBuf};
 
-/// A y4m stream read one frame at a time.
-pub struct Y4mSource {
+/// Longest header or frame-marker line read, bytes.
+const MAX_LINE: u64 = 4096;
+
+/// A y4m stream read one frame at a time from `R` (a file unless said otherwise).
+pub struct Y4mSource<R = BufReader<std::fs::File>> {
     format: FrameFormat,
     path: PathBuf,
-    reader: BufReader<std::fs::File>,
+    reader: R,
     /// Bytes of chroma after the luma plane of each frame.
     chroma_bytes: usize,
     index: usize,
@@ -24,9 +29,18 @@ impl Y4mSource {
             path: path.to_path_buf(),
             source,
         })?;
-        let mut reader = BufReader::new(file);
+        Self::from_reader(BufReader::with_capacity(1 << 20, file), path, fps)
+    }
+}
+
+impl<R: BufRead> Y4mSource<R> {
+    /// Reads a y4m stream from `reader`, named `path` in errors; `fps` overrides the header's
+    /// rate.
+    pub fn from_reader(mut reader: R, path: &Path, fps: Option<f64>) -> Result<Self, CaptureError> {
         let mut header = String::new();
-        reader
+        // A header is a short text line: a stream that is no y4m cannot make this read grow.
+        (&mut reader)
+            .take(MAX_LINE)
             .read_line(&mut header)
             .map_err(|source| CaptureError::Io {
                 path: path.to_path_buf(),
@@ -107,7 +121,26 @@ impl Y4mSource {
     }
 }
 
-impl FrameSource for Y4mSource {
+impl<R> Y4mSource<R> {
+    /// The error for a stream that ends after `got` bytes of the current frame (marker
+    /// line included): it names the frame and says the ones before it are whole.
+    fn truncated(&self, got: usize) -> CaptureError {
+        let index = self.index;
+        let pixels = self.format.pixels();
+        let frame_bytes = "FRAME\n".len()
+            + Samples::bytes_per_sample(self.format.bit_depth) * pixels
+            + self.chroma_bytes;
+        CaptureError::Format {
+            path: self.path.clone(),
+            reason: format!(
+                "stream is truncated inside frame {index}: {got} of its {frame_bytes} bytes \
+                 arrived (the {index} frames before it are whole)"
+            ),
+        }
+    }
+}
+
+impl<R: BufRead + Send> FrameSource for Y4mSource<R> {
     fn format(&self) -> &FrameFormat {
         &self.format
     }
@@ -119,9 +152,15 @@ impl FrameSource for Y4mSource {
             source,
         };
         let mut line = Vec::new();
-        let n = self.reader.read_until(b'\n', &mut line).map_err(io)?;
+        let n = (&mut self.reader)
+            .take(MAX_LINE)
+            .read_until(b'\n', &mut line)
+            .map_err(io)?;
         if n == 0 {
             return Ok(None);
+        }
+        if !line.ends_with(b"\n") && b"FRAME".iter().zip(&line).all(|(a, b)| a == b) {
+            return Err(self.truncated(line.len()));
         }
         if !line.starts_with(b"FRAME") {
             return Err(CaptureError::Format {
@@ -129,21 +168,18 @@ impl FrameSource for Y4mSource {
                 reason: format!("frame {}: missing FRAME marker", self.index),
             });
         }
-        let truncated = |index| CaptureError::Format {
-            path: self.path.clone(),
-            reason: format!("file is truncated inside frame {index}"),
-        };
         let pixels = self.format.pixels();
         let sample_bytes = Samples::bytes_per_sample(self.format.bit_depth);
-        // Read up to one luma plane, growing the buffer as data arrives, so a bad header's
-        // size cannot allocate more than the file holds.
-        let mut bytes = Vec::new();
-        (&mut self.reader)
-            .take((sample_bytes * pixels) as u64)
-            .read_to_end(&mut bytes)
-            .map_err(|_| truncated(self.index))?;
-        if bytes.len() != sample_bytes * pixels {
-            return Err(truncated(self.index));
+        // Read up to one luma plane into a buffer reserved for at most 64 MiB and grown as
+        // data arrives beyond that, so a bad header's size cannot allocate more than the
+        // stream holds.
+        let luma_bytes = sample_bytes * pixels;
+        let mut bytes = Vec::with_capacity(luma_bytes.min(1 << 26));
+        let luma = (&mut self.reader)
+            .take(luma_bytes as u64)
+            .read_to_end(&mut bytes);
+        if luma.is_err() || bytes.len() != luma_bytes {
+            return Err(self.truncated(line.len() + bytes.len()));
         }
         let samples = Samples::from_le_bytes(bytes, self.format.bit_depth);
         let skipped = std::io::copy(
@@ -155,7 +191,7 @@ impl FrameSource for Y4mSource {
             source,
         })?;
         if skipped != self.chroma_bytes as u64 {
-            return Err(truncated(self.index));
+            return Err(self.truncated(line.len() + luma_bytes + skipped as usize));
         }
         let frame = Frame {
             index: self.index,

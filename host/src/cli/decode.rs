@@ -89,7 +89,7 @@ fn parse_roi(text: &str) -> Result<Roi> {
 
 /// Builds the decoder settings; `default_leds` applies when --leds is absent, `force` keeps
 /// a result the quality verdict finds implausible (recorded as overridden).
-fn config(args: &DecodeOptions, default_leds: usize, force: bool) -> Result<DecodeConfig> {
+pub fn config(args: &DecodeOptions, default_leds: usize, force: bool) -> Result<DecodeConfig> {
     let leds = match args.leds.as_deref() {
         None => LedCount::Fixed(default_leds),
         Some("auto") => LedCount::Auto,
@@ -143,6 +143,14 @@ fn parse_raw(text: &str) -> Result<RawLayout> {
     })
 }
 
+/// How to open the input: frame rate override and raw layout.
+pub fn open_options(options: &DecodeOptions) -> Result<OpenOptions> {
+    Ok(OpenOptions {
+        fps: options.fps,
+        raw: options.raw.as_deref().map(parse_raw).transpose()?,
+    })
+}
+
 /// Opens and decodes `input` with `options`, showing a progress bar; `default_leds` applies
 /// when --leds is absent, `force` keeps a result the verdict finds implausible.
 pub fn decode_capture(
@@ -152,12 +160,8 @@ pub fn decode_capture(
     force: bool,
 ) -> Result<Decoded> {
     let config = config(options, default_leds, force)?;
-    let open_options = OpenOptions {
-        fps: options.fps,
-        raw: options.raw.as_deref().map(parse_raw).transpose()?,
-    };
-    let mut source =
-        open(input, &open_options).with_context(|| format!("cannot open {}", input.display()))?;
+    let mut source = open(input, &open_options(options)?)
+        .with_context(|| format!("cannot open {}", input.display()))?;
     let bar = ProgressBar::new(0);
     bar.set_style(
         ProgressStyle::with_template("decoding {bar:40} {pos}/{len} frames {elapsed}")

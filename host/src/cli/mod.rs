@@ -10,3 +10,4 @@ pub mod photometric;
 pub mod reconstruct;
 pub mod simulate;
 pub mod tof;
+pub mod video;

@@ -23,7 +23,7 @@ use std::time::Instant;
   Ch. 4 sphere:      meb simulate --rig thesis-out-of-plane --scene sphere --size-mm 48 --frames 128 --out sphere\n  \
   Ch. 4 cube face:   meb simulate --rig thesis-out-of-plane --scene cube --size-mm 75 --frames 128 --out cube\n  \
   Ch. 4 cube corner: meb simulate --rig thesis-out-of-plane --scene cube --corner --size-mm 75 --frames 128 --out corner\n  \
-  Ch. 5 ellipsoid:   meb simulate --rig thesis-dynamic --scene ellipsoid --axes-mm 100,60,60 --rpm 7.5 --frames 400 --out ellipsoid\n  \
+  Ch. 5 ellipsoid:   meb simulate --rig thesis-dynamic --scene ellipsoid --axes-mm 100,60,60 --rpm 7.5 --frames 400 --format y4m --truth-every 20 --out ellipsoid\n  \
   Ch. 7 data set:    meb simulate dataset --count 100 --out dataset"
 )]
 pub struct SimulateArgs {
@@ -174,6 +174,10 @@ struct CaptureArgs {
     /// Frame whose start time the ground-truth files describe.
     #[arg(long, default_value_t = 0)]
     truth_frame: usize,
+    /// Also write the true depth every K frames as truth/depth_FFFFF.npy (a moving scene,
+    /// for `meb video --ground-truth`).
+    #[arg(long)]
+    truth_every: Option<usize>,
 }
 
 #[derive(Args)]
@@ -273,6 +277,7 @@ fn run_capture(args: &CaptureArgs) -> Result<()> {
         },
         truth_frame: args.truth_frame,
         scene: description,
+        truth_every: args.truth_every,
     };
     let bar = progress_bar(args.frames, "rendering");
     write_capture(&mut capture, folder.path(), &options, &mut |done, _| {

@@ -1,6 +1,7 @@
 //! Writing a simulated capture to disk: frames (PNG sequence, y4m, or MP4 through the
 //! `ffmpeg` program) and the ground truth (`depth.npy`, `normals.npy`, `mask.png`,
-//! `albedo.npy`, `led<i>_true.npy`, `rig.toml`, `truth.json`).
+//! `albedo.npy`, `led<i>_true.npy`, `rig.toml`, `truth.json`; for moving scenes optionally the
+//! depth every K frames, `truth/depth_FFFFF.npy`).
 //!
 //! Everything is written into a folder the caller replaces atomically (an
 //! [`OutputFolder`](crate::export::files::OutputFolder)), so a failed or interrupted run never
@@ -244,6 +245,9 @@ pub struct OutputOptions {
     pub truth_frame: usize,
     /// Scene description stored in `truth.json`.
     pub scene: serde_json::Value,
+    /// Also write the true depth at the start of every K-th frame as
+    /// `truth/depth_FFFFF.npy` (F = frame), for scoring a moving scene frame by frame.
+    pub truth_every: Option<usize>,
 }
 
 /// Renders every frame of `capture` and writes frames plus ground truth into the existing
@@ -257,9 +261,19 @@ pub fn write_capture(
     let format = capture.format().clone();
     let total = capture.info().frames;
     let mut writer = FrameWriter::open(dir, options.video, &format)?;
+    let every = options.truth_every.filter(|&k| k > 0);
+    if every.is_some() {
+        let truth_dir = dir.join("truth");
+        std::fs::create_dir_all(&truth_dir).map_err(|e| write_err(&truth_dir, e))?;
+    }
     let mut done = 0;
     while let Some(frame) = capture.next_frame()? {
         writer.write(&format, &frame)?;
+        if every.is_some_and(|k| frame.index.is_multiple_of(k)) {
+            let truth = capture.truth_at(capture.frame_time(frame.index));
+            let path = dir.join(format!("truth/depth_{:05}.npy", frame.index));
+            write_npy(&path, &truth.depth_mm)?;
+        }
         done += 1;
         progress(done, total);
     }

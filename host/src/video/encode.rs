@@ -1,0 +1,319 @@
+//! Writing a sequence of pictures as a video: H.264 MP4 through the `ffmpeg` program, or an
+//! animated PNG (APNG, the `png` crate) when FFmpeg is not installed.
+//!
+//! MP4: RGB frames are piped to `ffmpeg -f rawvideo -pix_fmt rgb24 … -c:v libx264 -pix_fmt
+//! yuv420p` as they are made, so nothing accumulates in memory. APNG needs its frame count
+//! before the first frame, which a stream does not know: each picture is stored as a PNG
+//! under a hidden folder as it comes, and [`VideoEncoder::finish`] assembles them one at a
+//! time into the animation and deletes them.
+
+use super::VideoError;
+use image::RgbImage;
+use std::io::{BufWriter, Read, Write};
+use std::path::{Path, PathBuf};
+use std::process::{Child, ChildStdin, Command, Stdio};
+use std::thread::JoinHandle;
+
+/// Which container to write.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, serde::Serialize, serde::Deserialize)]
+#[serde(rename_all = "lowercase")]
+pub enum VideoContainer {
+    /// MP4 when FFmpeg runs, else APNG.
+    #[default]
+    Auto,
+    /// Animated PNG.
+    Apng,
+}
+
+/// A video being written.
+pub enum VideoEncoder {
+    /// Frames piped to FFmpeg.
+    Mp4 {
+        /// The video file.
+        path: PathBuf,
+        /// FFmpeg.
+        child: Child,
+        /// Its standard input.
+        stdin: Option<BufWriter<ChildStdin>>,
+        /// Its error output, collected on a thread.
+        stderr: Option<JoinHandle<String>>,
+        /// Picture size.
+        size: (u32, u32),
+    },
+    /// Pictures stored for an APNG.
+    Apng {
+        /// The video file.
+        path: PathBuf,
+        /// Folder of the stored pictures.
+        frames: PathBuf,
+        /// Pictures stored.
+        count: usize,
+        /// Picture size.
+        size: (u32, u32),
+        /// Display rate, pictures per second.
+        fps: f64,
+    },
+}
+
+impl VideoEncoder {
+    /// Starts a video `stem.mp4` (or `stem.png` as APNG) of `width` × `height` pictures shown
+    /// at `fps`.
+    pub fn create(
+        stem: &Path,
+        width: u32,
+        height: u32,
+        fps: f64,
+        container: VideoContainer,
+    ) -> Result<Self, VideoError> {
+        let fps = if fps.is_finite() && fps > 0.0 {
+            fps
+        } else {
+            25.0
+        };
+        if container == VideoContainer::Auto {
+            let path = stem.with_extension("mp4");
+            let spawned = Command::new("ffmpeg")
+                .args(["-hide_banner", "-loglevel", "error", "-nostdin", "-y"])
+                .args(["-f", "rawvideo", "-pix_fmt", "rgb24"])
+                .args(["-s", &format!("{width}x{height}")])
+                .args(["-framerate", &format!("{fps}"), "-i", "-"])
+                .args(["-c:v", "libx264", "-preset", "veryfast", "-crf", "18"])
+                .args(["-pix_fmt", "yuv420p", "-movflags", "+faststart"])
+                .arg(&path)
+                .stdin(Stdio::piped())
+                .stdout(Stdio::null())
+                .stderr(Stdio::piped())
+                .spawn();
+            match spawned {
+                Ok(mut child) => {
+                    let stdin = child.stdin.take().map(BufWriter::new);
+                    let stderr = child.stderr.take().map(|mut pipe| {
+                        std::thread::spawn(move || {
+                            let mut text = String::new();
+                            let _ = pipe.read_to_string(&mut text);
+                            text
+                        })
+                    });
+                    return Ok(Self::Mp4 {
+                        path,
+                        child,
+                        stdin,
+                        stderr,
+                        size: (width, height),
+                    });
+                }
+                Err(e) if e.kind() == std::io::ErrorKind::NotFound => {}
+                Err(e) => return Err(VideoError::Encode(format!("cannot run ffmpeg: {e}"))),
+            }
+        }
+        let name = stem
+            .file_name()
+            .map(|n| n.to_string_lossy().into_owned())
+            .unwrap_or_default();
+        let frames = stem.with_file_name(format!(".{name}-frames"));
+        std::fs::create_dir_all(&frames)
+            .map_err(|e| crate::export::files::FilesError::write(&frames, e))?;
+        Ok(Self::Apng {
+            path: stem.with_extension("png"),
+            frames,
+            count: 0,
+            size: (width, height),
+            fps,
+        })
+    }
+
+    /// The video file being written.
+    pub fn path(&self) -> &Path {
+        match self {
+            Self::Mp4 { path, .. } | Self::Apng { path, .. } => path,
+        }
+    }
+
+    /// Adds a picture (of the video's size).
+    pub fn push(&mut self, picture: &RgbImage) -> Result<(), VideoError> {
+        match self {
+            Self::Mp4 {
+                stdin, size, path, ..
+            } => {
+                check_size(picture, *size)?;
+                let Some(stdin) = stdin.as_mut() else {
+                    return Err(VideoError::Encode("ffmpeg's input is closed".into()));
+                };
+                stdin.write_all(picture.as_raw()).map_err(|e| {
+                    VideoError::Encode(format!(
+                        "ffmpeg stopped taking frames for {} ({e})",
+                        path.display()
+                    ))
+                })
+            }
+            Self::Apng {
+                frames,
+                count,
+                size,
+                ..
+            } => {
+                check_size(picture, *size)?;
+                let file = frames.join(format!("{count:08}.png"));
+                write_png(&file, picture, png::Compression::Fast)?;
+                *count += 1;
+                Ok(())
+            }
+        }
+    }
+
+    /// Ends the video and returns its path (`None` for an APNG without pictures).
+    pub fn finish(self) -> Result<Option<PathBuf>, VideoError> {
+        match self {
+            Self::Mp4 {
+                path,
+                mut child,
+                stdin,
+                stderr,
+                ..
+            } => {
+                if let Some(mut stdin) = stdin {
+                    stdin
+                        .flush()
+                        .map_err(|e| VideoError::Encode(format!("ffmpeg stopped early ({e})")))?;
+                }
+                let status = child
+                    .wait()
+                    .map_err(|e| VideoError::Encode(format!("waiting for ffmpeg: {e}")))?;
+                let messages = stderr.and_then(|h| h.join().ok()).unwrap_or_default();
+                if !status.success() {
+                    return Err(VideoError::Encode(format!(
+                        "ffmpeg could not write {} ({status}): {}",
+                        path.display(),
+                        messages.trim()
+                    )));
+                }
+                Ok(Some(path))
+            }
+            Self::Apng {
+                path,
+                frames,
+                count,
+                size,
+                fps,
+            } => {
+                let result = if count == 0 {
+                    Ok(None)
+                } else {
+                    assemble_apng(&path, &frames, count, size, fps).map(|()| Some(path))
+                };
+                std::fs::remove_dir_all(&frames)
+                    .map_err(|e| crate::export::files::FilesError::write(&frames, e))?;
+                result
+            }
+        }
+    }
+}
+
+/// A picture of the wrong size is a bug in the caller, reported instead of encoded.
+fn check_size(picture: &RgbImage, size: (u32, u32)) -> Result<(), VideoError> {
+    if picture.dimensions() != size {
+        return Err(VideoError::Encode(format!(
+            "picture is {:?}, the video is {size:?}",
+            picture.dimensions()
+        )));
+    }
+    Ok(())
+}
+
+/// Writes an RGB picture as a PNG.
+fn write_png(
+    path: &Path,
+    picture: &RgbImage,
+    compression: png::Compression,
+) -> Result<(), VideoError> {
+    let file = std::fs::File::create(path)
+        .map_err(|e| crate::export::files::FilesError::write(path, e))?;
+    let mut encoder = png::Encoder::new(BufWriter::new(file), picture.width(), picture.height());
+    encoder.set_color(png::ColorType::Rgb);
+    encoder.set_depth(png::BitDepth::Eight);
+    encoder.set_compression(compression);
+    let encode = |e: png::EncodingError| VideoError::Encode(format!("{}: {e}", path.display()));
+    let mut writer = encoder.write_header().map_err(encode)?;
+    writer.write_image_data(picture.as_raw()).map_err(encode)?;
+    writer.finish().map_err(encode)
+}
+
+/// Writes the `count` stored pictures in `frames` as one APNG at `path`.
+fn assemble_apng(
+    path: &Path,
+    frames: &Path,
+    count: usize,
+    size: (u32, u32),
+    fps: f64,
+) -> Result<(), VideoError> {
+    let encode = |e: png::EncodingError| VideoError::Encode(format!("{}: {e}", path.display()));
+    let file = std::fs::File::create(path)
+        .map_err(|e| crate::export::files::FilesError::write(path, e))?;
+    let mut encoder = png::Encoder::new(BufWriter::new(file), size.0, size.1);
+    encoder.set_color(png::ColorType::Rgb);
+    encoder.set_depth(png::BitDepth::Eight);
+    encoder.set_compression(png::Compression::Balanced);
+    let frames_u32 = u32::try_from(count)
+        .map_err(|_| VideoError::Encode(format!("{count} pictures are too many for an APNG")))?;
+    encoder.set_animated(frames_u32, 0).map_err(encode)?;
+    // Delay 1/fps s as a fraction of 16-bit integers (1000/fps ms, rounded).
+    let delay_ms = (1000.0 / fps).round().clamp(1.0, f64::from(u16::MAX)) as u16;
+    encoder.set_frame_delay(delay_ms, 1000).map_err(encode)?;
+    let mut writer = encoder.write_header().map_err(encode)?;
+    let mut buffer = Vec::new();
+    for k in 0..count {
+        let file = frames.join(format!("{k:08}.png"));
+        let decode = |e: png::DecodingError| {
+            VideoError::Encode(format!("stored picture {}: {e}", file.display()))
+        };
+        let reader = std::io::BufReader::new(
+            std::fs::File::open(&file)
+                .map_err(|e| crate::export::files::FilesError::read(&file, e))?,
+        );
+        let mut reader = png::Decoder::new(reader).read_info().map_err(decode)?;
+        buffer.resize(reader.output_buffer_size().unwrap_or(0), 0);
+        reader.next_frame(&mut buffer).map_err(decode)?;
+        writer.write_image_data(&buffer).map_err(encode)?;
+    }
+    writer.finish().map_err(encode)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn an_apng_holds_every_picture_in_order() {
+        let dir = tempfile::tempdir().unwrap();
+        let mut video =
+            VideoEncoder::create(&dir.path().join("depth"), 4, 2, 25.0, VideoContainer::Apng)
+                .unwrap();
+        for k in 0..3u8 {
+            video
+                .push(&RgbImage::from_pixel(
+                    4,
+                    2,
+                    image::Rgb([k * 50, 0, 255 - k]),
+                ))
+                .unwrap();
+        }
+        assert!(video.push(&RgbImage::new(2, 2)).is_err());
+        let path = video.finish().unwrap().unwrap();
+        assert_eq!(path, dir.path().join("depth.png"));
+        let names: Vec<_> = std::fs::read_dir(dir.path()).unwrap().collect();
+        assert_eq!(names.len(), 1, "the stored pictures are gone");
+        let mut reader =
+            png::Decoder::new(std::io::BufReader::new(std::fs::File::open(&path).unwrap()))
+                .read_info()
+                .unwrap();
+        let control = reader.info().animation_control.unwrap();
+        assert_eq!(control.num_frames, 3);
+        let mut buffer = vec![0; reader.output_buffer_size().unwrap()];
+        for k in 0..3u8 {
+            reader.next_frame(&mut buffer).unwrap();
+            assert_eq!(&buffer[..3], &[k * 50, 0, 255 - k]);
+            let fctl = reader.info().frame_control.unwrap();
+            assert_eq!((fctl.delay_num, fctl.delay_den), (40, 1000));
+        }
+    }
+}

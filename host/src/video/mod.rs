@@ -1,0 +1,637 @@
+//! Dynamic imaging: 3-D video from long or live captures (thesis Ch. 5).
+//!
+//! The thesis filmed a turning ellipsoid at 1 kfps and decoded 32 of every 40 frames into one
+//! 3-D frame (25 3-D frames per second), about three minutes of processing each. Here a clip or
+//! a live stream is cut into windows ([`schedule`]: thesis windows, or sliding ones), read on
+//! its own thread with memory bounded by the window whatever its length ([`stream`]), each
+//! window decoded by the demodulator ([`decode`]), checked for motion ([`motion`]) and
+//! reconstructed by the one decoded → reconstruction path ([`crate::reconstruct::from_decoded`]);
+//! with ground truth ([`truth`]) each 3-D frame is scored. The caller gets every window's
+//! [`VideoFrame`] as soon as it is done (the CLI writes it with [`output`]: per-frame arrays,
+//! a colour-mapped depth video and a shaded-render video, `video.json`).
+//!
+//! A window that cannot be decoded or reconstructed (the object left the view, a dark moment)
+//! is recorded as failed with the reason and the video goes on; a run in which no window
+//! succeeds is an error. A stream that ends inside a frame ends the video after the windows
+//! before the cut, and [`VideoSummary::input_error`] says where.
+
+pub mod carry;
+pub mod decode;
+pub mod encode;
+pub mod motion;
+pub mod output;
+pub mod render;
+pub mod schedule;
+pub mod stream;
+pub mod truth;
+
+pub use carry::{TimingCarry, TimingSource};
+pub use motion::{MotionConfig, MotionEstimate, MotionPolicy, detect_motion};
+pub use schedule::{ScheduleError, WindowSchedule};
+pub use stream::{FrameStream, StreamEnd};
+pub use truth::{TruthDepth, TruthSource};
+
+use crate::capture::{CaptureError, FrameSource};
+use crate::demod::{DecodeConfig, Decoded, DemodError};
+use crate::metrics::{MetricsError, compare_depth};
+use crate::reconstruct::{ReconstructConfig, Reconstruction, from_decoded};
+use crate::rig::Rig;
+use crate::timing::StageTiming;
+use serde::{Deserialize, Serialize};
+use std::ops::Range;
+use std::time::Instant;
+use thiserror::Error;
+
+/// Everything [`process`] needs besides the frames, the rig and the truth.
+#[derive(Debug, Clone, PartialEq)]
+pub struct VideoConfig {
+    /// How camera frames are cut into 3-D frames.
+    pub schedule: WindowSchedule,
+    /// Decoder settings (`start` frames are skipped once; `frames` is ignored).
+    pub decode: DecodeConfig,
+    /// Reconstruction settings.
+    pub reconstruct: ReconstructConfig,
+    /// Motion detection and what to do about it.
+    pub motion: MotionConfig,
+    /// Frames the reader may run ahead of the processing (default: one hop, at most one
+    /// window).
+    pub read_ahead: Option<usize>,
+    /// Stop after this many camera frames (a live stream).
+    pub max_frames: Option<usize>,
+    /// Decode windows with the exposure and rate ratio of the best fit so far ([`carry`]);
+    /// `false` fits every window on its own.
+    pub carry_timing: bool,
+}
+
+impl VideoConfig {
+    /// The thesis' windows (40 frames, 4 dropped at each end) for a rig of `leds` LEDs, with
+    /// the decoded-capture reconstruction settings.
+    pub fn thesis(leds: usize) -> Self {
+        Self {
+            schedule: WindowSchedule::THESIS,
+            decode: DecodeConfig {
+                leds: crate::demod::LedCount::Fixed(leds),
+                ..DecodeConfig::default()
+            },
+            reconstruct: ReconstructConfig::decoded_capture(),
+            motion: MotionConfig::default(),
+            read_ahead: None,
+            max_frames: None,
+            carry_timing: true,
+        }
+    }
+}
+
+/// Errors of a video run.
+#[derive(Debug, Error)]
+#[non_exhaustive]
+pub enum VideoError {
+    /// The window schedule cannot work.
+    #[error(transparent)]
+    Schedule(#[from] ScheduleError),
+    /// The frames cannot be read.
+    #[error(transparent)]
+    Capture(#[from] CaptureError),
+    /// A decoder setting is wrong for this stream (not a property of one window).
+    #[error(transparent)]
+    Decode(DemodError),
+    /// The rig does not fit the stream.
+    #[error("rig: {0}")]
+    Rig(String),
+    /// The clip ended before its first window was whole.
+    #[error(
+        "the clip ended after {frames} frames, before its first window (frames {first}..{end}) \
+         was whole{}",
+        cut.as_ref().map(|c| format!(": {c}")).unwrap_or_default()
+    )]
+    ClipTooShort {
+        /// Camera frames read.
+        frames: usize,
+        /// First frame of the first window.
+        first: usize,
+        /// End of the first window.
+        end: usize,
+        /// The read error that ended the clip, when it did not simply end.
+        cut: Option<String>,
+    },
+    /// Every window failed.
+    #[error("none of the {windows} windows could be reconstructed; the first failed with: {first}")]
+    NoFrames {
+        /// Windows tried.
+        windows: usize,
+        /// Why the first one failed.
+        first: String,
+    },
+    /// The ground truth cannot be used.
+    #[error("ground truth: {0}")]
+    Truth(String),
+    /// Comparing with the ground truth failed.
+    #[error(transparent)]
+    Metrics(#[from] MetricsError),
+    /// Writing the outputs failed.
+    #[error(transparent)]
+    Files(#[from] crate::export::files::FilesError),
+    /// Encoding an output video failed.
+    #[error("{0}")]
+    Encode(String),
+}
+
+/// What became of a window.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "lowercase")]
+pub enum FrameStatus {
+    /// Decoded and reconstructed.
+    Reconstructed,
+    /// Left out on purpose (motion, [`MotionPolicy::Skip`]).
+    Skipped,
+    /// Decoding or reconstruction failed; `reason` says why.
+    Failed,
+}
+
+/// The decoder's view of a window.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct DecodeQuality {
+    /// Chips per camera frame.
+    pub rate_ratio: f64,
+    /// Exposure, fraction of the frame period.
+    pub exposure: f64,
+    /// RMS residual of the waveform fit to the mean signal, fraction of full scale.
+    pub fit_residual: f64,
+    /// Median per-frame pixel noise σ, fraction of full scale.
+    pub median_noise: f64,
+    /// Signal-to-noise ratio of each LED image, dB.
+    pub led_snr_db: Vec<f64>,
+    /// The decoder's quality verdict (an implausible window is refused unless `--force`).
+    pub verdict: crate::demod::quality::Verdict,
+}
+
+impl DecodeQuality {
+    /// The figures of a decode report.
+    pub fn of(decoded: &Decoded) -> Self {
+        let report = &decoded.report;
+        Self {
+            rate_ratio: report.rate_ratio,
+            exposure: report.exposure,
+            fit_residual: report.fit_residual,
+            median_noise: report.median_noise,
+            led_snr_db: report.per_led.iter().map(|l| l.snr_db).collect(),
+            verdict: report.verdict.clone(),
+        }
+    }
+}
+
+/// The reconstruction's view of a window.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct ReconstructionQuality {
+    /// Pixels with a normal.
+    pub object_pixels: usize,
+    /// Fraction of the integrated surface kept by the artefact filter.
+    pub kept_fraction: f64,
+    /// Integration iterations of the last pass.
+    pub iterations: usize,
+}
+
+impl ReconstructionQuality {
+    /// The figures of a reconstruction.
+    pub fn of(reconstruction: &Reconstruction) -> Self {
+        Self {
+            object_pixels: reconstruction
+                .photometric
+                .field
+                .mask
+                .iter()
+                .filter(|&&m| m)
+                .count(),
+            kept_fraction: reconstruction.integration.kept_fraction,
+            iterations: reconstruction.integration.iterations,
+        }
+    }
+}
+
+/// A 3-D frame against the ground truth.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct FrameAccuracy {
+    /// Depth RMSE after removing the best constant offset, mm (`None` when no reconstructed
+    /// pixel lies on the true surface).
+    pub rmse_mm: Option<f64>,
+    /// RMSE over the true depth range.
+    pub nrmse: Option<f64>,
+    /// Fraction of the true surface reconstructed.
+    pub reconstructed_fraction: f64,
+    /// Camera frame (fractional) the truth describes.
+    pub truth_frame: f64,
+}
+
+/// Wall-clock time of a window's stages, ms.
+#[derive(Debug, Clone, Default, PartialEq, Serialize, Deserialize)]
+pub struct FrameTiming {
+    /// Waiting for the reader (reading, when it is the bottleneck).
+    pub read_ms: f64,
+    /// Decoding (every try, with [`MotionPolicy::Place`]).
+    pub decode_ms: f64,
+    /// Motion detection.
+    pub motion_ms: f64,
+    /// Reconstruction.
+    pub reconstruct_ms: f64,
+    /// Comparison with the truth.
+    pub compare_ms: f64,
+    /// Writing the outputs (filled in by the writer).
+    pub write_ms: f64,
+    /// The reconstruction's own stages.
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub stages: Vec<StageTiming>,
+}
+
+/// Everything recorded about one window (an entry of `video.json`).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct FrameRecord {
+    /// 3-D frame number (window k of the schedule).
+    pub index: usize,
+    /// Camera frames of the window, after placement (start, end).
+    pub frames: (usize, usize),
+    /// Camera frames decoded (start, end).
+    pub decoded: (usize, usize),
+    /// Camera time of the decoded frames' middle, s (when the frame rate is known).
+    pub time_s: Option<f64>,
+    /// What became of the window.
+    pub status: FrameStatus,
+    /// Why it was skipped or failed.
+    pub reason: Option<String>,
+    /// Frames the window was moved to find the object still ([`MotionPolicy::Place`]).
+    pub placed_by: usize,
+    /// Where the decoder's waveform timing came from.
+    pub timing_source: TimingSource,
+    /// Motion in the decoded frames.
+    pub motion: Option<MotionEstimate>,
+    /// Decoder figures.
+    pub decode: Option<DecodeQuality>,
+    /// Reconstruction figures.
+    pub reconstruction: Option<ReconstructionQuality>,
+    /// Accuracy against the ground truth.
+    pub accuracy: Option<FrameAccuracy>,
+    /// Stage timings.
+    pub timing: FrameTiming,
+}
+
+/// One window as handed to the caller.
+#[derive(Debug)]
+pub struct VideoFrame<'a> {
+    /// What was recorded.
+    pub record: FrameRecord,
+    /// The decoded LED images (when decoding succeeded).
+    pub decoded: Option<&'a Decoded>,
+    /// The reconstruction (when it succeeded).
+    pub reconstruction: Option<&'a Reconstruction>,
+    /// Camera frames read so far.
+    pub camera_frames: usize,
+    /// Camera frames in the stream, when known.
+    pub total_frames: Option<usize>,
+}
+
+/// How the stream ended, for the record.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "lowercase")]
+pub enum EndKind {
+    /// The source had no more frames.
+    Complete,
+    /// The source failed part-way (see the input error).
+    Cut,
+    /// The frame limit was reached.
+    Limit,
+}
+
+/// The outcome of a run.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct VideoSummary {
+    /// Camera frames read.
+    pub camera_frames: usize,
+    /// Windows processed.
+    pub windows: usize,
+    /// Windows reconstructed.
+    pub reconstructed: usize,
+    /// Windows skipped.
+    pub skipped: usize,
+    /// Windows that failed.
+    pub failed: usize,
+    /// Windows in which the object moved.
+    pub moving: usize,
+    /// How the stream ended.
+    pub end: EndKind,
+    /// The read error that cut the stream.
+    pub input_error: Option<String>,
+    /// Wall-clock time of the run, s.
+    pub wall_s: f64,
+    /// Windows per second of wall-clock time.
+    pub frames_per_second: f64,
+}
+
+/// One decoded try of a window (several with [`MotionPolicy::Place`]).
+struct Try {
+    start: usize,
+    decoded: Result<Decoded, DemodError>,
+    timing_source: TimingSource,
+    motion: Option<MotionEstimate>,
+}
+
+/// Runs the video pipeline over `source` (module docs), calling `sink` with every window as
+/// soon as it is done; `truth` scores the 3-D frames.
+pub fn process(
+    source: Box<dyn FrameSource>,
+    rig: &Rig,
+    config: &VideoConfig,
+    mut truth: Option<&mut dyn TruthSource>,
+    sink: &mut dyn FnMut(&VideoFrame) -> Result<(), VideoError>,
+) -> Result<VideoSummary, VideoError> {
+    let started = Instant::now();
+    if rig.leds.len() < 3 {
+        return Err(VideoError::Rig(format!(
+            "photometric stereo needs at least 3 LEDs, the rig has {}",
+            rig.leds.len()
+        )));
+    }
+    let schedule = WindowSchedule::new(
+        config.schedule.window,
+        config.schedule.drop,
+        config.schedule.hop,
+        1usize << (rig.leds.len() + 1),
+    )?;
+    let mut format = source.format().clone();
+    if let Some(fps) = config.decode.fps {
+        format.fps = fps;
+    }
+    let read_ahead = config
+        .read_ahead
+        .unwrap_or(schedule.hop.min(schedule.window));
+    let mut stream = FrameStream::new(source, read_ahead, config.max_frames)?;
+    let base = config.decode.start;
+    let decoded_len = schedule.decoded();
+    let place_step = config.motion.place_step.max(1);
+    let mut summary = VideoSummary {
+        camera_frames: 0,
+        windows: 0,
+        reconstructed: 0,
+        skipped: 0,
+        failed: 0,
+        moving: 0,
+        end: EndKind::Complete,
+        input_error: None,
+        wall_s: 0.0,
+        frames_per_second: 0.0,
+    };
+    let mut first_failure: Option<String> = None;
+    let mut carry = TimingCarry::new(config.carry_timing);
+    'windows: for k in 0.. {
+        let scheduled = base + k * schedule.hop;
+        let mut timing = FrameTiming::default();
+        let mut best: Option<Try> = None;
+        let mut offset = 0;
+        loop {
+            let start = scheduled + offset;
+            let needed = start + schedule.drop..start + schedule.window;
+            let Some(window) = stream.window(needed)? else {
+                if k == 0 && best.is_none() {
+                    return Err(too_short(&mut stream, base, schedule));
+                }
+                if best.is_none() {
+                    break 'windows;
+                }
+                break;
+            };
+            let time = Instant::now();
+            let (decoded, timing_source) =
+                carry.decode(&window.samples[..decoded_len], &format, &config.decode);
+            timing.decode_ms += time.elapsed().as_secs_f64() * 1e3;
+            timing.read_ms += stream.take_waited().as_secs_f64() * 1e3;
+            // A setting wrong for the stream fails every window alike: stop at once.
+            let decoded = match decoded {
+                Err(error @ (DemodError::InvalidConfig(_) | DemodError::Capture(_))) => {
+                    return Err(VideoError::Decode(error));
+                }
+                other => other,
+            };
+            let time = Instant::now();
+            let motion = decoded
+                .as_ref()
+                .ok()
+                .map(|d| detect_motion(d, &config.motion));
+            timing.motion_ms += time.elapsed().as_secs_f64() * 1e3;
+            let attempt = Try {
+                start,
+                decoded,
+                timing_source,
+                motion,
+            };
+            let still = attempt.motion.is_some_and(|m| !m.moving);
+            let better = match (&best, &attempt.motion) {
+                (None, _) => true,
+                (Some(b), Some(m)) => b.motion.is_none_or(|bm| m.score < bm.score),
+                (Some(_), None) => false,
+            };
+            if better {
+                best = Some(attempt);
+            }
+            let can_move =
+                config.motion.policy == MotionPolicy::Place && offset + place_step < schedule.hop;
+            if still || !can_move {
+                break;
+            }
+            offset += place_step;
+        }
+        let Some(chosen) = best else {
+            break;
+        };
+        let outcome = reconstruct_window(
+            chosen,
+            scheduled,
+            k,
+            &schedule,
+            &format,
+            rig,
+            config,
+            truth.as_deref_mut(),
+            timing,
+        )?;
+        summary.windows += 1;
+        match outcome.record.status {
+            FrameStatus::Reconstructed => summary.reconstructed += 1,
+            FrameStatus::Skipped => summary.skipped += 1,
+            FrameStatus::Failed => {
+                summary.failed += 1;
+                if first_failure.is_none() {
+                    first_failure = outcome.record.reason.clone();
+                }
+            }
+        }
+        if outcome.record.motion.is_some_and(|m| m.moving) {
+            summary.moving += 1;
+        }
+        sink(&VideoFrame {
+            record: outcome.record,
+            decoded: outcome.decoded.as_ref(),
+            reconstruction: outcome.reconstruction.as_ref(),
+            camera_frames: stream.received(),
+            total_frames: stream.total_hint(),
+        })?;
+    }
+    summary.camera_frames = stream.received();
+    match stream.take_end() {
+        Some(StreamEnd::Cut(error)) => {
+            summary.end = EndKind::Cut;
+            summary.input_error = Some(error.to_string());
+        }
+        Some(StreamEnd::Limit) => summary.end = EndKind::Limit,
+        Some(StreamEnd::Complete) | None => {}
+    }
+    if summary.reconstructed == 0 && summary.failed > 0 {
+        return Err(VideoError::NoFrames {
+            windows: summary.windows,
+            first: first_failure.unwrap_or_default(),
+        });
+    }
+    summary.wall_s = started.elapsed().as_secs_f64();
+    summary.frames_per_second = summary.windows as f64 / summary.wall_s.max(1e-9);
+    Ok(summary)
+}
+
+/// The error for a stream that ended before its first window.
+fn too_short(stream: &mut FrameStream, base: usize, schedule: WindowSchedule) -> VideoError {
+    let cut = match stream.take_end() {
+        Some(StreamEnd::Cut(error)) => Some(error.to_string()),
+        _ => None,
+    };
+    VideoError::ClipTooShort {
+        frames: stream.received(),
+        first: base,
+        end: base + schedule.window,
+        cut,
+    }
+}
+
+/// A finished window: its record and what was computed.
+struct Outcome {
+    record: FrameRecord,
+    decoded: Option<Decoded>,
+    reconstruction: Option<Reconstruction>,
+}
+
+/// Applies the motion policy to the chosen try, reconstructs it and scores it.
+#[allow(clippy::too_many_arguments)]
+fn reconstruct_window(
+    chosen: Try,
+    scheduled: usize,
+    index: usize,
+    schedule: &WindowSchedule,
+    format: &crate::capture::FrameFormat,
+    rig: &Rig,
+    config: &VideoConfig,
+    truth: Option<&mut (dyn TruthSource + '_)>,
+    mut timing: FrameTiming,
+) -> Result<Outcome, VideoError> {
+    let decoded_range =
+        chosen.start + schedule.drop..chosen.start + schedule.window - schedule.drop;
+    let time_s = (format.fps > 0.0)
+        .then(|| (decoded_range.start + decoded_range.end) as f64 / (2.0 * format.fps));
+    let mut record = FrameRecord {
+        index,
+        frames: (chosen.start, chosen.start + schedule.window),
+        decoded: (decoded_range.start, decoded_range.end),
+        time_s,
+        status: FrameStatus::Failed,
+        reason: None,
+        placed_by: chosen.start - scheduled,
+        timing_source: chosen.timing_source,
+        motion: chosen.motion,
+        decode: None,
+        reconstruction: None,
+        accuracy: None,
+        timing: FrameTiming::default(),
+    };
+    let decoded = match chosen.decoded {
+        Ok(decoded) => decoded,
+        Err(error) => {
+            record.reason = Some(format!("decoding failed: {error}"));
+            record.timing = timing;
+            return Ok(Outcome {
+                record,
+                decoded: None,
+                reconstruction: None,
+            });
+        }
+    };
+    record.decode = Some(DecodeQuality::of(&decoded));
+    let shape = decoded.leds.shape().unwrap_or((0, 0));
+    if shape != (rig.camera.height, rig.camera.width) {
+        return Err(VideoError::Rig(format!(
+            "the rig's camera is {}x{} but the decoded images are {}x{} (use a rig of the \
+             frames' or the region's size)",
+            rig.camera.width, rig.camera.height, shape.1, shape.0
+        )));
+    }
+    if config.motion.policy == MotionPolicy::Skip && chosen.motion.is_some_and(|m| m.moving) {
+        record.status = FrameStatus::Skipped;
+        record.reason = Some("the object moved during the window".into());
+        record.timing = timing;
+        return Ok(Outcome {
+            record,
+            decoded: Some(decoded),
+            reconstruction: None,
+        });
+    }
+    let time = Instant::now();
+    let reconstruction = from_decoded(&decoded, rig, None, &config.reconstruct);
+    timing.reconstruct_ms = time.elapsed().as_secs_f64() * 1e3;
+    let reconstruction = match reconstruction {
+        Ok(r) => r,
+        Err(error) => {
+            record.reason = Some(format!("reconstruction failed: {error}"));
+            record.timing = timing;
+            return Ok(Outcome {
+                record,
+                decoded: Some(decoded),
+                reconstruction: None,
+            });
+        }
+    };
+    record.status = FrameStatus::Reconstructed;
+    record.reconstruction = Some(ReconstructionQuality::of(&reconstruction));
+    timing.stages = reconstruction.timings.clone();
+    if let Some(truth) = truth {
+        let time = Instant::now();
+        record.accuracy = score(&reconstruction, truth, decoded_range)?;
+        timing.compare_ms = time.elapsed().as_secs_f64() * 1e3;
+    }
+    record.timing = timing;
+    Ok(Outcome {
+        record,
+        decoded: Some(decoded),
+        reconstruction: Some(reconstruction),
+    })
+}
+
+/// The accuracy of a reconstruction against the truth for `decoded` frames, when there is
+/// truth for them and the two overlap.
+fn score(
+    reconstruction: &Reconstruction,
+    truth: &mut dyn TruthSource,
+    decoded: Range<usize>,
+) -> Result<Option<FrameAccuracy>, VideoError> {
+    let Some(t) = truth.depth_for(decoded)? else {
+        return Ok(None);
+    };
+    let depth = &reconstruction.integration.depth.depth_mm;
+    match compare_depth(depth, &t.depth_mm, None) {
+        Ok(errors) => Ok(Some(FrameAccuracy {
+            rmse_mm: Some(errors.rmse_mm),
+            nrmse: errors.nrmse,
+            reconstructed_fraction: errors.reconstructed_fraction,
+            truth_frame: t.frame,
+        })),
+        Err(MetricsError::NoOverlap) => Ok(Some(FrameAccuracy {
+            rmse_mm: None,
+            nrmse: None,
+            reconstructed_fraction: 0.0,
+            truth_frame: t.frame,
+        })),
+        Err(error) => Err(error.into()),
+    }
+}

@@ -1,0 +1,153 @@
+//! Pictures of a 3-D frame for the output videos: the depth through the colour ramp, and the
+//! reconstructed surface shaded as seen from the camera.
+//!
+//! Both are drawn from the depth map itself (not the photometric normals), so they show what
+//! the integration produced. The shaded view lights the surface normals of the depth
+//! (central differences, [`normals_from_depth`]) with a Lambertian light over the viewer's
+//! left shoulder. Frames are drawn at an integer fraction of the camera's resolution (every
+//! f-th pixel), with even sizes as H.264's 4:2:0 sampling needs.
+
+use crate::export::files::colour::ramp;
+use crate::export::files::preview::NO_DATA;
+use crate::metrics::normals_from_depth;
+use image::{Rgb, RgbImage};
+use ndarray::{Array2, s};
+
+/// Size of the output pictures for a camera of `width` × `height`.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
+pub struct PictureSize {
+    /// Every `factor`-th camera pixel is drawn.
+    pub factor: usize,
+    /// Picture width (even).
+    pub width: usize,
+    /// Picture height (even).
+    pub height: usize,
+}
+
+impl PictureSize {
+    /// The largest size at most `max_width` wide (0 = full resolution), at least 2×2.
+    pub fn fit(width: usize, height: usize, max_width: usize) -> Self {
+        let factor = if max_width == 0 {
+            1
+        } else {
+            width.div_ceil(max_width).max(1)
+        };
+        let even = |n: usize| (n.div_ceil(factor) & !1).max(2);
+        Self {
+            factor,
+            width: even(width),
+            height: even(height),
+        }
+    }
+
+    /// The camera pixels drawn, `height` × `width`, NaN beyond the camera.
+    fn sample(&self, depth: &Array2<f32>) -> Array2<f32> {
+        let f = self.factor;
+        let sub = depth.slice(s![..;f, ..;f]);
+        Array2::from_shape_fn((self.height, self.width), |p| {
+            sub.get(p).copied().unwrap_or(f32::NAN)
+        })
+    }
+}
+
+/// Depth between `lo` and `hi` mm through the colour ramp; no data is dark grey.
+pub fn depth_picture(depth: &Array2<f32>, size: PictureSize, lo: f32, hi: f32) -> RgbImage {
+    let sampled = size.sample(depth);
+    let span = (hi - lo).max(f32::MIN_POSITIVE);
+    RgbImage::from_fn(size.width as u32, size.height as u32, |c, r| {
+        let z = sampled[(r as usize, c as usize)];
+        if z.is_finite() {
+            ramp((z - lo) / span)
+        } else {
+            NO_DATA
+        }
+    })
+}
+
+/// The surface of `depth` (grid pitch `pitch_mm`) shaded from the camera's viewpoint.
+pub fn shaded_picture(depth: &Array2<f32>, pitch_mm: f64, size: PictureSize) -> RgbImage {
+    let sampled = size.sample(depth);
+    let normals = normals_from_depth(&sampled, pitch_mm * size.factor as f64);
+    let light = [-0.4f32, 0.5, 1.0];
+    let norm = light.iter().map(|v| v * v).sum::<f32>().sqrt();
+    let light = light.map(|v| v / norm);
+    RgbImage::from_fn(size.width as u32, size.height as u32, |c, r| {
+        let (r, c) = (r as usize, c as usize);
+        let n = [0, 1, 2].map(|j| normals[(r, c, j)]);
+        if n.iter().any(|v| !v.is_finite()) {
+            return NO_DATA;
+        }
+        let lambert: f32 = n.iter().zip(&light).map(|(a, b)| a * b).sum();
+        let shade = 0.15 + 0.85 * lambert.max(0.0);
+        Rgb([215.0, 205.0, 190.0].map(|v: f32| (v * shade).round() as u8))
+    })
+}
+
+/// A picture with no data (a window without a reconstruction).
+pub fn blank_picture(size: PictureSize) -> RgbImage {
+    RgbImage::from_pixel(size.width as u32, size.height as u32, NO_DATA)
+}
+
+/// A depth range that keeps a video's colours steady: the 0.5 % and 99.5 % quantiles of the
+/// first 3-D frame, widened by half their span on each side (the object turns and moves).
+pub fn depth_range(depth: &Array2<f32>) -> Option<(f32, f32)> {
+    let lo = crate::stats::quantile(depth.iter().copied(), 0.005)?;
+    let hi = crate::stats::quantile(depth.iter().copied(), 0.995)?;
+    let span = (hi - lo).max(1.0);
+    Some((lo - 0.5 * span, hi + 0.5 * span))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn dome() -> Array2<f32> {
+        Array2::from_shape_fn((61, 81), |(r, c)| {
+            let d2 = (r as f32 - 30.0).powi(2) + (c as f32 - 40.0).powi(2);
+            if d2 < 625.0 {
+                (625.0 - d2).sqrt()
+            } else {
+                f32::NAN
+            }
+        })
+    }
+
+    #[test]
+    fn sizes_are_even_fractions_of_the_camera() {
+        assert_eq!(
+            PictureSize::fit(1280, 720, 640),
+            PictureSize {
+                factor: 2,
+                width: 640,
+                height: 360
+            }
+        );
+        assert_eq!(PictureSize::fit(81, 61, 0).width, 80);
+        assert_eq!(
+            PictureSize::fit(81, 61, 40),
+            PictureSize {
+                factor: 3,
+                width: 26,
+                height: 20
+            }
+        );
+    }
+
+    #[test]
+    fn the_dome_is_lit_from_the_upper_left_and_coloured_by_height() {
+        let depth = dome();
+        let size = PictureSize::fit(81, 61, 0);
+        let shaded = shaded_picture(&depth, 1.0, size);
+        // Upper-left flank faces the light, lower-right flank faces away.
+        let lit = shaded.get_pixel(30, 20).0[0];
+        let dark = shaded.get_pixel(50, 40).0[0];
+        assert!(lit > dark + 40, "{lit} vs {dark}");
+        assert_eq!(*shaded.get_pixel(0, 0), NO_DATA);
+        let (lo, hi) = depth_range(&depth).unwrap();
+        assert!(lo < 1.0 && hi > 25.0);
+        let coloured = depth_picture(&depth, size, 0.0, 25.0);
+        assert_eq!(*coloured.get_pixel(40, 30), ramp(1.0));
+        assert_eq!(*coloured.get_pixel(0, 0), NO_DATA);
+        assert_eq!(blank_picture(size).dimensions(), (80, 60));
+    }
+}

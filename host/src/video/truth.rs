@@ -1,0 +1,145 @@
+//! Ground truth for the 3-D frames of a video: the true depth at the time a window was
+//! filmed.
+//!
+//! A [`TruthSource`] answers, for the camera frames a window decoded, with a depth map of the
+//! scene at (or near) the middle of those frames. [`TruthFolder`] reads them from files: one
+//! `depth.npy` for a still scene, or `depth_FFFFF.npy` files named by the camera frame whose
+//! start they describe (`meb simulate --truth-every K` writes them under `truth/`); a window
+//! is compared with the file nearest its middle, when that is within a quarter of the
+//! decoded frames of it.
+
+use super::VideoError;
+use crate::export::files::read_float;
+use ndarray::{Array2, Ix2};
+use std::ops::Range;
+use std::path::{Path, PathBuf};
+
+/// The true depth for a window.
+#[derive(Debug, Clone, PartialEq)]
+pub struct TruthDepth {
+    /// Depth in mm, NaN off the object.
+    pub depth_mm: Array2<f32>,
+    /// Camera frame (fractional) the depth describes.
+    pub frame: f64,
+}
+
+/// Ground truth for windows of camera frames.
+pub trait TruthSource {
+    /// The true depth for a window that decoded camera frames `decoded`, or `None` when
+    /// there is none near its time.
+    fn depth_for(&mut self, decoded: Range<usize>) -> Result<Option<TruthDepth>, VideoError>;
+}
+
+/// Truth depth files of `(height, width)` in a folder (module docs).
+#[derive(Debug, Clone)]
+pub struct TruthFolder {
+    shape: (usize, usize),
+    /// `(camera frame, file)` sorted by frame; one entry with frame `None` for a still scene.
+    files: Vec<(Option<usize>, PathBuf)>,
+}
+
+impl TruthFolder {
+    /// Finds the truth files in `path`: a depth `.npy` file (a still scene), or a folder with
+    /// `depth_FFFFF.npy` files (directly or under `truth/`), or a folder with one `depth.npy`.
+    pub fn open(path: &Path, shape: (usize, usize)) -> Result<Self, VideoError> {
+        let missing = || {
+            VideoError::Truth(format!(
+                "{}: no depth .npy file, depth.npy or depth_FFFFF.npy files found",
+                path.display()
+            ))
+        };
+        if path.is_file() {
+            return Ok(Self {
+                shape,
+                files: vec![(None, path.to_path_buf())],
+            });
+        }
+        for dir in [path.join("truth"), path.to_path_buf()] {
+            let Ok(entries) = std::fs::read_dir(&dir) else {
+                continue;
+            };
+            let mut files: Vec<(Option<usize>, PathBuf)> = entries
+                .filter_map(|e| e.ok().map(|e| e.path()))
+                .filter_map(|p| {
+                    let name = p.file_name()?.to_str()?;
+                    let frame = name.strip_prefix("depth_")?.strip_suffix(".npy")?;
+                    Some((Some(frame.parse().ok()?), p))
+                })
+                .collect();
+            if !files.is_empty() {
+                files.sort();
+                return Ok(Self { shape, files });
+            }
+        }
+        let single = path.join("depth.npy");
+        if single.is_file() {
+            return Ok(Self {
+                shape,
+                files: vec![(None, single)],
+            });
+        }
+        Err(missing())
+    }
+
+    /// Camera frames that have a truth file (empty for a still scene).
+    pub fn frames(&self) -> Vec<usize> {
+        self.files.iter().filter_map(|(f, _)| *f).collect()
+    }
+}
+
+impl TruthSource for TruthFolder {
+    fn depth_for(&mut self, decoded: Range<usize>) -> Result<Option<TruthDepth>, VideoError> {
+        let middle = (decoded.start + decoded.end) as f64 / 2.0;
+        let tolerance = (decoded.end - decoded.start) as f64 / 4.0;
+        let nearest = self
+            .files
+            .iter()
+            .min_by(|a, b| {
+                let distance = |f: &Option<usize>| f.map_or(0.0, |f| (f as f64 - middle).abs());
+                distance(&a.0).total_cmp(&distance(&b.0))
+            })
+            .cloned();
+        let Some((frame, path)) = nearest else {
+            return Ok(None);
+        };
+        if frame.is_some_and(|f| (f as f64 - middle).abs() > tolerance) {
+            return Ok(None);
+        }
+        let depth = read_float::<Ix2>(&path, &[Some(self.shape.0), Some(self.shape.1)])?;
+        Ok(Some(TruthDepth {
+            depth_mm: depth,
+            frame: frame.map_or(middle, |f| f as f64),
+        }))
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::export::files::write_npy;
+
+    #[test]
+    fn the_nearest_truth_file_within_a_quarter_window_is_used() {
+        let dir = tempfile::tempdir().unwrap();
+        let truth = dir.path().join("truth");
+        std::fs::create_dir(&truth).unwrap();
+        for frame in [0usize, 20, 60] {
+            let depth = Array2::from_elem((2, 3), frame as f32);
+            write_npy(&truth.join(format!("depth_{frame:05}.npy")), &depth).unwrap();
+        }
+        let mut folder = TruthFolder::open(dir.path(), (2, 3)).unwrap();
+        assert_eq!(folder.frames(), vec![0, 20, 60]);
+        let t = folder.depth_for(4..36).unwrap().unwrap();
+        assert_eq!((t.frame, t.depth_mm[(1, 2)]), (20.0, 20.0));
+        // Window 44..76 has its middle at 60.
+        assert_eq!(folder.depth_for(44..76).unwrap().unwrap().frame, 60.0);
+        // Middle 40: the nearest file (20 or 60) is 20 frames away, more than 32 / 4.
+        assert!(folder.depth_for(24..56).unwrap().is_none());
+        let wrong = TruthFolder::open(dir.path(), (3, 3))
+            .unwrap()
+            .depth_for(4..36)
+            .unwrap_err();
+        assert!(wrong.to_string().contains("depth_00020.npy"), "{wrong}");
+        assert!(TruthFolder::open(&dir.path().join("nothing"), (2, 3)).is_err());
+    }
+}

@@ -1,0 +1,444 @@
+//! `meb video` end to end on simulated moving scenes: the thesis' turning ellipsoid (Ch. 5)
+//! scored frame by frame, sliding windows, standard input, motion detection on an object that
+//! moves and then stops, and bad input (a clip shorter than a window, a stream cut mid-frame).
+//!
+//! The rig is the thesis' dynamic rig (1000 fps, out-of-plane LEDs, 43° field of view at
+//! 420 mm) with its camera at 160×90 pixels instead of 1280×720 to keep the tests quick.
+
+use meb::capture::{OpenOptions, open};
+use meb::demod::{DecodeConfig, decode};
+use meb::rig::Rig;
+use meb::video::{FrameStatus, VideoConfig, WindowSchedule, process};
+use ndarray::{Array2, Array3};
+use std::path::{Path, PathBuf};
+use std::process::{Command, Stdio};
+
+mod common;
+use common::{OUT_OF_PLANE_LEDS, meb, run_ok};
+
+/// The thesis' dynamic rig at 160×90 pixels.
+fn small_dynamic_rig(dir: &Path) -> String {
+    dynamic_rig(dir, 160, 90)
+}
+
+/// The thesis' dynamic rig with a `width` × `height` camera.
+fn dynamic_rig(dir: &Path, width: usize, height: usize) -> String {
+    let mut toml = format!(
+        "[camera]\nwidth = {width}\nheight = {height}\nfps = 1000.0\ndistance_mm = 420.0\n\
+         fov_deg = 43.0\n"
+    );
+    for [x, y, z] in OUT_OF_PLANE_LEDS {
+        toml.push_str(&format!("[[led]]\nposition_mm = [{x:?}, {y:?}, {z:?}]\n"));
+    }
+    let path = dir.join(format!("dynamic-{width}x{height}.toml"));
+    std::fs::write(&path, toml).unwrap();
+    path.display().to_string()
+}
+
+fn s(path: &Path) -> String {
+    path.display().to_string()
+}
+
+/// Simulates `frames` of the 100×60×60 mm ellipsoid turning at `rpm` about `axis` as a y4m
+/// clip with the true depth every 20 frames and LED phases 3, 7, 11, 5 chips; returns the
+/// capture folder.
+fn ellipsoid(dir: &Path, rig: &str, name: &str, frames: usize, rpm: f64, axis: &str) -> PathBuf {
+    ellipsoid_with(dir, rig, name, frames, rpm, axis, &["--phases", "3,7,11,5"])
+}
+
+/// [`ellipsoid`] with other simulator options.
+fn ellipsoid_with(
+    dir: &Path,
+    rig: &str,
+    name: &str,
+    frames: usize,
+    rpm: f64,
+    axis: &str,
+    options: &[&str],
+) -> PathBuf {
+    let out = dir.join(name);
+    let (rpm, frames, out_arg) = (rpm.to_string(), frames.to_string(), s(&out));
+    let mut args = vec![
+        "simulate",
+        "--rig",
+        rig,
+        "--scene",
+        "ellipsoid",
+        "--axes-mm",
+        "100,60,60",
+        "--rpm",
+        &rpm,
+        "--spin-axis",
+        axis,
+        "--frames",
+        &frames,
+        "--format",
+        "y4m",
+        "--truth-every",
+        "20",
+        "--out",
+        &out_arg,
+    ];
+    args.extend(options);
+    run_ok(&args);
+    out
+}
+
+fn video_json(dir: &Path) -> serde_json::Value {
+    serde_json::from_str(&std::fs::read_to_string(dir.join("video.json")).unwrap()).unwrap()
+}
+
+fn frames(json: &serde_json::Value) -> &Vec<serde_json::Value> {
+    json["frames"].as_array().unwrap()
+}
+
+fn depth(dir: &Path, k: usize) -> Array2<f32> {
+    ndarray_npy::read_npy(dir.join(format!("depth_{k:05}.npy"))).unwrap()
+}
+
+fn run_err(args: &[&str]) -> String {
+    let out = meb(args);
+    assert!(!out.status.success(), "meb {args:?} should fail");
+    String::from_utf8_lossy(&out.stderr).into_owned()
+}
+
+#[test]
+fn the_turning_ellipsoid_is_scored_frame_by_frame_within_the_thesis_accuracy() {
+    let tmp = tempfile::tempdir().unwrap();
+    // 320×180 with the simulator's seed-0 phases (where an earlier per-window timing fit went
+    // astray in window 1: rate ratio 0.984, 38 mm RMSE).
+    let rig = dynamic_rig(tmp.path(), 320, 180);
+    let clip = ellipsoid_with(tmp.path(), &rig, "ellipsoid", 200, 7.5, "0,1,0", &[]);
+    let out = tmp.path().join("video");
+    let stdout = run_ok(&[
+        "video",
+        &s(&clip.join("capture.y4m")),
+        "--rig",
+        &rig,
+        "--out",
+        &s(&out),
+        "--window",
+        "40",
+        "--drop",
+        "4",
+        "--ground-truth",
+        &s(&clip),
+        "--save",
+        "normals,albedo",
+        // The decoder's verdict finds a turning object's windows implausible (modulation
+        // left unexplained by a still-scene model); --force keeps them, verdict recorded, so
+        // the accuracy below is what judges them.
+        "--force",
+    ]);
+    assert!(
+        stdout.contains("5 3-D frames from 200 camera frames"),
+        "{stdout}"
+    );
+    let json = video_json(&out);
+    assert_eq!(json["schema"], "meb-video v1");
+    assert_eq!(json["summary"]["reconstructed"], 5, "{:#}", json["frames"]);
+    assert_eq!(json["settings"]["rate_3d_fps"], 25.0);
+    let records = frames(&json);
+    assert_eq!(records.len(), 5);
+    for (k, record) in records.iter().enumerate() {
+        assert_eq!(record["status"], "reconstructed", "{record}");
+        assert_eq!(record["decoded"][0], 40 * k + 4);
+        assert_eq!(record["decoded"][1], 40 * k + 36);
+        let accuracy = &record["accuracy"];
+        // Compared with the truth at the window's middle (frame 40k + 20).
+        assert_eq!(accuracy["truth_frame"], (40 * k + 20) as f64);
+        let rmse = accuracy["rmse_mm"].as_f64().unwrap();
+        // Thesis Ch. 5: 4.8–11 mm per 3-D frame.
+        assert!(rmse < 4.8, "3-D frame {k}: RMSE {rmse} mm");
+        // The LEDs sit above the object: its lower part sees fewer than three of them.
+        let fraction = accuracy["reconstructed_fraction"].as_f64().unwrap();
+        assert!(fraction > 0.35, "3-D frame {k}: {fraction} of the surface");
+        assert!(record["timing"]["reconstruct_ms"].as_f64().unwrap() > 0.0);
+        assert!(record["decode"]["led_snr_db"].as_array().unwrap().len() == 4);
+        assert_eq!(depth(&out, k).dim(), (180, 320));
+        let normals: Array3<f32> =
+            ndarray_npy::read_npy(out.join(format!("normals_{k:05}.npy"))).unwrap();
+        assert_eq!(normals.dim(), (180, 320, 3));
+        assert!(out.join(format!("albedo_{k:05}.npy")).exists());
+    }
+    assert_eq!(json["accuracy"]["frames"], 5);
+    let videos = json["outputs"].clone();
+    for key in ["depth_video", "shaded_video"] {
+        let name = videos[key].as_str().unwrap();
+        assert!(name.ends_with(".mp4") || name.ends_with(".png"), "{name}");
+        assert!(std::fs::metadata(out.join(name)).unwrap().len() > 0);
+    }
+    if common::ffmpeg_available() {
+        // FFmpeg is installed: the videos are MP4s of five 3-D frames at 25 fps.
+        let probe = Command::new("ffprobe")
+            .args(["-v", "error", "-count_frames", "-select_streams", "v:0"])
+            .args([
+                "-show_entries",
+                "stream=nb_read_frames,width,height,r_frame_rate",
+            ])
+            .args(["-of", "csv=p=0"])
+            .arg(out.join("depth.mp4"))
+            .output()
+            .unwrap();
+        let text = String::from_utf8_lossy(&probe.stdout);
+        assert_eq!(text.trim(), "320,180,25/1,5", "{text}");
+    }
+
+    // Sliding windows every 8 frames: window 5 covers the same frames as window 1 above and
+    // gives the same depth (timing fitted per window in both runs, so they are comparable).
+    let sliding = tmp.path().join("sliding");
+    let clip_path = s(&clip.join("capture.y4m"));
+    for (dir, hop) in [(&sliding, "8"), (&tmp.path().join("thesis-free"), "40")] {
+        run_ok(&[
+            "video",
+            &clip_path,
+            "--rig",
+            &rig,
+            "--out",
+            &s(dir),
+            "--hop",
+            hop,
+            "--fit-every-window",
+            "--apng",
+            "--force",
+        ]);
+    }
+    let json = video_json(&sliding);
+    assert_eq!(frames(&json).len(), (200 - 40) / 8 + 1);
+    assert_eq!(frames(&json)[5]["frames"][0], 40);
+    let a = depth(&sliding, 5);
+    let b = depth(&tmp.path().join("thesis-free"), 1);
+    assert!(
+        a.iter()
+            .zip(&b)
+            .all(|(x, y)| x.to_bits() == y.to_bits() || (x - y).abs() < 1e-4),
+        "sliding window 5 differs from thesis window 1"
+    );
+    assert!(
+        sliding.join("depth.png").exists(),
+        "--apng writes depth.png"
+    );
+}
+
+#[test]
+fn a_window_from_the_stream_equals_a_fresh_decode_of_its_frames() {
+    let tmp = tempfile::tempdir().unwrap();
+    let rig_path = small_dynamic_rig(tmp.path());
+    let clip = ellipsoid(tmp.path(), &rig_path, "clip", 120, 7.5, "0,1,0");
+    let capture = clip.join("capture.y4m");
+    let rig = Rig::load(&rig_path).unwrap();
+    let mut config = VideoConfig::thesis(4);
+    config.schedule = WindowSchedule::new(40, 4, 12, 32).unwrap();
+    config.carry_timing = false;
+    let source = open(&capture, &OpenOptions::default()).unwrap();
+    let mut windows = Vec::new();
+    let summary = process(source, &rig, &config, None, &mut |frame| {
+        let decoded = frame.decoded.expect("decoded");
+        windows.push((frame.record.decoded, decoded.leds.images.clone()));
+        Ok(())
+    })
+    .unwrap();
+    assert_eq!(summary.windows, (120 - 40) / 12 + 1);
+    assert_eq!(windows.len(), summary.windows);
+    for (range, images) in windows.iter().step_by(3) {
+        let mut source = open(&capture, &OpenOptions::default()).unwrap();
+        let fresh = decode(
+            source.as_mut(),
+            &DecodeConfig {
+                start: range.0,
+                frames: Some(range.1 - range.0),
+                ..config.decode.clone()
+            },
+            &mut |_, _| {},
+        )
+        .unwrap();
+        for (a, b) in images.iter().zip(&fresh.leds.images) {
+            let worst = a
+                .iter()
+                .zip(b)
+                .filter(|(x, y)| x.is_finite() || y.is_finite())
+                .map(|(x, y)| (x - y).abs())
+                .fold(0.0f32, f32::max);
+            assert!(
+                worst < 1e-6,
+                "window {range:?}: LED images differ by {worst}"
+            );
+        }
+    }
+}
+
+#[test]
+fn standard_input_gives_the_same_video_as_the_file() {
+    let tmp = tempfile::tempdir().unwrap();
+    let rig = small_dynamic_rig(tmp.path());
+    let clip = ellipsoid(tmp.path(), &rig, "clip", 80, 7.5, "0,1,0");
+    let capture = clip.join("capture.y4m");
+    let from_file = tmp.path().join("file");
+    run_ok(&[
+        "video",
+        &s(&capture),
+        "--rig",
+        &rig,
+        "--out",
+        &s(&from_file),
+    ]);
+    let from_stdin = tmp.path().join("stdin");
+    let out = Command::new(env!("CARGO_BIN_EXE_meb"))
+        .args(["video", "-", "--rig", &rig, "--out", &s(&from_stdin)])
+        .stdin(Stdio::from(std::fs::File::open(&capture).unwrap()))
+        .output()
+        .unwrap();
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    for k in 0..2 {
+        assert_eq!(
+            depth(&from_file, k).mapv(f32::to_bits),
+            depth(&from_stdin, k).mapv(f32::to_bits)
+        );
+    }
+    assert_eq!(video_json(&from_stdin)["settings"]["input"], "-");
+    // Raw frames on standard input need their layout; a PNG is refused in words.
+    let out = Command::new(env!("CARGO_BIN_EXE_meb"))
+        .args([
+            "video",
+            "-",
+            "--rig",
+            &rig,
+            "--out",
+            &s(&tmp.path().join("png")),
+        ])
+        .stdin(Stdio::from(
+            std::fs::File::open(clip.join("mask.png")).unwrap(),
+        ))
+        .output()
+        .unwrap();
+    assert!(!out.status.success());
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    assert!(stderr.contains("not a y4m stream"), "{stderr}");
+}
+
+#[test]
+fn motion_is_found_while_the_object_turns_and_not_once_it_stops() {
+    let tmp = tempfile::tempdir().unwrap();
+    let rig = small_dynamic_rig(tmp.path());
+    // 128 frames turning at 60 rpm in the image plane, then 128 frames still. The carriers'
+    // code period is 32 frames, so the two clips join without a jump in the modulation.
+    let moving = ellipsoid(tmp.path(), &rig, "moving", 128, 60.0, "0,0,1");
+    let still = ellipsoid(tmp.path(), &rig, "still", 128, 0.0, "0,1,0");
+    let a = std::fs::read(moving.join("capture.y4m")).unwrap();
+    let b = std::fs::read(still.join("capture.y4m")).unwrap();
+    let header = b.iter().position(|&c| c == b'\n').unwrap() + 1;
+    let joined = tmp.path().join("moves-then-stops.y4m");
+    std::fs::write(&joined, [&a[..], &b[header..]].concat()).unwrap();
+    let out = tmp.path().join("marked");
+    let args = |out: &Path, policy: &str| {
+        [
+            "video".to_string(),
+            s(&joined),
+            "--rig".into(),
+            rig.clone(),
+            "--out".into(),
+            s(out),
+            "--window".into(),
+            "32".into(),
+            "--drop".into(),
+            "0".into(),
+            "--motion".into(),
+            policy.into(),
+            // Keep the windows the decoder's verdict refuses while the object turns.
+            "--force".into(),
+        ]
+    };
+    let marked: Vec<String> = args(&out, "mark").to_vec();
+    run_ok(&marked.iter().map(String::as_str).collect::<Vec<_>>());
+    let json = video_json(&out);
+    let moving: Vec<bool> = frames(&json)
+        .iter()
+        .map(|f| {
+            f["motion"]["moving"]
+                .as_bool()
+                .unwrap_or_else(|| panic!("{f:#}"))
+        })
+        .collect();
+    assert_eq!(moving, [true, true, true, true, false, false, false, false]);
+    assert_eq!(json["summary"]["moving"], 4);
+    assert_eq!(json["summary"]["reconstructed"], 8);
+
+    let out = tmp.path().join("skipped");
+    let skipped: Vec<String> = args(&out, "skip").to_vec();
+    run_ok(&skipped.iter().map(String::as_str).collect::<Vec<_>>());
+    let json = video_json(&out);
+    let status: Vec<&str> = frames(&json)
+        .iter()
+        .map(|f| f["status"].as_str().unwrap())
+        .collect();
+    assert_eq!(status[..4], ["skipped"; 4]);
+    assert_eq!(status[4..], ["reconstructed"; 4]);
+    assert!(!out.join("depth_00000.npy").exists());
+    assert!(out.join("depth_00004.npy").exists());
+    assert_eq!(
+        serde_json::to_value(FrameStatus::Skipped).unwrap(),
+        "skipped"
+    );
+}
+
+#[test]
+fn a_clip_shorter_than_a_window_and_a_cut_stream_are_reported() {
+    let tmp = tempfile::tempdir().unwrap();
+    let rig = small_dynamic_rig(tmp.path());
+    let clip = ellipsoid(tmp.path(), &rig, "clip", 150, 7.5, "0,1,0");
+    let capture = clip.join("capture.y4m");
+    let bytes = std::fs::read(&capture).unwrap();
+    let header = bytes.iter().position(|&c| c == b'\n').unwrap() + 1;
+    // Mono 8-bit y4m (or 4:2:0): the frame size follows from the file.
+    let frame = (bytes.len() - header) / 150;
+
+    // 30 frames: shorter than one 40-frame window.
+    let short = tmp.path().join("short.y4m");
+    std::fs::write(&short, &bytes[..header + 30 * frame]).unwrap();
+    let stderr = run_err(&[
+        "video",
+        &s(&short),
+        "--rig",
+        &rig,
+        "--out",
+        &s(&tmp.path().join("short")),
+    ]);
+    assert!(
+        stderr.contains("ended after 30 frames, before its first window (frames 0..40)"),
+        "{stderr}"
+    );
+    assert!(
+        !tmp.path().join("short").exists(),
+        "no output for no 3-D frame"
+    );
+
+    // Cut 100 bytes into frame 130: the three windows before it are kept, the error says
+    // where the stream stopped, and the command fails.
+    let cut = tmp.path().join("cut.y4m");
+    std::fs::write(&cut, &bytes[..header + 130 * frame + 100]).unwrap();
+    let out = tmp.path().join("cut");
+    let stderr = run_err(&["video", &s(&cut), "--rig", &rig, "--out", &s(&out)]);
+    assert!(stderr.contains("truncated inside frame 130"), "{stderr}");
+    assert!(stderr.contains("3 3-D frames before it"), "{stderr}");
+    let json = video_json(&out);
+    assert_eq!(json["summary"]["end"], "cut");
+    assert_eq!(frames(&json).len(), 3);
+    assert!(out.join("depth_00002.npy").exists());
+
+    // A window too short for four LEDs is refused before any work.
+    let stderr = run_err(&[
+        "video",
+        &s(&capture),
+        "--rig",
+        &rig,
+        "--out",
+        &s(&tmp.path().join("bad")),
+        "--window",
+        "36",
+    ]);
+    assert!(stderr.contains("28 frames are left to decode"), "{stderr}");
+}
