@@ -383,6 +383,22 @@ fn motion_is_found_while_the_object_turns_and_not_once_it_stops() {
         serde_json::to_value(FrameStatus::Skipped).unwrap(),
         "skipped"
     );
+
+    // Placing: no window may be moved across the join (a sudden change of pose, whose decode
+    // is implausible) and called still; the still windows stay where they were scheduled.
+    let out = tmp.path().join("placed");
+    let placed: Vec<String> = args(&out, "place").to_vec();
+    run_ok(&placed.iter().map(String::as_str).collect::<Vec<_>>());
+    let json = video_json(&out);
+    let records = frames(&json);
+    let moving: Vec<bool> = records
+        .iter()
+        .map(|f| f["motion"]["moving"].as_bool().unwrap_or(true))
+        .collect();
+    assert_eq!(moving, [true, true, true, true, false, false, false, false]);
+    for f in &records[4..] {
+        assert_eq!(f["placed_by"], 0, "{f:#}");
+    }
 }
 
 #[test]

@@ -333,6 +333,15 @@ struct Try {
     motion: Option<MotionEstimate>,
 }
 
+impl Try {
+    /// Whether the try decoded and the decoder's verdict calls it plausible.
+    fn is_plausible(&self) -> bool {
+        self.decoded
+            .as_ref()
+            .is_ok_and(|d| d.report.verdict.is_plausible())
+    }
+}
+
 /// Runs the video pipeline over `source` (module docs), calling `sink` with every window as
 /// soon as it is done; `truth` scores the 3-D frames.
 pub fn process(
@@ -421,11 +430,18 @@ pub fn process(
                 timing_source,
                 motion,
             };
-            let still = attempt.motion.is_some_and(|m| !m.moving);
-            let better = match (&best, &attempt.motion) {
-                (None, _) => true,
-                (Some(b), Some(m)) => b.motion.is_none_or(|bm| m.score < bm.score),
-                (Some(_), None) => false,
+            // A window cut across a sudden change of pose raises every pixel's residual alike,
+            // so its relative motion score can look still: only a plausible decode counts.
+            let plausible = attempt.is_plausible();
+            let still = plausible && attempt.motion.is_some_and(|m| !m.moving);
+            let better = match &best {
+                None => true,
+                Some(b) if b.is_plausible() != plausible => plausible,
+                Some(b) => match (&b.motion, &attempt.motion) {
+                    (Some(bm), Some(m)) => m.score < bm.score,
+                    (None, Some(_)) => true,
+                    (_, None) => false,
+                },
             };
             if better {
                 best = Some(attempt);
