@@ -137,7 +137,7 @@ impl ChipTable {
     /// CRC-32 (ISO-HDLC) of the LED count followed by the on-masks: a fingerprint of the
     /// table a luminaire is playing, reported by `GetInfo`.
     pub fn fingerprint(&self) -> u32 {
-        let mut digest = crate::framing::CRC32.digest();
+        let mut digest = crate::checksum::CRC32.digest();
         digest.update(&[self.led_count]);
         digest.update(self.masks());
         digest.finalize()

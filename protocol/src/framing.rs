@@ -28,10 +28,8 @@ pub const MAX_COBS_LEN: usize = MAX_FRAME_LEN - 1;
 /// Length of the CRC-32 trailer inside a decoded frame.
 pub const CRC_LEN: usize = 4;
 
-/// The frame and record CRC: CRC-32/ISO-HDLC, computed bit by bit (frames are at most
-/// 256 bytes; a lookup table would cost the firmware 1 KiB of flash).
-pub static CRC32: crc::Crc<u32, crc::NoTable> =
-    crc::Crc::<u32, crc::NoTable>::new(&crc::CRC_32_ISO_HDLC);
+/// The frame CRC ([`crate::checksum::CRC32`]), re-exported where the frame layout is defined.
+pub use crate::checksum::CRC32;
 
 /// A [`FrameReader`] sized for this protocol's frames.
 pub type WireFrameReader = FrameReader<MAX_COBS_LEN>;

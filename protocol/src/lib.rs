@@ -17,6 +17,7 @@
 #![deny(missing_docs)]
 
 pub mod carriers;
+pub mod checksum;
 pub mod config;
 pub mod framing;
 pub mod luminaire;

@@ -6,8 +6,8 @@
 //! record (erased flash) are ignored. Decoding yields either a valid configuration or an error,
 //! never a half-valid configuration.
 
+use crate::checksum::CRC32;
 use crate::config::{ConfigError, LuminaireConfig};
-use crate::framing::CRC32;
 
 /// Record magic.
 pub const RECORD_MAGIC: [u8; 4] = *b"MEBC";

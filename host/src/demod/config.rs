@@ -115,3 +115,27 @@ impl Default for DecodeConfig {
         }
     }
 }
+
+/// What the fit may vary.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct FitLimits {
+    /// Largest |ρ − 1| searched when the rate ratio is estimated.
+    pub max_rate_mismatch: f64,
+    /// A known rate ratio ρ (chips per frame) instead of estimating it.
+    pub rate_ratio: Option<f64>,
+    /// A known exposure fraction instead of estimating it.
+    pub exposure: Option<f64>,
+    /// A known line delay λ (frame periods per row; 0 = global shutter) instead of fitting it.
+    pub line_delay: Option<f64>,
+}
+
+impl Default for FitLimits {
+    fn default() -> Self {
+        Self {
+            max_rate_mismatch: 0.06,
+            rate_ratio: None,
+            exposure: None,
+            line_delay: None,
+        }
+    }
+}

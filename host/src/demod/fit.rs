@@ -22,6 +22,7 @@
 //! half-period shift negates a carrier, SPEC §2).
 
 use super::basis::TemplateBasis;
+use super::config::FitLimits;
 use super::levenberg::{Freedom, Residuals, Solution, minimise, minimise_within};
 use super::sample::PixelSample;
 use super::seed::{Start, starts};
@@ -68,30 +69,6 @@ const ROW_EXPOSURES: [f64; 1] = [1.0];
 /// A sample row takes part in the row-wise fit when its leading singular value² exceeds the
 /// noise-only edge (√pixels + √F)²·σ² by this factor.
 const ROW_SIGNAL_FACTOR: f64 = 1.5;
-
-/// What the fit may vary.
-#[derive(Debug, Clone, Copy, PartialEq)]
-pub struct FitLimits {
-    /// Largest |ρ − 1| searched when the rate ratio is estimated.
-    pub max_rate_mismatch: f64,
-    /// A known rate ratio ρ (chips per frame) instead of estimating it.
-    pub rate_ratio: Option<f64>,
-    /// A known exposure fraction instead of estimating it.
-    pub exposure: Option<f64>,
-    /// A known line delay λ (frame periods per row; 0 = global shutter) instead of fitting it.
-    pub line_delay: Option<f64>,
-}
-
-impl Default for FitLimits {
-    fn default() -> Self {
-        Self {
-            max_rate_mismatch: 0.06,
-            rate_ratio: None,
-            exposure: None,
-            line_delay: None,
-        }
-    }
-}
 
 /// The timing of every LED's received waveform.
 #[derive(Debug, Clone, PartialEq)]

@@ -79,7 +79,8 @@ pub use report::{DecodeReport, LedReport};
 
 use crate::capture::{FrameFormat, FrameSource, Samples};
 use crate::types::LedImages;
-use fit::{FitLimits, TimingFit, fit_timing, refit_timing};
+use config::FitLimits;
+use fit::{TimingFit, fit_timing, refit_timing};
 use matched::CodeLimits;
 use nalgebra::DMatrix;
 use ndarray::Array2;

@@ -14,7 +14,7 @@
 //! exposures, because at ρ ≈ 1 the exposure barely changes the templates) start the
 //! least-squares refinement ([`super::fit`]).
 
-use super::fit::FitLimits;
+use super::config::FitLimits;
 use super::waveform::{ReceivedWaveform, Timing};
 use nalgebra::DMatrixView;
 use rayon::prelude::*;

@@ -10,7 +10,7 @@
 //! that the integrator fills. With a given mask the object is its solved and two-LED pixels and
 //! their holes inside it.
 
-use super::solve::Outcome;
+use super::outcome::Outcome;
 use crate::regions::{enclosed_holes, remove_small};
 use crate::types::LedImages;
 use ndarray::Array2;

@@ -11,6 +11,7 @@
 pub mod lights;
 pub mod mask;
 pub mod noise;
+mod outcome;
 pub mod solve;
 
 pub use lights::Lights;

@@ -22,6 +22,7 @@
 
 use super::lights::{describe_geometry, light_rank};
 use super::mask::object_region;
+use super::outcome::Outcome;
 use super::{Lights, PhotometricConfig, PhotometricError, check_shape, noise::led_noise_gains};
 use crate::types::{LedImages, NormalField, NormalPlane};
 use nalgebra::{Matrix3, Vector3};
@@ -43,25 +44,6 @@ pub struct PhotometricResult {
     pub fill: Array2<bool>,
     /// Noise gain g_i of each LED image (1 without a noise map).
     pub noise_gains: Vec<f64>,
-}
-
-/// What the solve found at one pixel.
-#[derive(Debug, Clone, Copy, PartialEq)]
-pub(crate) enum Outcome {
-    /// Outside the given mask.
-    Outside,
-    /// A value is NaN or infinite (e.g. flagged by the decoder).
-    Unusable,
-    /// Fewer than two LEDs light it.
-    Dark,
-    /// Lit by two LEDs: the normal is on a circle.
-    TwoLeds(Vector3<f64>, Vector3<f64>),
-    /// Normal, albedo and LEDs used.
-    Solved(Vector3<f64>, f64, u8),
-    /// Three or more LEDs light it but their light vectors do not span space.
-    Singular,
-    /// Every lit LED's solution contradicts it (e.g. light vectors pointing away).
-    Contradictory,
 }
 
 /// Image rows per parallel task.
