@@ -61,6 +61,15 @@ pub enum SimulateError {
     /// The `ffmpeg` program could not be run.
     #[error("cannot run ffmpeg for MP4 output ({0}); install FFmpeg or write PNG or y4m frames")]
     Ffmpeg(String),
+    /// Starting, feeding or waiting for `ffmpeg` failed in the operating system.
+    #[error("cannot {what} ffmpeg for MP4 output; install FFmpeg or write PNG or y4m frames")]
+    FfmpegIo {
+        /// What was being done: "start", "feed frames to" or "wait for".
+        what: &'static str,
+        /// The operating system's error.
+        #[source]
+        source: std::io::Error,
+    },
 }
 
 /// Largest camera side the simulator renders, pixels.

@@ -115,7 +115,10 @@ impl FrameWriter {
                     .stdout(Stdio::null())
                     .stderr(Stdio::piped())
                     .spawn()
-                    .map_err(|e| SimulateError::Ffmpeg(e.to_string()))?;
+                    .map_err(|source| SimulateError::FfmpegIo {
+                        what: "start",
+                        source,
+                    })?;
                 Ok(Self::Mp4 { child })
             }
         }
@@ -152,8 +155,10 @@ impl FrameWriter {
                     .stdin
                     .as_mut()
                     .ok_or_else(|| SimulateError::Ffmpeg("no stdin pipe".into()))?;
-                write_raw(stdin, format, &frame.samples)
-                    .map_err(|e| SimulateError::Ffmpeg(format!("writing frames failed: {e}")))
+                write_raw(stdin, format, &frame.samples).map_err(|source| SimulateError::FfmpegIo {
+                    what: "feed frames to",
+                    source,
+                })
             }
         }
     }
@@ -166,7 +171,10 @@ impl FrameWriter {
                 drop(child.stdin.take());
                 let out = child
                     .wait_with_output()
-                    .map_err(|e| SimulateError::Ffmpeg(e.to_string()))?;
+                    .map_err(|source| SimulateError::FfmpegIo {
+                        what: "wait for",
+                        source,
+                    })?;
                 if out.status.success() {
                     Ok(())
                 } else {
