@@ -148,7 +148,7 @@ fn a_mesh_without_area_is_an_error() {
         &s(&out),
     ]);
     assert!(
-        err.contains("flat.stl") && err.contains("zero total area"),
+        err.contains("flat.stl") && err.contains("zero area"),
         "{err}"
     );
     assert!(!out.exists());
