@@ -434,15 +434,9 @@ pub fn process(
             // so its relative motion score can look still: only a plausible decode counts.
             let plausible = attempt.is_plausible();
             let still = plausible && attempt.motion.is_some_and(|m| !m.moving);
-            let better = match &best {
-                None => true,
-                Some(b) if b.is_plausible() != plausible => plausible,
-                Some(b) => match (&b.motion, &attempt.motion) {
-                    (Some(bm), Some(m)) => m.score < bm.score,
-                    (None, Some(_)) => true,
-                    (_, None) => false,
-                },
-            };
+            // Placing keeps the scheduled try unless a later one is still: a try that is only
+            // "least moving" is no better placed than where the schedule put it.
+            let better = best.is_none() || still;
             if better {
                 best = Some(attempt);
             }
