@@ -74,6 +74,12 @@ fn bench(c: &mut Criterion) {
         exposure: Some(decoded.report.exposure),
         ..config.decode.clone()
     };
+    // The per-stage profile of one reconstruction, printed once (criterion times the whole).
+    if let Ok(reconstruction) = from_decoded(&decoded, &rig, None, &config.reconstruct) {
+        for stage in &reconstruction.timings {
+            eprintln!("stage {:>8.1} ms  {}", stage.ms, stage.stage);
+        }
+    }
     let mut group = c.benchmark_group("video_1280x720");
     group.sample_size(10);
     group.bench_function("window", |b| {
