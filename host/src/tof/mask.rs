@@ -769,7 +769,10 @@ mod tests {
         let full = Array2::from_elem((10, 10), true);
         let eroded = morph(&full, 1, true);
         assert!(!eroded[(0, 5)] && eroded[(1, 5)] && eroded[(5, 5)]);
-        assert_eq!(morph(&eroded, 1, false), full);
+        // The radius-1 disc is a cross: dilating back restores all but the four corners.
+        let dilated = morph(&eroded, 1, false);
+        assert!(dilated[(0, 5)] && dilated[(5, 0)] && dilated[(9, 5)] && !dilated[(0, 0)]);
+        assert_eq!(dilated.iter().filter(|&&m| !m).count(), 4);
     }
 
     /// Two markers either side of a bright ridge: the flood meets on the ridge, which becomes
