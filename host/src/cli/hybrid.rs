@@ -12,18 +12,48 @@ use meb::export::files::{preview, read_exact, write_mask, write_npy};
 use meb::export::report::Summary;
 use meb::reconstruct::{ReconstructConfig, level_noise, usable_led_images};
 use meb::tof::hybrid::{HybridConfig, HybridObject, HybridReconstruction, reconstruct_objects};
-use meb::tof::read_range_folder;
+use meb::tof::{Calibration, RangeMap, read_range_folder};
 use ndarray::{Array2, Ix2};
 use std::path::Path;
 
-/// What the hybrid reconstruction needs besides the plain command's inputs.
-pub struct HybridInputs<'a> {
-    /// The `meb tof range` folder.
-    pub range: &'a Path,
-    /// The `meb tof calibrate` folder or file.
-    pub calibration: &'a Path,
+/// What the hybrid reconstruction needs besides the plain command's inputs, read before any
+/// work so that a bad folder is refused at once.
+pub struct TofInputs {
+    /// The range map.
+    range: RangeMap,
+    /// The ToF → camera calibration.
+    calibration: Calibration,
     /// Per-pixel object labels of the ground truth (−1: background).
-    pub truth_labels: Option<&'a Path>,
+    truth_labels: Option<Array2<i32>>,
+    /// Where they came from, for messages.
+    origin: String,
+}
+
+impl TofInputs {
+    /// Reads the `meb tof range` folder, the calibration (folder or file) and the optional
+    /// truth labels.
+    pub fn load(range: &Path, calibration: &Path, truth_labels: Option<&Path>) -> Result<Self> {
+        let truth_labels = truth_labels
+            .map(|path| {
+                read_exact::<i32, Ix2>(path, &[None, None]).with_context(|| {
+                    format!(
+                        "--truth-labels {}: expected the camera's object labels (H×W int32 .npy, −1 = background)",
+                        path.display()
+                    )
+                })
+            })
+            .transpose()?;
+        Ok(Self {
+            range: read_range_folder(range)?,
+            calibration: super::tof::load_calibration(calibration)?,
+            truth_labels,
+            origin: format!(
+                "--tof {} and --calibration {}",
+                range.display(),
+                calibration.display()
+            ),
+        })
+    }
 }
 
 /// One object's row of `objects.json`.
@@ -71,72 +101,55 @@ struct TruthRow {
     fused_mean_error_mm: f64,
 }
 
-/// Runs the hybrid reconstruction and writes its files into `dir`; `summary` is the plain
-/// command's report summary (input, rig, truth), completed per object. Returns the rows' text.
-#[allow(clippy::too_many_arguments)]
-pub fn run(
-    dir: &Path,
-    decoded: &meb::demod::Decoded,
-    rig: &meb::rig::Rig,
-    config: &ReconstructConfig,
-    inputs: &HybridInputs,
-    truth: Option<&super::reconstruct::Truth>,
-    summary: &Summary,
-    source: &str,
-    mesh_formats: &[String],
-) -> Result<Vec<String>> {
-    let range = read_range_folder(inputs.range)?;
-    let calibration = super::tof::load_calibration(inputs.calibration)?;
-    let labels = inputs
-        .truth_labels
-        .map(|path| {
-            read_exact::<i32, Ix2>(
-                path,
-                &[Some(rig.camera.height), Some(rig.camera.width)],
-            )
-            .with_context(|| {
-                format!(
-                    "--truth-labels {}: expected the camera's object labels (H×W int32 .npy, −1 = background)",
-                    path.display()
-                )
-            })
-        })
-        .transpose()?;
+/// What every object's folder shares: the plain command's inputs and report fields.
+pub struct ObjectReport<'a> {
+    /// The plain command's inputs (rig, decoded capture, ground truth).
+    pub inputs: &'a super::reconstruct::Inputs,
+    /// The reconstruction settings.
+    pub config: &'a ReconstructConfig,
+    /// Input, rig and truth for the report's summary.
+    pub summary: Summary,
+    /// Where the data came from.
+    pub source: String,
+    /// Extra mesh formats.
+    pub mesh_formats: Vec<String>,
+}
+
+/// Runs the hybrid reconstruction and writes its files into `dir` (module docs); returns one
+/// line of text per object.
+pub fn run(dir: &Path, tof: &TofInputs, report: &ObjectReport) -> Result<Vec<String>> {
+    let (decoded, rig) = (&report.inputs.decoded, &report.inputs.rig);
+    let labels = tof.truth_labels.as_ref();
+    if let Some(labels) = labels {
+        let camera = (rig.camera.height, rig.camera.width);
+        ensure!(
+            labels.dim() == camera,
+            "--truth-labels is {}x{} but the camera is {}x{}",
+            labels.ncols(),
+            labels.nrows(),
+            camera.1,
+            camera.0
+        );
+    }
     let hybrid = reconstruct_objects(
         &usable_led_images(decoded),
         Some(&level_noise(decoded)),
         rig,
-        &range,
-        &calibration,
-        config,
+        &tof.range,
+        &tof.calibration,
+        report.config,
         &HybridConfig::default(),
     )
-    .with_context(|| {
-        format!(
-            "hybrid reconstruction with --tof {} and --calibration {}",
-            inputs.range.display(),
-            inputs.calibration.display()
-        )
-    })?;
+    .with_context(|| format!("hybrid reconstruction with {}", tof.origin))?;
+    let truth = report.inputs.truth.as_ref();
     let mut rows = Vec::with_capacity(hybrid.objects.len());
     for (k, object) in hybrid.objects.iter().enumerate() {
         let folder = format!("object_{}", k + 1);
         let sub = dir.join(&folder);
         std::fs::create_dir(&sub).map_err(|e| meb::export::files::FilesError::write(&sub, e))?;
-        write_object(
-            &sub,
-            object,
-            k + 1,
-            decoded,
-            config,
-            truth,
-            summary,
-            source,
-            &hybrid,
-            mesh_formats,
-        )?;
+        report.write_object(&sub, &hybrid, k)?;
         let truth_row = truth
-            .map(|t| absolute_errors(object, &t.depth, labels.as_ref()))
+            .map(|t| absolute_errors(object, &t.depth, labels))
             .transpose()?;
         rows.push(ObjectRow {
             object: k + 1,
@@ -166,54 +179,47 @@ pub fn run(
     Ok(rows.iter().map(row_text).collect())
 }
 
-/// Writes one object's reconstruction folder (the plain command's files, with the fused depth).
-#[allow(clippy::too_many_arguments)]
-fn write_object(
-    dir: &Path,
-    object: &HybridObject,
-    index: usize,
-    decoded: &meb::demod::Decoded,
-    config: &ReconstructConfig,
-    truth: Option<&super::reconstruct::Truth>,
-    summary: &Summary,
-    source: &str,
-    hybrid: &HybridReconstruction,
-    mesh_formats: &[String],
-) -> Result<()> {
-    let field = &object.reconstruction.photometric.field;
-    let depth = &object.fused.depth;
-    let (depth_errors, angular_errors) = match truth {
-        Some(t) => super::reconstruct::compare(t, field, &depth.depth_mm)?,
-        None => (None, None),
-    };
-    let mut object_summary =
-        super::common::reconstruction_summary(decoded, config, &object.reconstruction);
-    object_summary.object = Some(format!(
-        "object {index} of {}, ToF depth {:.1} mm",
-        hybrid.objects.len(),
-        object.tof_depth_mm
-    ));
-    object_summary.input.clone_from(&summary.input);
-    object_summary.rig.clone_from(&summary.rig);
-    object_summary
-        .ground_truth
-        .clone_from(&summary.ground_truth);
-    super::common::write_outputs(
-        dir,
-        &format!("meb reconstruct --tof: object {index}"),
-        source.to_string(),
-        field,
-        depth,
-        depth_errors.as_ref(),
-        angular_errors.as_ref(),
-        Some(object.reconstruction.confidence()),
-        &hybrid.timings,
-        object_summary,
-        mesh_formats.to_vec(),
-    )?;
-    write_mask(&dir.join("object_mask.png"), &object.mask)?;
-    write_npy(&dir.join("depth_placed.npy"), &object.placed)?;
-    Ok(())
+impl ObjectReport<'_> {
+    /// Writes object `k`'s folder: the plain command's files, with the fused depth.
+    fn write_object(&self, dir: &Path, hybrid: &HybridReconstruction, k: usize) -> Result<()> {
+        let object = &hybrid.objects[k];
+        let field = &object.reconstruction.photometric.field;
+        let depth = &object.fused.depth;
+        let (depth_errors, angular_errors) = match &self.inputs.truth {
+            Some(t) => super::reconstruct::compare(t, field, &depth.depth_mm)?,
+            None => (None, None),
+        };
+        let mut summary = super::common::reconstruction_summary(
+            &self.inputs.decoded,
+            self.config,
+            &object.reconstruction,
+        );
+        summary.object = Some(format!(
+            "object {} of {}, ToF depth {:.1} mm",
+            k + 1,
+            hybrid.objects.len(),
+            object.tof_depth_mm
+        ));
+        summary.input.clone_from(&self.summary.input);
+        summary.rig.clone_from(&self.summary.rig);
+        summary.ground_truth.clone_from(&self.summary.ground_truth);
+        super::common::write_outputs(
+            dir,
+            &format!("meb reconstruct --tof: object {}", k + 1),
+            self.source.clone(),
+            field,
+            depth,
+            depth_errors.as_ref(),
+            angular_errors.as_ref(),
+            Some(object.reconstruction.confidence()),
+            &hybrid.timings,
+            summary,
+            self.mesh_formats.clone(),
+        )?;
+        write_mask(&dir.join("object_mask.png"), &object.mask)?;
+        write_npy(&dir.join("depth_placed.npy"), &object.placed)?;
+        Ok(())
+    }
 }
 
 /// Absolute (no offset removed) depth errors of `object` against `truth`, on its mask's pixels

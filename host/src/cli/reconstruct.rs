@@ -80,42 +80,47 @@ pub struct Truth {
 }
 
 /// What `meb reconstruct` reads: the rig, the decoded capture and the optional mask and truth.
-struct Inputs {
-    rig: Rig,
-    decoded: Decoded,
+pub struct Inputs {
+    /// The rig.
+    pub rig: Rig,
+    /// The decoded capture.
+    pub decoded: Decoded,
     /// Whether INPUT was a `meb decode` folder (else a capture decoded here).
     from_folder: bool,
+    /// The object mask given with --mask.
     mask: Option<Array2<bool>>,
-    truth: Option<Truth>,
+    /// The ground truth on the camera grid.
+    pub truth: Option<Truth>,
 }
 
 /// Runs `meb reconstruct`: read and check the inputs, reconstruct, compare with the truth,
 /// write the folder, print a summary.
 pub fn run(args: &ReconstructArgs) -> Result<()> {
     let folder = super::common::output_folder(&args.out, "reconstruct", args.force)?;
+    let tof = match (&args.tof, &args.calibration) {
+        (Some(range), Some(calibration)) => Some(super::hybrid::TofInputs::load(
+            range,
+            calibration,
+            args.truth_labels.as_deref(),
+        )?),
+        _ => None,
+    };
     let inputs = read_inputs(args)?;
     let config = reconstruct_config(args);
-    if let (Some(range), Some(calibration)) = (&args.tof, &args.calibration) {
-        let lines = super::hybrid::run(
-            folder.path(),
-            &inputs.decoded,
-            &inputs.rig,
-            &config,
-            &super::hybrid::HybridInputs {
-                range,
-                calibration,
-                truth_labels: args.truth_labels.as_deref(),
-            },
-            inputs.truth.as_ref(),
-            &Summary {
+    if let Some(tof) = &tof {
+        let report = super::hybrid::ObjectReport {
+            inputs: &inputs,
+            config: &config,
+            summary: Summary {
                 input: Some(args.input.display().to_string()),
                 rig: Some(args.rig.clone()),
                 ground_truth: args.ground_truth.as_ref().map(|p| p.display().to_string()),
                 ..Summary::default()
             },
-            &source_text(args, &inputs),
-            &super::common::mesh_extensions(&args.mesh),
-        )?;
+            source: source_text(args, &inputs),
+            mesh_formats: super::common::mesh_extensions(&args.mesh),
+        };
+        let lines = super::hybrid::run(folder.path(), tof, &report)?;
         let out = super::common::commit(folder)?;
         for line in lines {
             println!("{line}");

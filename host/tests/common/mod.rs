@@ -14,23 +14,23 @@ pub fn meb(args: &[&str]) -> Output {
 
 /// The standard output of a command that must have succeeded (its stderr in the failure).
 pub fn stdout_of(output: &Output) -> String {
-    assert!(
-        output.status.success(),
-        "meb failed: {}",
-        String::from_utf8_lossy(&output.stderr)
-    );
-    String::from_utf8_lossy(&output.stdout).into_owned()
+    succeeded(output, "meb")
 }
 
 /// Runs `meb args`, which must succeed, and returns its standard output.
 pub fn run_ok(args: &[&str]) -> String {
-    let out = meb(args);
+    succeeded(&meb(args), &format!("meb {args:?}"))
+}
+
+/// The standard output of `output`, which must be a success (`what` and its stderr in the
+/// failure).
+fn succeeded(output: &Output, what: &str) -> String {
     assert!(
-        out.status.success(),
-        "meb {args:?} failed: {}",
-        String::from_utf8_lossy(&out.stderr)
+        output.status.success(),
+        "{what} failed: {}",
+        stderr_of(output)
     );
-    String::from_utf8_lossy(&out.stdout).into_owned()
+    String::from_utf8_lossy(&output.stdout).into_owned()
 }
 
 /// The standard error of a run, as text.
