@@ -341,7 +341,8 @@ fn fit_homography(src: &[[f64; 2]], dst: &[[f64; 2]]) -> Result<Matrix3<f64>, St
     // A unique solution needs a one-dimensional null space: the second-smallest eigenvalue
     // clearly above zero (collinear corners leave several).
     let largest = eigen.eigenvalues[order[8]];
-    if !(eigen.eigenvalues[order[1]] > 1e-9 * largest) {
+    let second = eigen.eigenvalues[order[1]];
+    if second.is_nan() || second <= 1e-9 * largest {
         return Err(collinear());
     }
     let h = eigen.eigenvectors.column(order[0]);
