@@ -280,6 +280,21 @@ impl Projection {
 }
 
 impl Camera {
+    /// A small 64×48, 960 fps test camera 400 mm from the origin with pitch `pixel_pitch_mm`
+    /// or pinhole `intrinsics`.
+    #[cfg(test)]
+    pub(crate) fn test_64x48(pixel_pitch_mm: Option<f64>, intrinsics: Option<Intrinsics>) -> Self {
+        Self {
+            width: 64,
+            height: 48,
+            fps: 960.0,
+            distance_mm: 400.0,
+            fov_deg: None,
+            pixel_pitch_mm,
+            intrinsics,
+        }
+    }
+
     /// Grid pitch h in mm per pixel: `pixel_pitch_mm`, else h = 2·d·tan(FOV/2)/width (SPEC §6);
     /// for a perspective camera the pitch on the object plane z = 0, d/fx.
     pub fn pitch_mm(&self) -> f64 {
@@ -373,10 +388,44 @@ impl Led {
     /// Light vector L_i(X) at scene point `point` (module docs): direction to the LED scaled
     /// by Φ·cos^m θ / d². Zero behind the LED's emitting hemisphere.
     pub fn light_vector_at(&self, point: &Vector3<f64>) -> Vector3<f64> {
-        let to_led = self.position() - point;
+        self.emitter().light_vector_at(point)
+    }
+
+    /// The LED's geometry with its emission axis normalised once, for loops that evaluate
+    /// light vectors at many points.
+    pub fn emitter(&self) -> Emitter {
+        Emitter {
+            position: self.position(),
+            axis: self.unit_axis(),
+            intensity: self.intensity,
+            lambert_order: self.lambert_order,
+        }
+    }
+}
+
+/// An LED prepared for evaluating light vectors: position, unit emission axis, intensity Φ
+/// and Lambert order m (see [`Led`]).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Emitter {
+    /// Position P_i in mm.
+    pub position: Vector3<f64>,
+    /// Unit emission axis.
+    pub axis: Vector3<f64>,
+    /// Relative intensity Φ_i.
+    pub intensity: f64,
+    /// Lambert order m of the emission profile cos^m θ.
+    pub lambert_order: f64,
+}
+
+impl Emitter {
+    /// Light vector L_i(X) at scene point `point` (module docs): direction to the LED scaled
+    /// by Φ·cos^m θ / d². Zero behind the LED's emitting hemisphere.
+    #[inline]
+    pub fn light_vector_at(&self, point: &Vector3<f64>) -> Vector3<f64> {
+        let to_led = self.position - point;
         let d2 = to_led.norm_squared();
-        let dir = to_led / d2.sqrt();
-        let cos_theta = self.unit_axis().dot(&(-dir));
+        let inv_d = 1.0 / d2.sqrt();
+        let cos_theta = -self.axis.dot(&to_led) * inv_d;
         if cos_theta <= 0.0 {
             return Vector3::zeros();
         }
@@ -387,7 +436,7 @@ impl Led {
         } else {
             cos_theta.powf(self.lambert_order)
         };
-        dir * (self.intensity * falloff / d2)
+        to_led * (self.intensity * falloff * inv_d / d2)
     }
 }
 
@@ -813,14 +862,9 @@ mod tests {
     }
 
     fn perspective() -> Camera {
-        Camera {
-            width: 64,
-            height: 48,
-            fps: 960.0,
-            distance_mm: 400.0,
-            fov_deg: None,
-            pixel_pitch_mm: None,
-            intrinsics: Some(Intrinsics {
+        Camera::test_64x48(
+            None,
+            Some(Intrinsics {
                 fx: 900.0,
                 fy: 880.0,
                 cx: 30.5,
@@ -828,7 +872,7 @@ mod tests {
                 k1: -0.2,
                 k2: 0.05,
             }),
-        }
+        )
     }
 
     #[test]
