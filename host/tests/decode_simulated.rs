@@ -113,7 +113,7 @@ fn cli_decodes_what_simulate_writes() {
     let rig = tmp.path().join("rig.toml");
     std::fs::write(&rig, rig_toml(96, 54, 0.6, &OUT_OF_PLANE_LEDS)).unwrap();
     let sim = tmp.path().join("sim");
-    let out = meb(&[
+    common::run_ok(&[
         "simulate",
         "--rig",
         rig.to_str().unwrap(),
@@ -128,13 +128,8 @@ fn cli_decodes_what_simulate_writes() {
         "--out",
         sim.to_str().unwrap(),
     ]);
-    assert!(
-        out.status.success(),
-        "{}",
-        String::from_utf8_lossy(&out.stderr)
-    );
     let dec = tmp.path().join("dec");
-    let out = meb(&[
+    common::run_ok(&[
         "decode",
         sim.join("capture.y4m").to_str().unwrap(),
         "--leds",
@@ -142,11 +137,6 @@ fn cli_decodes_what_simulate_writes() {
         "--out",
         dec.to_str().unwrap(),
     ]);
-    assert!(
-        out.status.success(),
-        "{}",
-        String::from_utf8_lossy(&out.stderr)
-    );
     for i in 1..=4 {
         let decoded: ndarray::Array2<f32> =
             ndarray_npy::read_npy(dec.join(format!("led{i}.npy"))).unwrap();

@@ -8,10 +8,10 @@
 
 use meb::export::report::{REPORT_SCHEMA, REPORT_SCHEMA_VERSION, Report};
 use ndarray::{Array2, Array3};
-use std::path::{Path, PathBuf};
+use std::path::PathBuf;
 
 mod common;
-use common::{OUT_OF_PLANE_LEDS, meb, rig_toml, run_ok};
+use common::{OUT_OF_PLANE_LEDS, arg, rig_toml, run_err, run_ok};
 
 /// The test rig: 160×96 at 0.4 mm/px with the first `leds` out-of-plane LEDs.
 fn test_rig(leds: &[[f64; 3]]) -> String {
@@ -20,24 +20,6 @@ fn test_rig(leds: &[[f64; 3]]) -> String {
 
 /// Depth RMSE bound in mm (module docs).
 const MAX_RMSE_MM: f64 = 0.3;
-
-/// Runs a command that must fail and returns its one-line error message.
-fn run_err(args: &[&str]) -> String {
-    let out = meb(args);
-    assert!(!out.status.success(), "meb {args:?} should fail");
-    let stderr = String::from_utf8_lossy(&out.stderr).trim().to_string();
-    assert_eq!(
-        stderr.lines().count(),
-        1,
-        "expected a one-line message, got {stderr:?}"
-    );
-    assert!(stderr.starts_with("error: "), "{stderr}");
-    stderr
-}
-
-fn s(path: &Path) -> String {
-    path.display().to_string()
-}
 
 /// A temp dir holding `rig.toml`, a simulated capture `cap/` and its decode `dec/`.
 struct Setup {
@@ -69,7 +51,7 @@ impl Setup {
     }
 
     fn p(&self, name: &str) -> String {
-        s(&self.path(name))
+        arg(&self.path(name)).to_string()
     }
 
     /// The typed `report.json` of output folder `out` (parsing checks the schema).
@@ -252,13 +234,13 @@ fn integrate_rejects_nan_normals() {
     let out = tmp.path().join("out");
     let err = run_err(&[
         "integrate",
-        &s(&npy),
+        arg(&npy),
         "--mask",
-        &s(&mask),
+        arg(&mask),
         "--pitch",
         "1",
         "--out",
-        &s(&out),
+        arg(&out),
     ]);
     assert!(err.to_lowercase().contains("nan"), "{err}");
     assert!(!out.join("depth.npy").exists());
@@ -272,7 +254,7 @@ fn photometric_runs_on_diligent_ball() {
     );
     let tmp = tempfile::tempdir().unwrap();
     let out = tmp.path().join("ball");
-    let stdout = run_ok(&["photometric", "--diligent", data, "--out", &s(&out)]);
+    let stdout = run_ok(&["photometric", "--diligent", data, "--out", arg(&out)]);
     println!("{stdout}");
     let normals: Array3<f32> = ndarray_npy::read_npy(out.join("normals.npy")).unwrap();
     assert_eq!(normals.dim().2, 3);

@@ -1,5 +1,6 @@
 //! `meb reconstruct`: a capture (decoded on the fly) or a `meb decode` folder + a rig →
-//! normals, albedo, depth, mesh and report (SPEC §5–§6), optionally compared with ground truth.
+//! normals, albedo, depth, mesh and report (SPEC §5–§6), optionally compared with ground truth;
+//! with `--tof`, per object placed at and fused with a ToF range map ([`super::hybrid`]).
 
 use super::decode::{DecodeOptions, check_folder_verdict, decode_capture};
 use super::integrate::IntegratorArg;
@@ -42,8 +43,22 @@ pub struct ReconstructArgs {
     integrator: IntegratorArg,
     /// Object mask image (non-zero = object), same size as the images; found automatically
     /// when absent.
-    #[arg(long)]
+    #[arg(long, conflicts_with = "tof")]
     mask: Option<PathBuf>,
+    /// Hybrid reconstruction (thesis Ch. 6): a `meb tof range` folder. Every object the range
+    /// map separates is reconstructed in its own mask, placed at its absolute ToF depth and
+    /// fused with it (one folder per object and objects.json); needs --calibration and a rig
+    /// with a [tof_camera].
+    #[arg(long, requires = "calibration")]
+    tof: Option<PathBuf>,
+    /// With --tof: the `meb tof calibrate` folder (or its calibration.toml).
+    #[arg(long, requires = "tof")]
+    calibration: Option<PathBuf>,
+    /// With --tof and --ground-truth: the camera's object labels (H×W int32 .npy, −1 =
+    /// background; `meb simulate --tof` writes object_labels.npy): each object's absolute
+    /// error is measured on the truth object its mask overlaps most.
+    #[arg(long, requires_all = ["tof", "ground_truth"])]
+    truth_labels: Option<PathBuf>,
     /// Ground truth: a depth map (H×W .npy, mm, NaN = background) or a mesh (.stl/.obj, mm,
     /// rendered in the rig's camera).
     #[arg(long)]
@@ -57,27 +72,62 @@ pub struct ReconstructArgs {
 }
 
 /// Ground-truth depth and normals on the camera grid.
-struct Truth {
-    depth: Array2<f32>,
-    normals: Array3<f32>,
+pub struct Truth {
+    /// Depth, mm (NaN = background).
+    pub depth: Array2<f32>,
+    /// Unit normals, H×W×3.
+    pub normals: Array3<f32>,
 }
 
 /// What `meb reconstruct` reads: the rig, the decoded capture and the optional mask and truth.
-struct Inputs {
-    rig: Rig,
-    decoded: Decoded,
+pub struct Inputs {
+    /// The rig.
+    pub rig: Rig,
+    /// The decoded capture.
+    pub decoded: Decoded,
     /// Whether INPUT was a `meb decode` folder (else a capture decoded here).
     from_folder: bool,
+    /// The object mask given with --mask.
     mask: Option<Array2<bool>>,
-    truth: Option<Truth>,
+    /// The ground truth on the camera grid.
+    pub truth: Option<Truth>,
 }
 
 /// Runs `meb reconstruct`: read and check the inputs, reconstruct, compare with the truth,
 /// write the folder, print a summary.
 pub fn run(args: &ReconstructArgs) -> Result<()> {
     let folder = super::common::output_folder(&args.out, "reconstruct", args.force)?;
+    let tof = match (&args.tof, &args.calibration) {
+        (Some(range), Some(calibration)) => Some(super::hybrid::TofInputs::load(
+            range,
+            calibration,
+            args.truth_labels.as_deref(),
+        )?),
+        _ => None,
+    };
     let inputs = read_inputs(args)?;
     let config = reconstruct_config(args);
+    if let Some(tof) = &tof {
+        let report = super::hybrid::ObjectReport {
+            inputs: &inputs,
+            config: &config,
+            summary: Summary {
+                input: Some(args.input.display().to_string()),
+                rig: Some(args.rig.clone()),
+                ground_truth: args.ground_truth.as_ref().map(|p| p.display().to_string()),
+                ..Summary::default()
+            },
+            source: source_text(args, &inputs),
+            mesh_formats: super::common::mesh_extensions(&args.mesh),
+        };
+        let lines = super::hybrid::run(folder.path(), tof, &report)?;
+        let out = super::common::commit(folder)?;
+        for line in lines {
+            println!("{line}");
+        }
+        println!("objects: {}", out.join("objects.json").display());
+        return Ok(());
+    }
     let reconstruction = from_decoded(&inputs.decoded, &inputs.rig, inputs.mask.as_ref(), &config)?;
     let field = &reconstruction.photometric.field;
     let depth = &reconstruction.integration.depth;
@@ -291,7 +341,7 @@ fn load_truth(path: &Path, rig: &Rig, shape: (usize, usize)) -> Result<Truth> {
 }
 
 /// Depth and normal errors against the truth, over the truth's surface.
-fn compare(
+pub fn compare(
     truth: &Truth,
     field: &meb::types::NormalField,
     depth: &Array2<f32>,

@@ -6,6 +6,7 @@ use indicatif::{ProgressBar, ProgressStyle};
 use meb::rig::Rig;
 use meb::simulate::dataset::{DatasetConfig, write_dataset};
 use meb::simulate::output::{OutputOptions, VideoFormat, write_capture};
+use meb::simulate::tof::thesis_hybrid_scene;
 use meb::simulate::{
     GroundPlane, NoiseModel, Scene, SceneObject, Shape, SimConfig, SimulatedCapture, Spin,
     ToneCurve, TriMesh,
@@ -24,6 +25,7 @@ use std::time::Instant;
   Ch. 4 cube face:   meb simulate --rig thesis-out-of-plane --scene cube --size-mm 75 --frames 128 --out cube\n  \
   Ch. 4 cube corner: meb simulate --rig thesis-out-of-plane --scene cube --corner --size-mm 75 --frames 128 --out corner\n  \
   Ch. 5 ellipsoid:   meb simulate --rig thesis-dynamic --scene ellipsoid --axes-mm 100,60,60 --rpm 7.5 --frames 400 --format y4m --truth-every 20 --out ellipsoid\n  \
+  Ch. 6 hybrid:      meb simulate --rig thesis-hybrid --scene hybrid --tof --camera-size 384x216 --frames 128 --out hybrid\n  \
   Ch. 7 data set:    meb simulate dataset --count 100 --out dataset"
 )]
 pub struct SimulateArgs {
@@ -55,6 +57,9 @@ enum SceneKind {
     Mesh,
     /// Several objects at different depths: sphere Ø48 at z = 0, cube 40 at z = −70.
     Multi,
+    /// The thesis' hybrid scene (Fig. 6.4): a Ø48 sphere, a head and a 75 mm cube 100 mm apart
+    /// in depth before a wall, each with its own albedo.
+    Hybrid,
 }
 
 /// Frame containers.
@@ -98,9 +103,10 @@ struct CaptureArgs {
     /// Object rotation: angles about x, then y, then z, in degrees.
     #[arg(long, value_delimiter = ',', allow_hyphen_values = true)]
     rotate_deg: Option<Vec<f64>>,
-    /// Object albedo in [0, 1].
-    #[arg(long, default_value_t = 1.0)]
-    albedo: f64,
+    /// Object albedo in [0, 1] (default 1; the hybrid scene's objects keep their own unless
+    /// this is given).
+    #[arg(long)]
+    albedo: Option<f64>,
     /// Add a ground plane at this z (mm, e.g. -24 under a Ø48 sphere).
     #[arg(long, allow_hyphen_values = true)]
     ground_mm: Option<f64>,
@@ -152,9 +158,11 @@ struct CaptureArgs {
     /// at --peak on a Ø48 mm white sphere.
     #[arg(long)]
     gain: Option<f64>,
-    /// Peak of the brightest LED on the reference sphere when --gain is not given.
-    #[arg(long, default_value_t = 0.4)]
-    peak: f64,
+    /// Peak of the brightest LED on the reference sphere when --gain is not given (default
+    /// 0.4; 0.15 for the hybrid scene, whose sphere stands 100 mm nearer the LEDs and would
+    /// otherwise saturate).
+    #[arg(long)]
+    peak: Option<f64>,
     /// Per-LED time shifts in chips, comma-separated (default: random from --seed).
     #[arg(long, value_delimiter = ',', allow_hyphen_values = true)]
     phases: Option<Vec<f64>>,
@@ -171,6 +179,18 @@ struct CaptureArgs {
     /// Timeline time (s) at camera time 0 (default: the timeline's last output change).
     #[arg(long, requires = "timeline")]
     timeline_start: Option<f64>,
+    /// Resize the rig's camera to WxH pixels, keeping its field of view (e.g. 384x216 for a
+    /// quick run of a 1280x720 preset).
+    #[arg(long, value_name = "WxH")]
+    camera_size: Option<String>,
+    /// Also render the rig's time-of-flight camera (thesis Ch. 6): SPAD histograms of the
+    /// scene and of a reference board, chequerboard images in both cameras and the truth, in
+    /// tof/ (see tof/tof.json for the `meb tof` and `meb reconstruct --tof` commands).
+    #[arg(long)]
+    tof: bool,
+    /// With --tof: TCSPC exposures (frames of 1 ms) per histogram (thesis: 10 000).
+    #[arg(long, default_value_t = 10_000, requires = "tof")]
+    tof_frames: usize,
     /// Frame whose start time the ground-truth files describe.
     #[arg(long, default_value_t = 0)]
     truth_frame: usize,
@@ -230,8 +250,17 @@ fn run_capture(args: &CaptureArgs) -> Result<()> {
         .out
         .as_ref()
         .context("--out DIR is required (where to write the capture)")?;
-    let rig = Rig::load(&args.rig)?;
-    let (scene, description) = build_scene(args)?;
+    let mut rig = Rig::load(&args.rig)?;
+    if let Some(size) = &args.camera_size {
+        resize_camera(&mut rig, size)?;
+    }
+    if args.tof && rig.tof_camera.is_none() {
+        bail!(
+            "--tof needs a rig with a [tof_camera] (the SPAD's pose, size and field of view); rig {} has none (try --rig thesis-hybrid)",
+            args.rig
+        );
+    }
+    let (scene, groups, description) = build_scene(args)?;
     let folder = super::common::output_folder(out, "simulate", args.force)?;
     let tone = match (args.gamma, args.srgb) {
         (Some(g), _) => ToneCurve::Gamma(g),
@@ -251,7 +280,10 @@ fn run_capture(args: &CaptureArgs) -> Result<()> {
         tone,
         snr_db: args.snr_db,
         gain: args.gain,
-        peak: args.peak,
+        peak: args.peak.unwrap_or(match args.scene {
+            SceneKind::Hybrid => 0.15,
+            _ => 0.4,
+        }),
         phases_chips: args.phases.clone(),
         chip_rates_hz: args.chip_rate.clone(),
         seed: args.seed,
@@ -264,7 +296,7 @@ fn run_capture(args: &CaptureArgs) -> Result<()> {
         );
     }
     let started = Instant::now();
-    let mut capture = SimulatedCapture::new(rig, scene, config)?;
+    let mut capture = SimulatedCapture::new(rig, scene.clone(), config)?;
     if let Some(path) = &args.timeline {
         let waveform = meb::device::TimelineWaveform::load(path, args.timeline_start)?;
         capture = capture.with_waveform(std::sync::Arc::new(waveform))?;
@@ -284,6 +316,28 @@ fn run_capture(args: &CaptureArgs) -> Result<()> {
         bar.set_position(done as u64)
     })?;
     bar.finish_and_clear();
+    let tof_ranges = if args.tof {
+        let settings = super::simulate_tof::TofSettings {
+            scene: &scene,
+            groups: &groups.members,
+            names: &groups.names,
+            frames: args.tof_frames,
+            seed: args.seed,
+        };
+        eprintln!(
+            "rendering the SPAD histograms ({} frames)…",
+            args.tof_frames
+        );
+        let ranges = super::simulate_tof::write_tof(
+            folder.path(),
+            folder.target(),
+            capture.rig(),
+            &settings,
+        )?;
+        Some(ranges)
+    } else {
+        None
+    };
     let path = super::common::commit(folder)?;
     let info = capture.info();
     eprintln!(
@@ -300,7 +354,59 @@ fn run_capture(args: &CaptureArgs) -> Result<()> {
             .collect::<Vec<_>>(),
         info.gain
     );
+    if let Some(ranges) = tof_ranges {
+        eprintln!(
+            "wrote SPAD histograms, reference, chequerboards (ranges {ranges:?} mm) and truth to {}; commands for the hybrid chain: {}",
+            path.join("tof").display(),
+            path.join("tof/tof.json").display()
+        );
+    }
     Ok(())
+}
+
+/// Sets the rig camera's size from "WxH", keeping its field of view.
+fn resize_camera(rig: &mut Rig, text: &str) -> Result<()> {
+    let parsed = text
+        .split_once(['x', 'X'])
+        .and_then(|(w, h)| {
+            Some((
+                w.trim().parse::<usize>().ok()?,
+                h.trim().parse::<usize>().ok()?,
+            ))
+        })
+        .filter(|&(w, h)| w > 0 && h > 0);
+    let Some((width, height)) = parsed else {
+        bail!("--camera-size {text:?}: expected WxH in pixels, e.g. 384x216");
+    };
+    let camera = &mut rig.camera;
+    if camera.intrinsics.is_some() {
+        bail!(
+            "--camera-size cannot resize a pinhole camera with intrinsics; write a rig file of that size instead"
+        );
+    }
+    if let Some(pitch) = camera.pixel_pitch_mm {
+        camera.pixel_pitch_mm = Some(pitch * camera.width as f64 / width as f64);
+    }
+    camera.width = width;
+    camera.height = height;
+    Ok(())
+}
+
+/// Which object group each scene object belongs to (several analytic parts may form one
+/// object, e.g. the hybrid scene's head).
+struct Groups {
+    members: Vec<usize>,
+    names: Vec<String>,
+}
+
+impl Groups {
+    /// One group per object.
+    fn each(objects: usize) -> Self {
+        Self {
+            members: (0..objects).collect(),
+            names: (1..=objects).map(|k| format!("object {k}")).collect(),
+        }
+    }
 }
 
 fn vec3(values: &[f64], name: &str) -> Result<Vector3<f64>> {
@@ -318,9 +424,14 @@ fn positive(value: f64, name: &str) -> Result<f64> {
     }
 }
 
-/// Builds the scene and a JSON description of it for truth.json.
-fn build_scene(args: &CaptureArgs) -> Result<(Scene, serde_json::Value)> {
+/// Builds the scene, its object groups and a JSON description of it for truth.json.
+fn build_scene(args: &CaptureArgs) -> Result<(Scene, Groups, serde_json::Value)> {
     let size = args.size_mm.map(|s| positive(s, "--size-mm")).transpose()?;
+    let mut groups = None;
+    let mut ground = args.ground_mm.map(|z| GroundPlane {
+        z_mm: z,
+        albedo: args.ground_albedo,
+    });
     let mut objects = match args.scene {
         SceneKind::Sphere => vec![SceneObject::sphere(size.unwrap_or(48.0))],
         SceneKind::Cube => vec![SceneObject::cube(size.unwrap_or(75.0), args.corner)],
@@ -369,7 +480,17 @@ fn build_scene(args: &CaptureArgs) -> Result<(Scene, serde_json::Value)> {
             cube.position_mm = Vector3::new(45.0, 0.0, -70.0);
             vec![sphere, cube]
         }
+        SceneKind::Hybrid => {
+            let hybrid = thesis_hybrid_scene();
+            groups = Some(Groups {
+                members: hybrid.groups,
+                names: hybrid.names,
+            });
+            ground = ground.or(hybrid.scene.ground);
+            hybrid.scene.objects
+        }
     };
+    let groups = groups.unwrap_or_else(|| Groups::each(objects.len()));
     let rotation = match &args.rotate_deg {
         Some(r) => {
             let r = vec3(r, "--rotate-deg")?;
@@ -403,13 +524,11 @@ fn build_scene(args: &CaptureArgs) -> Result<(Scene, serde_json::Value)> {
         if let Some(p) = position {
             object.position_mm += p;
         }
-        object.albedo = args.albedo;
+        if let Some(albedo) = args.albedo {
+            object.albedo = albedo;
+        }
         object.spin = spin.clone();
     }
-    let ground = args.ground_mm.map(|z| GroundPlane {
-        z_mm: z,
-        albedo: args.ground_albedo,
-    });
     let description = serde_json::json!({
         "kind": format!("{:?}", args.scene).to_lowercase(),
         "size_mm": size,
@@ -422,8 +541,9 @@ fn build_scene(args: &CaptureArgs) -> Result<(Scene, serde_json::Value)> {
         "ground_mm": args.ground_mm,
         "rpm": args.rpm,
         "spin_axis": args.spin_axis,
+        "objects": groups.names,
     });
-    Ok((Scene { objects, ground }, description))
+    Ok((Scene { objects, ground }, groups, description))
 }
 
 fn run_dataset(args: &DatasetArgs) -> Result<()> {

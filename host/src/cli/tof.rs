@@ -6,10 +6,12 @@ use anyhow::{Context, Result, ensure};
 use clap::{Args, Subcommand};
 use meb::export::files::{FilesError, preview, read_float, write_mask, write_npy};
 use meb::tof::calibration::{BoardView, Calibration};
-use meb::tof::chequerboard::{BoardSize, find_corners};
+use meb::tof::chequerboard::{BoardSize, find_corners, require_corner_detector};
 use meb::tof::hybrid::{HybridConfig, object_masks};
 use meb::tof::mask::{Layer, MaskConfig, interval_mask};
-use meb::tof::{Histograms, RangeConfig, Reference, TimingMode, estimate_range};
+use meb::tof::{
+    Histograms, RangeConfig, Reference, TimingMode, estimate_range, write_range_folder,
+};
 use ndarray::{Array2, Ix2};
 use std::path::{Path, PathBuf};
 
@@ -24,7 +26,8 @@ pub struct TofArgs {
 enum TofCommand {
     /// Range map from TCSPC histograms (H×W×bins .npy) and a reference histogram.
     Range(RangeArgs),
-    /// ToF → camera homographies from chequerboard images seen by both cameras.
+    /// ToF → camera homographies from chequerboard images seen by both cameras (corner
+    /// finding needs meb built with `--features opencv`).
     Calibrate(CalibrateArgs),
     /// Object masks in camera pixels from a range map: a range interval, or every layer.
     Mask(MaskArgs),
@@ -39,8 +42,8 @@ pub struct RangeArgs {
     /// axis, or one per pixel (H×W×bins) of a board perpendicular to it.
     #[arg(long)]
     reference: PathBuf,
-    /// Output folder (range.npy, sigma.npy, confidence.npy, signal.npy, range.png,
-    /// range.json), replaced whole and atomically.
+    /// Output folder (range.npy, sigma.npy, confidence.npy, signal.npy, background.npy,
+    /// correlation.npy, range.png, range.json), replaced whole and atomically.
     #[arg(long)]
     out: PathBuf,
     #[arg(long, help = super::common::FORCE_HELP)]
@@ -170,10 +173,7 @@ fn range(args: &RangeArgs) -> Result<()> {
     };
     let map = estimate_range(&histograms, &reference, &config)?;
     let dir = folder.path();
-    write_npy(&dir.join("range.npy"), &map.range_mm)?;
-    write_npy(&dir.join("sigma.npy"), &map.sigma_mm)?;
-    write_npy(&dir.join("confidence.npy"), &map.confidence)?;
-    write_npy(&dir.join("signal.npy"), &map.signal_photons)?;
+    write_range_folder(dir, &map)?;
     preview::write_png(&dir.join("range.png"), &preview::depth_map(&map.range_mm))?;
     let finite = |a: &Array2<f32>| -> Vec<f64> {
         let mut v: Vec<f64> = a
@@ -225,6 +225,7 @@ fn calibrate(args: &CalibrateArgs) -> Result<()> {
         args.tof.len()
     );
     let board = BoardSize::parse(&args.board)?;
+    require_corner_detector()?;
     let folder = super::common::output_folder(&args.out, "tof calibrate", args.force)?;
     let mut views = Vec::with_capacity(args.tof.len());
     let (mut tof_size, mut camera_size) = (None, None);
@@ -299,12 +300,7 @@ fn mask(args: &MaskArgs) -> Result<()> {
         args.range.clone()
     };
     let range: Array2<f32> = read_float::<Ix2>(&range_path, &[None, None])?;
-    let calibration_path = if args.calibration.is_dir() {
-        args.calibration.join("calibration.toml")
-    } else {
-        args.calibration.clone()
-    };
-    let calibration = Calibration::load(&calibration_path)?;
+    let calibration = load_calibration(&args.calibration)?;
     let masks: Vec<(Layer, Array2<bool>)> = match &args.interval {
         Some(text) => {
             let (lo, hi) = parse_interval(text)?;
@@ -360,6 +356,16 @@ fn mask(args: &MaskArgs) -> Result<()> {
     Ok(())
 }
 
+/// Loads a calibration: a `meb tof calibrate` folder or its calibration.toml.
+pub fn load_calibration(path: &Path) -> Result<Calibration> {
+    let file = if path.is_dir() {
+        path.join("calibration.toml")
+    } else {
+        path.to_path_buf()
+    };
+    Ok(Calibration::load(&file)?)
+}
+
 /// "A..B" in mm.
 fn parse_interval(text: &str) -> Result<(f64, f64)> {
     let parsed = text
@@ -389,7 +395,8 @@ fn read_grey(path: &Path) -> Result<Array2<f32>> {
     )?)
 }
 
-fn write_json(path: &Path, value: &impl serde::Serialize) -> Result<()> {
+/// Writes `value` as pretty JSON to `path`.
+pub fn write_json(path: &Path, value: &impl serde::Serialize) -> Result<()> {
     let text = serde_json::to_string_pretty(value)?;
     std::fs::write(path, text).map_err(|e| FilesError::write(path, e))?;
     Ok(())

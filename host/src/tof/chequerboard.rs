@@ -1,5 +1,6 @@
 //! Chequerboard corner detection in the SPAD's photon-counting image and the PS camera's image
-//! (thesis §6.4), through OpenCV: `findChessboardCorners` (quad detection), or, when that fails
+//! (thesis §6.4), through OpenCV when meb is built with the `opencv` feature (the only part of
+//! meb that needs it; without it [`find_corners`] refuses and says how to rebuild): `findChessboardCorners` (quad detection), or, when that fails
 //! (low-resolution, noisy SPAD images), the sector-based `findChessboardCornersSB` of Duda &
 //! Frese ("Accurate detection and localization of checkerboard corners for calibration",
 //! BMVC 2018); then `cornerSubPix` in a window of a third of a square. On rendered boards the
@@ -12,10 +13,18 @@
 
 use super::TofError;
 use ndarray::Array2;
-use opencv::core::{
-    Mat, Point2f, Size, TermCriteria, TermCriteria_COUNT, TermCriteria_EPS, Vector,
-};
-use opencv::{calib3d, imgproc};
+
+/// Whether this build can find chequerboard corners (built with the `opencv` feature).
+pub const CORNER_DETECTOR: bool = cfg!(feature = "opencv");
+
+/// Refuses, before any work, when this build has no corner detector.
+pub fn require_corner_detector() -> Result<(), TofError> {
+    if CORNER_DETECTOR {
+        Ok(())
+    } else {
+        Err(TofError::NoCornerDetector)
+    }
+}
 
 /// Inner-corner counts of a chequerboard (squares − 1 along each side).
 #[derive(Debug, Clone, Copy, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
@@ -70,61 +79,97 @@ pub fn find_corners(
         rows: board.rows,
         reason,
     };
-    let (rows, cols) = image.dim();
+    require_corner_detector()?;
     let grey = to_u8(image).ok_or_else(|| not_found("the image is blank".into()))?;
-    let cv = |e: opencv::Error| not_found(format!("OpenCV: {e}"));
-    let mat = Mat::new_rows_cols_with_data(rows as i32, cols as i32, &grey).map_err(cv)?;
-    let size = Size::new(board.cols as i32, board.rows as i32);
-    let mut corners = Vector::<Point2f>::new();
-    let complete =
-        |found: bool, corners: &Vector<Point2f>| found && corners.len() == board.corners();
-    let found = calib3d::find_chessboard_corners(
-        &mat,
-        size,
-        &mut corners,
-        calib3d::CALIB_CB_ADAPTIVE_THRESH | calib3d::CALIB_CB_NORMALIZE_IMAGE,
-    )
-    .map_err(cv)?;
-    if !complete(found, &corners) {
-        corners.clear();
-        let found = calib3d::find_chessboard_corners_sb(
+    let points = opencv_detector::detect(&grey, image.dim(), board).map_err(not_found)?;
+    Ok(canonical_order(points, board))
+}
+
+/// OpenCV's detectors (module docs).
+#[cfg(feature = "opencv")]
+mod opencv_detector {
+    use super::BoardSize;
+    use opencv::core::{
+        Mat, Point2f, Size, TermCriteria, TermCriteria_COUNT, TermCriteria_EPS, Vector,
+    };
+    use opencv::{calib3d, imgproc};
+
+    /// The corners of `board` in the 8-bit image `grey` of (rows, cols), in OpenCV's order;
+    /// the error says why none were found.
+    pub fn detect(
+        grey: &[u8],
+        (rows, cols): (usize, usize),
+        board: BoardSize,
+    ) -> Result<Vec<[f64; 2]>, String> {
+        let cv = |e: opencv::Error| format!("OpenCV: {e}");
+        let mat = Mat::new_rows_cols_with_data(rows as i32, cols as i32, grey).map_err(cv)?;
+        let size = Size::new(board.cols as i32, board.rows as i32);
+        let mut corners = Vector::<Point2f>::new();
+        let complete =
+            |found: bool, corners: &Vector<Point2f>| found && corners.len() == board.corners();
+        let found = calib3d::find_chessboard_corners(
             &mat,
             size,
             &mut corners,
-            calib3d::CALIB_CB_NORMALIZE_IMAGE | calib3d::CALIB_CB_EXHAUSTIVE,
+            calib3d::CALIB_CB_ADAPTIVE_THRESH | calib3d::CALIB_CB_NORMALIZE_IMAGE,
         )
         .map_err(cv)?;
         if !complete(found, &corners) {
-            return Err(not_found(format!(
-                "neither OpenCV detector found all {} inner corners (check that COLSxROWS counts inner corners, that the whole board is in view with a light border, and the focus/exposure)",
-                board.corners()
-            )));
+            corners.clear();
+            let found = calib3d::find_chessboard_corners_sb(
+                &mat,
+                size,
+                &mut corners,
+                calib3d::CALIB_CB_NORMALIZE_IMAGE | calib3d::CALIB_CB_EXHAUSTIVE,
+            )
+            .map_err(cv)?;
+            if !complete(found, &corners) {
+                return Err(format!(
+                    "neither OpenCV detector found all {} inner corners (check that COLSxROWS counts inner corners, that the whole board is in view with a light border, and the focus/exposure)",
+                    board.corners()
+                ));
+            }
         }
+        // Refine within a window of about a third of a square (corner spacing along a row).
+        let spacing = corners
+            .iter()
+            .zip(corners.iter().skip(1))
+            .take(board.cols - 1)
+            .map(|(a, b)| f64::from((b.x - a.x).hypot(b.y - a.y)))
+            .sum::<f64>()
+            / (board.cols - 1) as f64;
+        let half = (spacing * 0.35).round().clamp(2.0, 10.0) as i32;
+        let criteria =
+            TermCriteria::new(TermCriteria_COUNT + TermCriteria_EPS, 50, 1e-3).map_err(cv)?;
+        imgproc::corner_sub_pix(
+            &mat,
+            &mut corners,
+            Size::new(half, half),
+            Size::new(-1, -1),
+            criteria,
+        )
+        .map_err(cv)?;
+        Ok(corners
+            .iter()
+            .map(|p| [f64::from(p.x), f64::from(p.y)])
+            .collect())
     }
-    // Refine within a window of about a third of a square (corner spacing along a row).
-    let spacing = corners
-        .iter()
-        .zip(corners.iter().skip(1))
-        .take(board.cols - 1)
-        .map(|(a, b)| f64::from((b.x - a.x).hypot(b.y - a.y)))
-        .sum::<f64>()
-        / (board.cols - 1) as f64;
-    let half = (spacing * 0.35).round().clamp(2.0, 10.0) as i32;
-    let criteria =
-        TermCriteria::new(TermCriteria_COUNT + TermCriteria_EPS, 50, 1e-3).map_err(cv)?;
-    imgproc::corner_sub_pix(
-        &mat,
-        &mut corners,
-        Size::new(half, half),
-        Size::new(-1, -1),
-        criteria,
-    )
-    .map_err(cv)?;
-    let points: Vec<[f64; 2]> = corners
-        .iter()
-        .map(|p| [f64::from(p.x), f64::from(p.y)])
-        .collect();
-    Ok(canonical_order(points, board))
+}
+
+/// Stands in for OpenCV in a build without it: never reached, [`require_corner_detector`]
+/// refuses first.
+#[cfg(not(feature = "opencv"))]
+mod opencv_detector {
+    use super::BoardSize;
+
+    /// Always refuses (module docs).
+    pub fn detect(
+        _grey: &[u8],
+        _size: (usize, usize),
+        _board: BoardSize,
+    ) -> Result<Vec<[f64; 2]>, String> {
+        Err("this build has no corner detector".into())
+    }
 }
 
 /// Scales `image` to 8 bits between its 0.5 % and 99.5 % quantiles; `None` if it is flat.
@@ -221,6 +266,7 @@ mod tests {
     }
 
     #[test]
+    #[cfg_attr(not(feature = "opencv"), ignore = "needs the opencv feature")]
     fn finds_rotated_board_to_a_tenth_of_a_pixel_in_order() {
         let board = BoardSize::parse("7x5").unwrap();
         let (image, truth) = board_image(120, 160, board, [30.3, 28.7], 14.2, 0.12);
@@ -241,6 +287,7 @@ mod tests {
     }
 
     #[test]
+    #[cfg_attr(not(feature = "opencv"), ignore = "needs the opencv feature")]
     fn blank_images_and_bad_board_sizes_are_refused() {
         let board = BoardSize { cols: 7, rows: 5 };
         let err = find_corners(&Array2::from_elem((50, 60), 0.5), board, "ToF").unwrap_err();
@@ -250,5 +297,17 @@ mod tests {
         assert!(err.to_string().contains("9x6"), "{err}");
         assert!(BoardSize::parse("9by6").is_err());
         assert!(BoardSize::parse("1x6").is_err());
+    }
+
+    #[test]
+    #[cfg_attr(feature = "opencv", ignore = "this build has OpenCV")]
+    fn without_opencv_corner_finding_refuses_and_says_how_to_rebuild() {
+        let board = BoardSize { cols: 7, rows: 5 };
+        let (image, _) = board_image(120, 160, board, [30.0, 30.0], 14.0, 0.0);
+        let err = find_corners(&image, board, "camera").unwrap_err();
+        assert!(matches!(err, TofError::NoCornerDetector), "{err}");
+        let text = err.to_string();
+        assert!(text.contains("--features opencv"), "{text}");
+        assert!(require_corner_detector().is_err());
     }
 }

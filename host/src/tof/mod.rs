@@ -1,8 +1,8 @@
 //! Hybrid time-of-flight + photometric stereo (thesis Ch. 6, SPEC §9): TCSPC histograms of a
 //! SPAD camera → range map ([`range`]), chequerboard calibration between the SPAD and the
 //! photometric-stereo camera ([`chequerboard`], [`calibration`]), per-object masks in the PS
-//! camera's pixels ([`mask`]), and per-object reconstruction placed at, and fused with, the
-//! absolute ToF range ([`hybrid`]; the fusion is Nehab, Rusinkiewicz, Davis & Ramamoorthi,
+//! camera's pixels ([`mask`]), range maps on disk ([`range_folder`]), and per-object
+//! reconstruction placed at, and fused with, the absolute ToF range ([`hybrid`]; the fusion is Nehab, Rusinkiewicz, Davis & Ramamoorthi,
 //! "Efficiently combining positions and normals for precise 3D geometry", SIGGRAPH 2005, solved
 //! by [`crate::integrate::fusion`]).
 //!
@@ -17,10 +17,12 @@ pub mod hybrid;
 pub mod layer_smoothing;
 pub mod mask;
 pub mod range;
+pub mod range_folder;
 
 pub use calibration::{BoardView, Calibration, CalibrationPlane};
 pub use histogram::{Histograms, Reference};
 pub use range::{RangeConfig, RangeMap, TimingMode, estimate_range};
+pub use range_folder::{read_range_folder, write_range_folder};
 
 use thiserror::Error;
 
@@ -80,6 +82,11 @@ pub enum TofError {
         /// What went wrong.
         reason: String,
     },
+    /// This build cannot find chequerboard corners (built without the `opencv` feature).
+    #[error(
+        "this meb was built without OpenCV, which finds the chequerboard corners: rebuild with `cargo build --release --features opencv` (after `bash scripts/setup.sh`, which installs libopencv-dev, clang and libclang-dev)"
+    )]
+    NoCornerDetector,
     /// A calibration does not fit the data it is applied to.
     #[error("calibration mismatch: {0}")]
     CalibrationMismatch(String),

@@ -1,6 +1,7 @@
 //! Helpers shared by the CLI test files: running the `meb` binary and small test rigs.
 #![allow(dead_code)] // each test binary uses a different subset
 
+use std::path::Path;
 use std::process::{Command, Output};
 
 /// Runs the `meb` binary built for these tests.
@@ -13,23 +14,56 @@ pub fn meb(args: &[&str]) -> Output {
 
 /// The standard output of a command that must have succeeded (its stderr in the failure).
 pub fn stdout_of(output: &Output) -> String {
-    assert!(
-        output.status.success(),
-        "meb failed: {}",
-        String::from_utf8_lossy(&output.stderr)
-    );
-    String::from_utf8_lossy(&output.stdout).into_owned()
+    succeeded(output, "meb")
 }
 
 /// Runs `meb args`, which must succeed, and returns its standard output.
 pub fn run_ok(args: &[&str]) -> String {
-    let out = meb(args);
+    succeeded(&meb(args), &format!("meb {args:?}"))
+}
+
+/// The standard output of `output`, which must be a success (`what` and its stderr in the
+/// failure).
+fn succeeded(output: &Output, what: &str) -> String {
     assert!(
-        out.status.success(),
-        "meb {args:?} failed: {}",
-        String::from_utf8_lossy(&out.stderr)
+        output.status.success(),
+        "{what} failed: {}",
+        stderr_of(output)
     );
-    String::from_utf8_lossy(&out.stdout).into_owned()
+    String::from_utf8_lossy(&output.stdout).into_owned()
+}
+
+/// The standard error of a run, as text.
+pub fn stderr_of(output: &Output) -> String {
+    String::from_utf8_lossy(&output.stderr).into_owned()
+}
+
+/// A path as a command-line argument.
+pub fn arg(path: &Path) -> &str {
+    path.to_str().expect("test paths are UTF-8")
+}
+
+/// Runs `meb args`, which must fail with one line `error: …`, and returns that line.
+pub fn run_err(args: &[&str]) -> String {
+    let out = meb(args);
+    assert!(!out.status.success(), "meb {args:?} should fail");
+    let stderr = stderr_of(&out).trim().to_string();
+    assert_eq!(
+        stderr.lines().count(),
+        1,
+        "meb {args:?}: expected a one-line message, got {stderr:?}"
+    );
+    assert!(stderr.starts_with("error: "), "{stderr}");
+    stderr
+}
+
+/// Runs `meb args`, which must fail with a message containing `expect` and leave no `out`;
+/// returns the message.
+pub fn refused(args: &[&str], out: &Path, expect: &str) -> String {
+    let text = run_err(args);
+    assert!(text.contains(expect), "meb {args:?}: {text}");
+    assert!(!out.exists(), "meb {args:?} left {}", out.display());
+    text
 }
 
 /// The thesis' out-of-plane LED positions (SPEC §5), mm.
@@ -71,4 +105,21 @@ pub fn ffmpeg_available() -> bool {
     );
     eprintln!("SKIPPED: ffmpeg/ffprobe not installed (apt-get install ffmpeg); FFmpeg untested");
     false
+}
+
+/// The vertices of a PLY file, read with `ply-rs-bw` (float x, y, z).
+pub fn ply_points(path: &Path) -> Vec<[f32; 3]> {
+    let file = std::fs::File::open(path).expect("PLY opens");
+    let parser = ply_rs_bw::parser::Parser::<ply_rs_bw::ply::DefaultElement>::new();
+    let ply = parser
+        .read_ply(&mut std::io::BufReader::new(file))
+        .expect("PLY parses");
+    let float = |e: &ply_rs_bw::ply::DefaultElement, k: &str| match e.get(k) {
+        Some(ply_rs_bw::ply::Property::Float(v)) => *v,
+        other => panic!("vertex {k} is {other:?}"),
+    };
+    ply.payload["vertex"]
+        .iter()
+        .map(|v| [float(v, "x"), float(v, "y"), float(v, "z")])
+        .collect()
 }
