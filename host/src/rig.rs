@@ -280,6 +280,21 @@ impl Projection {
 }
 
 impl Camera {
+    /// A small 64×48, 960 fps test camera 400 mm from the origin with pitch `pixel_pitch_mm`
+    /// or pinhole `intrinsics`.
+    #[cfg(test)]
+    pub(crate) fn test_64x48(pixel_pitch_mm: Option<f64>, intrinsics: Option<Intrinsics>) -> Self {
+        Self {
+            width: 64,
+            height: 48,
+            fps: 960.0,
+            distance_mm: 400.0,
+            fov_deg: None,
+            pixel_pitch_mm,
+            intrinsics,
+        }
+    }
+
     /// Grid pitch h in mm per pixel: `pixel_pitch_mm`, else h = 2·d·tan(FOV/2)/width (SPEC §6);
     /// for a perspective camera the pitch on the object plane z = 0, d/fx.
     pub fn pitch_mm(&self) -> f64 {
@@ -813,14 +828,9 @@ mod tests {
     }
 
     fn perspective() -> Camera {
-        Camera {
-            width: 64,
-            height: 48,
-            fps: 960.0,
-            distance_mm: 400.0,
-            fov_deg: None,
-            pixel_pitch_mm: None,
-            intrinsics: Some(Intrinsics {
+        Camera::test_64x48(
+            None,
+            Some(Intrinsics {
                 fx: 900.0,
                 fy: 880.0,
                 cx: 30.5,
@@ -828,7 +838,7 @@ mod tests {
                 k1: -0.2,
                 k2: 0.05,
             }),
-        }
+        )
     }
 
     #[test]

@@ -17,8 +17,8 @@ use common::{OUT_OF_PLANE_LEDS, rig_toml, run_ok};
 /// The thesis camera's grid pitch: 2·420·tan(21.5°)/1280 mm.
 const THESIS_PITCH_MM: f64 = 0.258_49;
 
-/// Depth RMSE bound of Suzanne (measured 6.72 mm), mm.
-const SUZANNE_MAX_RMSE_MM: f64 = 7.5;
+/// Depth RMSE bound of Suzanne with the bilateral integrator (measured 5.11 mm), mm.
+const SUZANNE_MAX_RMSE_MM: f64 = 5.5;
 
 /// Depth RMSE bound of the blobby shape (measured 0.14 mm), mm.
 const BLOBBY_MAX_RMSE_MM: f64 = 1.0;
@@ -144,10 +144,12 @@ fn sphere_under_strong_background_light_meets_its_target() {
 }
 
 /// Blender's Suzanne, 90 mm wide, face to the camera: ≥ 90 % of the surface lit by ≥ 3 LEDs
-/// reconstructed. Depth: the target is RMSE ≤ 5 mm and is not met yet (measured 6.72 mm with
+/// reconstructed. Depth: the target is RMSE ≤ 5 mm and is not met yet (measured 5.11 mm with
 /// `--integrator bilateral`, 7.96 mm with the least-squares default; the thesis' monkey:
-/// 10.9 mm); this test holds what is reached, ≤ [`SUZANNE_MAX_RMSE_MM`] with the bilateral
-/// integrator, and that it beats least squares across the brow, nose and ears.
+/// 10.9 mm). Most of what is left is the ears sitting about 11 mm too close to the camera as a
+/// whole: they stay joined to the head through two-LED pixels at their roots. This test holds
+/// what is reached, ≤ [`SUZANNE_MAX_RMSE_MM`] with the bilateral integrator, and that it beats
+/// least squares across the brow, nose and ears.
 #[test]
 fn suzanne_head_coverage_and_depth() {
     let bench = Bench::new(&rig_toml(384, 288, THESIS_PITCH_MM, &OUT_OF_PLANE_LEDS));

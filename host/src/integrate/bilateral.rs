@@ -52,17 +52,24 @@ pub(crate) fn uniform(
         .collect()
 }
 
-/// The bilateral weights at the current solution `x` (module docs); `units` turns differences of
-/// `x` into pixels, `stiffness` is k.
+/// How steep the sigmoid weights are: `units` (pixels per unit of the unknown) and stiffness k.
+#[derive(Debug, Clone, Copy)]
+pub(crate) struct Stiffness {
+    /// Pixels per unit of the unknown.
+    pub units: f64,
+    /// Stiffness k.
+    pub k: f64,
+}
+
+/// The bilateral weights at the current solution `x` (module docs).
 pub(crate) fn bilateral(
     topology: &Topology,
     x: &[f64],
     slopes: &[(f64, f64)],
     confidence: &[f64],
-    units: f64,
-    stiffness: f64,
+    stiffness: Stiffness,
 ) -> Vec<SideWeights> {
-    sigmoid_weights(topology, x, slopes, units, stiffness)
+    sigmoid_weights(topology, x, slopes, stiffness)
         .into_iter()
         .enumerate()
         .map(|(k, w)| {
@@ -79,10 +86,13 @@ fn sigmoid_weights(
     topology: &Topology,
     x: &[f64],
     slopes: &[(f64, f64)],
-    units: f64,
-    stiffness: f64,
+    stiffness: Stiffness,
 ) -> Vec<SideWeights> {
     let sigmoid = |t: f64| 1.0 / (1.0 + (-t).exp());
+    let Stiffness {
+        units,
+        k: stiffness,
+    } = stiffness;
     topology
         .neighbours
         .iter()
@@ -118,11 +128,10 @@ pub(crate) fn discontinuities(
     topology: &Topology,
     x: &[f64],
     slopes: &[(f64, f64)],
-    units: f64,
-    stiffness: f64,
+    stiffness: Stiffness,
     cut: f64,
 ) -> Vec<[bool; 2]> {
-    let w = sigmoid_weights(topology, x, slopes, units, stiffness);
+    let w = sigmoid_weights(topology, x, slopes, stiffness);
     topology
         .neighbours
         .iter()
@@ -134,6 +143,52 @@ pub(crate) fn discontinuities(
             })
         })
         .collect()
+}
+
+/// The two one-sided equations of an edge k→j (right or down): the forward equation of node k
+/// and the backward equation of node j, with their weights and slopes h·s along the edge.
+struct EdgeSides {
+    /// The left/upper node.
+    k: usize,
+    /// Axis: 0 right, 1 down.
+    d: usize,
+    /// Weights of the forward equation of k and the backward equation of j.
+    w: (f64, f64),
+    /// Slopes of k and j along the edge (y up, so negated for the down edges).
+    g: (f64, f64),
+    /// The two nodes' side weights summed (for the weight floor).
+    total: f64,
+    /// The right/lower node.
+    j: usize,
+}
+
+/// Every edge's one-sided equations ([`EdgeSides`]).
+fn edge_sides<'a>(
+    topology: &'a Topology,
+    sides: &'a [SideWeights],
+    slopes: &'a [(f64, f64)],
+) -> impl Iterator<Item = EdgeSides> + 'a {
+    topology
+        .neighbours
+        .iter()
+        .enumerate()
+        .flat_map(|(k, nb)| [(k, 0, nb[0]), (k, 1, nb[1])])
+        .filter(|&(_, _, j)| j != NONE)
+        .map(move |(k, d, j)| {
+            let j = j as usize;
+            let g = match d {
+                0 => (slopes[k].0, slopes[j].0),
+                _ => (-slopes[k].1, -slopes[j].1),
+            };
+            EdgeSides {
+                k,
+                d,
+                w: (sides[k][d], sides[j][d + 2]),
+                g,
+                total: sides[k].iter().sum::<f64>() + sides[j].iter().sum::<f64>(),
+                j,
+            }
+        })
 }
 
 /// Edge equations from one-sided equations: edge k→j (right or down) has weight
@@ -148,28 +203,16 @@ pub(crate) fn side_equations(
     let n = topology.len();
     let mut weight = vec![[0.0; 2]; n];
     let mut target = vec![[0.0; 2]; n];
-    for (k, nb) in topology.neighbours.iter().enumerate() {
-        for d in 0..2 {
-            let j = nb[d];
-            if j == NONE {
-                continue;
-            }
-            let j = j as usize;
-            let (wk, wj) = (sides[k][d], sides[j][d + 2]);
-            let (gk, gj) = match d {
-                0 => (slopes[k].0, slopes[j].0),
-                _ => (-slopes[k].1, -slopes[j].1),
-            };
-            let floor =
-                WEIGHT_FLOOR * (sides[k].iter().sum::<f64>() + sides[j].iter().sum::<f64>());
-            let total = wk + wj;
-            weight[k][d] = total.max(floor).max(f64::MIN_POSITIVE);
-            target[k][d] = if total > 0.0 {
-                step * (wk * gk + wj * gj) / total
-            } else {
-                0.5 * step * (gk + gj)
-            };
-        }
+    for e in edge_sides(topology, sides, slopes) {
+        let (wk, wj) = e.w;
+        let (gk, gj) = e.g;
+        let total = wk + wj;
+        weight[e.k][e.d] = total.max(WEIGHT_FLOOR * e.total).max(f64::MIN_POSITIVE);
+        target[e.k][e.d] = if total > 0.0 {
+            step * (wk * gk + wj * gj) / total
+        } else {
+            0.5 * step * (gk + gj)
+        };
     }
     EdgeEquations { weight, target }
 }
@@ -182,24 +225,12 @@ pub(crate) fn energy(
     step: f64,
     x: &[f64],
 ) -> f64 {
-    let mut sum = 0.0;
-    for (k, nb) in topology.neighbours.iter().enumerate() {
-        for d in 0..2 {
-            let j = nb[d];
-            if j == NONE {
-                continue;
-            }
-            let j = j as usize;
-            let delta = x[j] - x[k];
-            let (gk, gj) = match d {
-                0 => (slopes[k].0, slopes[j].0),
-                _ => (-slopes[k].1, -slopes[j].1),
-            };
-            sum += sides[k][d] * (delta - step * gk).powi(2)
-                + sides[j][d + 2] * (delta - step * gj).powi(2);
-        }
-    }
-    sum
+    edge_sides(topology, sides, slopes)
+        .map(|e| {
+            let delta = x[e.j] - x[e.k];
+            e.w.0 * (delta - step * e.g.0).powi(2) + e.w.1 * (delta - step * e.g.1).powi(2)
+        })
+        .sum()
 }
 
 #[cfg(test)]
@@ -219,7 +250,14 @@ mod tests {
             .map(|&(_, c)| if c < 4 { 0.0 } else { 10.0 })
             .collect();
         let slopes = vec![(0.0, 0.0); topology.len()];
-        let w = bilateral(&topology, &x, &slopes, &vec![1.0; topology.len()], 1.0, 2.0);
+        let stiffness = Stiffness { units: 1.0, k: 2.0 };
+        let w = bilateral(
+            &topology,
+            &x,
+            &slopes,
+            &vec![1.0; topology.len()],
+            stiffness,
+        );
         let left_of_step = topology.node((1, 3)).unwrap();
         let right_of_step = topology.node((1, 4)).unwrap();
         assert!(w[left_of_step][0] < 1e-6 && w[left_of_step][2] > 1.0 - 1e-6);

@@ -339,43 +339,9 @@ mod tests {
 
     /// Unit-weight Laplacian of a `rows`×`cols` mask given by `inside`.
     fn laplacian(rows: usize, cols: usize, inside: impl Fn(usize, usize) -> bool) -> GridLaplacian {
-        let mut index = vec![NONE; rows * cols];
-        let mut cells = Vec::new();
-        for r in 0..rows {
-            for c in 0..cols {
-                if inside(r, c) {
-                    index[r * cols + c] = cells.len() as u32;
-                    cells.push((r, c));
-                }
-            }
-        }
-        let at = |r: usize, c: usize| {
-            if r < rows && c < cols {
-                index[r * cols + c]
-            } else {
-                NONE
-            }
-        };
-        let neighbours: Vec<[u32; 4]> = cells
-            .iter()
-            .map(|&(r, c)| {
-                [
-                    at(r, c + 1),
-                    at(r + 1, c),
-                    if c > 0 { at(r, c - 1) } else { NONE },
-                    if r > 0 { at(r - 1, c) } else { NONE },
-                ]
-            })
-            .collect();
-        let weights: Vec<[f64; 4]> = neighbours
-            .iter()
-            .map(|nb| nb.map(|j| if j == NONE { 0.0 } else { 1.0 }))
-            .collect();
-        let diag = weights
-            .iter()
-            .map(|w| 1e-10 + w.iter().sum::<f64>())
-            .collect();
-        GridLaplacian::new((rows, cols), cells, neighbours, weights, diag)
+        let mask = ndarray::Array2::from_shape_fn((rows, cols), |(r, c)| inside(r, c));
+        let topology = super::super::least_squares::Topology::new(&mask);
+        topology.laplacian(&vec![[1.0; 2]; topology.len()])
     }
 
     #[test]

@@ -149,15 +149,7 @@ mod tests {
     use std::sync::Arc;
 
     fn camera() -> Camera {
-        Camera {
-            width: 64,
-            height: 48,
-            fps: 960.0,
-            distance_mm: 400.0,
-            fov_deg: None,
-            pixel_pitch_mm: Some(1.0),
-            intrinsics: None,
-        }
+        Camera::test_64x48(Some(1.0), None)
     }
 
     #[test]
@@ -229,14 +221,9 @@ mod tests {
     /// A 64×48 pinhole camera 400 mm away with f = 1500 px (≈ 0.27 mm per pixel at the origin)
     /// and barrel distortion.
     fn perspective_camera() -> Camera {
-        Camera {
-            width: 64,
-            height: 48,
-            fps: 960.0,
-            distance_mm: 400.0,
-            fov_deg: None,
-            pixel_pitch_mm: None,
-            intrinsics: Some(crate::rig::Intrinsics {
+        Camera::test_64x48(
+            None,
+            Some(crate::rig::Intrinsics {
                 fx: 1500.0,
                 fy: 1500.0,
                 cx: 31.5,
@@ -244,7 +231,7 @@ mod tests {
                 k1: -0.5,
                 k2: 0.0,
             }),
-        }
+        )
     }
 
     /// Seen in perspective, every sphere pixel's point lies on the sphere with the radial normal,
