@@ -24,6 +24,16 @@
 //! `pow` at 20 % of all samples), the per-pixel solve (`solve_pixel`, 10–13 %) and the
 //! closures of the depth-offset search — ≈ 70 %; integration (multigrid) ≈ 5 %; decoding
 //! ≈ 3 %; per pass, the offset search costs 220–280 ms against 60–100 ms of integration.
+//!
+//! The bench prints the per-stage profile of one reconstruction first. A later round (light
+//! vectors from a prepared projection and LED emitters, the offset search gathering its pixels
+//! once, background pixels decided before light vectors, early passes with capped two-LED
+//! alternations) was measured only at a load average of 10–11 on 2 cores, where `reconstruct`
+//! took 11.9 s (11.1–12.7) against 11.6 s (8.3–14.9) for the code before it in the same run:
+//! load, not code, set those numbers. At a load of 4–9 the two measured 2.08–2.40 s (after)
+//! and 2.14 s (before): no speed-up is shown yet. Per pass (after) the offset search took
+//! 87–100 ms, photometric stereo 71–100 ms and integration 145–290 ms; re-measure on a quiet
+//! machine.
 
 use criterion::{BatchSize, Criterion, criterion_group, criterion_main};
 use meb::capture::memory::MemorySource;
@@ -74,6 +84,12 @@ fn bench(c: &mut Criterion) {
         exposure: Some(decoded.report.exposure),
         ..config.decode.clone()
     };
+    // The per-stage profile of one reconstruction, printed once (criterion times the whole).
+    if let Ok(reconstruction) = from_decoded(&decoded, &rig, None, &config.reconstruct) {
+        for stage in &reconstruction.timings {
+            eprintln!("stage {:>8.1} ms  {}", stage.ms, stage.stage);
+        }
+    }
     let mut group = c.benchmark_group("video_1280x720");
     group.sample_size(10);
     group.bench_function("window", |b| {

@@ -9,7 +9,7 @@
 //! piece of the mask, and per part the bilateral integrator cut off along a depth discontinuity.
 //! The light vectors depend on it: after each integration every part's constant is chosen by a
 //! golden-section search that minimises the Lambertian misfit of its pixels lit by more than
-//! three LEDs ([`model_misfit`]), bracketed to ±`offset_search_mm` around the integrated depth.
+//! three LEDs ([`ModelMisfit`]), bracketed to ±`offset_search_mm` around the integrated depth.
 //!
 //! [`from_decoded`] is the one path from a decoded capture to a reconstruction: `meb
 //! reconstruct`, `meb demo` and the hardware-in-the-loop tests all call it, with the
@@ -22,7 +22,7 @@ use crate::integrate::{
 };
 use crate::photometric::lights::moved_depth;
 use crate::photometric::{
-    Lights, PhotometricConfig, PhotometricError, PhotometricResult, estimate_normals, model_misfit,
+    Lights, ModelMisfit, PhotometricConfig, PhotometricError, PhotometricResult, estimate_normals,
 };
 use crate::rig::{Projection, Rig};
 pub use crate::timing::StageTiming;
@@ -31,8 +31,8 @@ use ndarray::{Array2, Zip};
 use std::time::Instant;
 use thiserror::Error;
 
-/// Bilateral reweightings of the near-field passes before the last (they only feed the next
-/// pass's light vectors).
+/// Bilateral reweightings, or two-LED alternations, of the near-field passes before the last
+/// (they only feed the next pass's light vectors).
 const EARLY_PASS_REWEIGHTINGS: usize = 8;
 
 /// Bilateral stiffness k of reconstructions. Stiffer than the paper's 2: on Suzanne (out-of-plane
@@ -40,6 +40,14 @@ const EARLY_PASS_REWEIGHTINGS: usize = 8;
 /// 5.68, 5.11, 5.51, 5.33 mm. Plain normal integration keeps the paper's k, which leans less on
 /// smooth curved surfaces (Quéau's vase: NRMSE 0.35 % at k = 2, 0.67 % at k = 10).
 const BILATERAL_STIFFNESS: f64 = 10.0;
+
+/// Width in mm of the bracket at which the golden-section search for a part's depth offset
+/// stops (far below the depth accuracy; each step costs one misfit evaluation).
+const OFFSET_TOLERANCE_MM: f64 = 0.01;
+
+/// Relative residual at which conjugate gradients stops in the passes before the last: their
+/// depth only places the next pass's light vectors, which a 10⁻⁵ residual leaves unchanged.
+const EARLY_PASS_TOLERANCE: f64 = 1e-5;
 
 /// Settings of the whole reconstruction.
 #[derive(Debug, Clone, PartialEq, serde::Serialize, serde::Deserialize)]
@@ -218,13 +226,19 @@ pub fn reconstruct(
             planes: &ps.planes,
             fill: Some(&ps.fill),
         };
-        // Early passes only feed the light vectors of the next: a few reweightings suffice.
+        // Early passes only feed the light vectors of the next: a few reweightings (or
+        // two-LED alternations) and a looser solve suffice.
         let mut integrate_config = config.integrate.clone();
         if pass + 1 < passes {
             integrate_config.bilateral.max_iterations = integrate_config
                 .bilateral
                 .max_iterations
                 .min(EARLY_PASS_REWEIGHTINGS);
+            integrate_config.coverage.iterations = integrate_config
+                .coverage
+                .iterations
+                .min(EARLY_PASS_REWEIGHTINGS);
+            integrate_config.tolerance = integrate_config.tolerance.max(EARLY_PASS_TOLERANCE);
         }
         let mut integration = integrate_surface(&evidence, &projection, &integrate_config, depth)?;
         time(format!("integration (pass {})", pass + 1), start);
@@ -335,16 +349,16 @@ fn best_offset(
     if pixels.len() < 16 {
         return 0.0;
     }
-    let misfit = |offset: f64| {
-        model_misfit(
-            images,
-            &Lights::near_field(rig, Some(depth)).moved(offset),
-            pixels,
-            noise,
-            &ps.noise_gains,
-            &config.photometric,
-        )
-    };
+    let lights = Lights::near_field(rig, Some(depth));
+    let model = ModelMisfit::new(
+        images,
+        &lights,
+        pixels,
+        noise,
+        &ps.noise_gains,
+        &config.photometric,
+    );
+    let misfit = |offset: f64| model.at(offset);
     // Coarse scan, then golden-section refinement around the best sample.
     let half = half_range;
     let samples = 13;
@@ -362,7 +376,7 @@ fn best_offset(
     let mut c = b - ratio * (b - a);
     let mut d = a + ratio * (b - a);
     let (mut fc, mut fd) = (misfit(c), misfit(d));
-    for _ in 0..20 {
+    while b - a > OFFSET_TOLERANCE_MM {
         if fc < fd {
             (b, d, fd) = (d, c, fc);
             c = b - ratio * (b - a);

@@ -388,10 +388,44 @@ impl Led {
     /// Light vector L_i(X) at scene point `point` (module docs): direction to the LED scaled
     /// by Φ·cos^m θ / d². Zero behind the LED's emitting hemisphere.
     pub fn light_vector_at(&self, point: &Vector3<f64>) -> Vector3<f64> {
-        let to_led = self.position() - point;
+        self.emitter().light_vector_at(point)
+    }
+
+    /// The LED's geometry with its emission axis normalised once, for loops that evaluate
+    /// light vectors at many points.
+    pub fn emitter(&self) -> Emitter {
+        Emitter {
+            position: self.position(),
+            axis: self.unit_axis(),
+            intensity: self.intensity,
+            lambert_order: self.lambert_order,
+        }
+    }
+}
+
+/// An LED prepared for evaluating light vectors: position, unit emission axis, intensity Φ
+/// and Lambert order m (see [`Led`]).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Emitter {
+    /// Position P_i in mm.
+    pub position: Vector3<f64>,
+    /// Unit emission axis.
+    pub axis: Vector3<f64>,
+    /// Relative intensity Φ_i.
+    pub intensity: f64,
+    /// Lambert order m of the emission profile cos^m θ.
+    pub lambert_order: f64,
+}
+
+impl Emitter {
+    /// Light vector L_i(X) at scene point `point` (module docs): direction to the LED scaled
+    /// by Φ·cos^m θ / d². Zero behind the LED's emitting hemisphere.
+    #[inline]
+    pub fn light_vector_at(&self, point: &Vector3<f64>) -> Vector3<f64> {
+        let to_led = self.position - point;
         let d2 = to_led.norm_squared();
-        let dir = to_led / d2.sqrt();
-        let cos_theta = self.unit_axis().dot(&(-dir));
+        let inv_d = 1.0 / d2.sqrt();
+        let cos_theta = -self.axis.dot(&to_led) * inv_d;
         if cos_theta <= 0.0 {
             return Vector3::zeros();
         }
@@ -402,7 +436,7 @@ impl Led {
         } else {
             cos_theta.powf(self.lambert_order)
         };
-        dir * (self.intensity * falloff / d2)
+        to_led * (self.intensity * falloff * inv_d / d2)
     }
 }
 

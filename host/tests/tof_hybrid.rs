@@ -6,13 +6,14 @@
 
 mod tof_common;
 
+use meb::integrate::fusion::{FusionConfig, fuse_positions_and_normals};
 use meb::reconstruct::ReconstructConfig;
 use meb::rig::{Rig, TofCamera};
 use meb::simulate::geometry::SurfaceMap;
 use meb::simulate::lighting::{default_gain, led_images};
 use meb::simulate::tof::camera_labels;
 use meb::tof::calibration::Calibration;
-use meb::tof::hybrid::{HybridConfig, reconstruct_objects};
+use meb::tof::hybrid::{HybridConfig, object_masks, reconstruct_objects};
 use meb::tof::{Histograms, RangeConfig, Reference, TimingMode, estimate_range};
 use meb::types::LedImages;
 use ndarray::Array2;
@@ -45,7 +46,9 @@ fn per_object_depth_beats_the_thesis_with_fusion() {
         &Histograms {
             counts: capture.histograms.mapv(|v| v as f32),
         },
-        &Reference::Global(capture.reference.mapv(|v| v as f32)),
+        // The whole reference board, pooled on the axis: a 4×4-pixel reference's own photon
+        // noise would offset every range alike (by about 2 mm, measured).
+        &Reference::PerPixel(capture.reference_pixels.mapv(|v| v as f32)),
         &RangeConfig {
             mode: TimingMode::Reverse,
             fov_deg: Some(tof.fov_deg),
@@ -64,6 +67,45 @@ fn per_object_depth_beats_the_thesis_with_fusion() {
         .map(|im| im.mapv(|v| v + noise.sample(&mut rng) as f32))
         .collect();
     let sigma = Array2::from_elem((rig.camera.height, rig.camera.width), 0.01f32);
+    let labels = camera_labels(&hybrid.scene, &hybrid.groups, &rig.camera);
+    // Mask coverage against the snapping band (diagnostic for the default).
+    for snap in [0.0, 1.0, 1.5, 2.0, 3.0] {
+        let masks = object_masks(
+            Some(&LedImages {
+                images: images.clone(),
+            }),
+            [rig.camera.width, rig.camera.height],
+            &range.range_mm,
+            &calibration,
+            &HybridConfig {
+                snap_tof_pixels: snap,
+                ..HybridConfig::default()
+            },
+        )
+        .unwrap();
+        let shares: Vec<String> = masks
+            .iter()
+            .enumerate()
+            .map(|(k, (_, m))| {
+                let object = labels.iter().filter(|&&l| l == k as i32).count();
+                let covered = labels
+                    .iter()
+                    .zip(m)
+                    .filter(|&(&l, &m)| m && l == k as i32)
+                    .count();
+                let foreign = labels
+                    .iter()
+                    .zip(m)
+                    .filter(|&(&l, &m)| m && l != k as i32)
+                    .count();
+                format!(
+                    "{:.1} % ({foreign} foreign)",
+                    100.0 * covered as f64 / object as f64
+                )
+            })
+            .collect();
+        eprintln!("snap ±{snap} ToF px: {shares:?}");
+    }
     let result = reconstruct_objects(
         &LedImages { images },
         Some(&sigma),
@@ -76,7 +118,6 @@ fn per_object_depth_beats_the_thesis_with_fusion() {
     .unwrap();
 
     let truth_z = Array2::from_shape_vec((map.height, map.width), map.z_mm.clone()).unwrap();
-    let labels = camera_labels(&hybrid.scene, &hybrid.groups, &rig.camera);
     assert_eq!(result.objects.len(), hybrid.names.len());
     // Masks (snapped to the LED images' edges): share of each object's pixels, none of another.
     for (k, o) in result.objects.iter().enumerate() {
@@ -105,42 +146,72 @@ fn per_object_depth_beats_the_thesis_with_fusion() {
             o.layer.tof_pixels
         );
         assert_eq!(foreign, 0, "{}", hybrid.names[k]);
-        // The aim was 98 %; measured 98.6 % (sphere), 97.8 % (head), 95.6 % (cube).
+        // The aim is 98 %; measured 98.6 % (sphere), 98.0 % (head), 96.2 % (cube: the SPAD,
+        // from its own pose, does not see all of the cube's faces the camera sees).
+        let least = [0.98, 0.975, 0.955][k];
         assert!(
-            covered as f64 >= 0.95 * object as f64,
+            covered as f64 >= least * object as f64,
             "{}",
             hybrid.names[k]
         );
     }
     let thesis = [Some(2.06), None, Some(3.6)];
-    eprintln!("object   pixels  placed RMSE  fused RMSE  (absolute depth, mm; thesis)");
+    eprintln!(
+        "object   pixels  ToF prior RMSE (bias)  placed RMSE (bias)  fused RMSE (bias)  (absolute depth, mm; thesis)"
+    );
     for (k, object) in result.objects.iter().enumerate() {
         let label = k as i32;
+        // (RMSE, mean error, pixels) over the object's own pixels inside its mask.
         let rmse = |depth: &Array2<f32>| {
             let e: Vec<f64> = depth
                 .indexed_iter()
                 .filter(|(p, z)| object.mask[*p] && labels[*p] == label && z.is_finite())
                 .map(|(p, &z)| f64::from(z) - truth_z[p])
                 .collect();
+            let n = e.len() as f64;
             (
-                (e.iter().map(|e| e * e).sum::<f64>() / e.len() as f64).sqrt(),
+                (e.iter().map(|e| e * e).sum::<f64>() / n).sqrt(),
+                e.iter().sum::<f64>() / n,
                 e.len(),
             )
         };
-        let (placed, n) = rmse(&object.placed);
-        let (fused, _) = rmse(&object.fused.depth.depth_mm);
+        let (prior, prior_bias, _) = rmse(&object.prior.depth_mm);
+        let (placed, placed_bias, n) = rmse(&object.placed);
+        let (fused, fused_bias, _) = rmse(&object.fused.depth.depth_mm);
         eprintln!(
-            "{:<8} {n:>6}  {placed:>10.3}  {fused:>10.3}  ({})",
+            "{:<8} {n:>6}  {prior:>8.3} ({prior_bias:+.3})  {placed:>8.3} ({placed_bias:+.3})  {fused:>8.3} ({fused_bias:+.3})  ({})",
             hybrid.names[k],
             thesis[k].map_or("–".into(), |t: f64| format!("{t} mm"))
         );
         assert!(n > 0);
-        if let Some(t) = thesis[k] {
-            assert!(
-                fused <= t,
-                "{}: fused {fused} mm, thesis {t} mm",
-                hybrid.names[k]
-            );
-        }
+        // 4× better than the thesis is the aim: sphere ≤ 0.52 mm (measured 0.48), cube
+        // ≤ 0.9 mm (measured 0.91, missed); head measured 0.58 mm.
+        let bar = [0.52, 0.8, 1.2][k];
+        assert!(
+            fused <= bar,
+            "{}: fused {fused} mm (bar {bar} mm, thesis {:?})",
+            hybrid.names[k],
+            thesis[k]
+        );
+        // How the fusion's trust in the normals (σ_g) trades against the ToF positions.
+        let sweep: Vec<String> = [0.005, 0.01, 0.02, 0.05]
+            .iter()
+            .map(|&slope_sigma| {
+                let f = fuse_positions_and_normals(
+                    &object.reconstruction.photometric.field,
+                    rig.camera.pitch_mm(),
+                    &object.prior,
+                    &FusionConfig {
+                        slope_sigma,
+                        ..FusionConfig::default()
+                    },
+                    Some(&object.placed),
+                )
+                .unwrap();
+                let (r, b, _) = rmse(&f.depth.depth_mm);
+                format!("σ_g {slope_sigma}: {r:.3} ({b:+.3})")
+            })
+            .collect();
+        eprintln!("  {sweep:?}");
     }
 }

@@ -21,6 +21,7 @@
 //! position at all cannot be placed and are left out.
 
 use super::multigrid::{GridLaplacian, Multigrid, NONE};
+use super::pcg::{Stop, preconditioned_cg};
 use super::{IntegrateError, SurfaceGradients};
 use crate::types::{DepthMap, NormalField};
 use ndarray::Array2;
@@ -330,48 +331,18 @@ fn solve(
     coarse_shift: f64,
     config: &FusionConfig,
 ) -> usize {
-    let n = b.len();
-    let inner = |u: &[f64], v: &[f64]| u.iter().zip(v).map(|(p, q)| p * q).sum::<f64>();
     let mut multigrid = Multigrid::new(a, coarse_shift);
-    let mut precondition = |r: &[f64], z: &mut [f64]| {
-        multigrid.precondition(a, r, z);
-        deflation.add_correction(r, z);
-    };
-    let mut scratch = vec![0.0; n];
-    precondition(b, &mut scratch);
-    let reference = inner(b, &scratch).max(f64::MIN_POSITIVE);
-    let mut residual = vec![0.0; n];
-    a.apply(x, &mut residual);
-    residual.iter_mut().zip(b).for_each(|(r, bi)| *r = bi - *r);
-    let mut z = vec![0.0; n];
-    precondition(&residual, &mut z);
-    let mut direction = z.clone();
-    let mut rz = inner(&residual, &z);
-    let mut a_direction = vec![0.0; n];
-    for iteration in 0..config.max_iterations {
-        if rz <= config.tolerance * config.tolerance * reference {
-            return iteration;
-        }
-        a.apply(&direction, &mut a_direction);
-        let curvature = inner(&direction, &a_direction);
-        if curvature.is_nan() || curvature <= 0.0 {
-            return iteration;
-        }
-        let step = rz / curvature;
-        for k in 0..n {
-            x[k] += step * direction[k];
-            residual[k] -= step * a_direction[k];
-        }
-        precondition(&residual, &mut z);
-        let rz_next = inner(&residual, &z);
-        let beta = rz_next / rz;
-        rz = rz_next;
-        direction
-            .iter_mut()
-            .zip(&z)
-            .for_each(|(d, zk)| *d = zk + beta * *d);
-    }
-    config.max_iterations
+    preconditioned_cg(
+        |u, v| a.apply(u, v),
+        |r, z| {
+            multigrid.precondition(a, r, z);
+            deflation.add_correction(r, z);
+        },
+        b,
+        x,
+        Stop::PreconditionedResidual(config.tolerance),
+        config.max_iterations,
+    )
 }
 
 #[cfg(test)]

@@ -11,6 +11,7 @@
 //! mask's size.
 
 use super::multigrid::{GridLaplacian, Multigrid, NONE};
+use super::pcg::{Stop, preconditioned_cg};
 use super::{IntegrateConfig, IntegrateError, SurfaceGradients};
 use ndarray::Array2;
 
@@ -247,43 +248,15 @@ pub(crate) fn conjugate_gradients(
     tolerance: f64,
     max_iterations: usize,
 ) -> usize {
-    let n = b.len();
-    let dot = |a: &[f64], b: &[f64]| a.iter().zip(b).map(|(x, y)| x * y).sum::<f64>();
     let mut multigrid = Multigrid::new(lap, REGULARISATION);
-    let mut r = vec![0.0; n];
-    lap.apply(x, &mut r);
-    for (ri, bi) in r.iter_mut().zip(b) {
-        *ri = bi - *ri;
-    }
-    let b_norm = dot(b, b).sqrt().max(f64::MIN_POSITIVE);
-    let mut z = vec![0.0; n];
-    multigrid.precondition(lap, &r, &mut z);
-    let mut p = z.clone();
-    let mut rz = dot(&r, &z);
-    let mut ap = vec![0.0; n];
-    for it in 0..max_iterations {
-        if dot(&r, &r).sqrt() <= tolerance * b_norm {
-            return it;
-        }
-        lap.apply(&p, &mut ap);
-        let pap = dot(&p, &ap);
-        if pap.is_nan() || pap <= 0.0 {
-            return it;
-        }
-        let alpha = rz / pap;
-        for k in 0..n {
-            x[k] += alpha * p[k];
-            r[k] -= alpha * ap[k];
-        }
-        multigrid.precondition(lap, &r, &mut z);
-        let rz_new = dot(&r, &z);
-        let beta = rz_new / rz;
-        rz = rz_new;
-        for k in 0..n {
-            p[k] = z[k] + beta * p[k];
-        }
-    }
-    max_iterations
+    preconditioned_cg(
+        |u, v| lap.apply(u, v),
+        |r, z| multigrid.precondition(lap, r, z),
+        b,
+        x,
+        Stop::ResidualNorm(tolerance),
+        max_iterations,
+    )
 }
 
 #[cfg(test)]

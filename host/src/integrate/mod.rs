@@ -26,6 +26,7 @@ pub mod gradients;
 pub(crate) mod grid;
 pub mod least_squares;
 mod multigrid;
+mod pcg;
 
 pub use coverage::NormalPlane;
 pub use filter::{ArtefactFilter, filter_artefacts};

@@ -4,7 +4,7 @@
 //! light geometry (three independent directions are needed).
 
 use super::PhotometricError;
-use crate::rig::{Projection, Rig};
+use crate::rig::{Emitter, PixelRay, Projection, Rig};
 use nalgebra::{DMatrix, Vector3};
 use ndarray::Array2;
 
@@ -23,6 +23,10 @@ pub enum Lights<'a> {
         scale: f64,
         /// Every point moved this far towards the camera (see [`moved_depth`]).
         offset_mm: f64,
+        /// The camera's projection, computed once.
+        projection: Projection,
+        /// The rig's LEDs prepared for per-point light vectors, in LED order.
+        emitters: Vec<Emitter>,
     },
 }
 
@@ -35,6 +39,8 @@ impl<'a> Lights<'a> {
             depth_mm,
             scale: Self::near_field_scale(rig),
             offset_mm: 0.0,
+            projection: rig.camera.projection(),
+            emitters: rig.leds.iter().map(|led| led.emitter()).collect(),
         }
     }
 
@@ -45,12 +51,16 @@ impl<'a> Lights<'a> {
                 rig,
                 depth_mm,
                 scale,
+                projection,
+                emitters,
                 ..
             } => Lights::NearField {
                 rig,
                 depth_mm,
                 scale,
                 offset_mm,
+                projection,
+                emitters,
             },
             distant => distant,
         }
@@ -91,22 +101,65 @@ impl Lights<'_> {
     pub fn at(&self, row: usize, col: usize, out: &mut [Vector3<f64>]) {
         match self {
             Lights::Distant(v) => out.copy_from_slice(v),
+            Lights::NearField { projection, .. } => {
+                let z = self.depth_at(row, col);
+                self.at_point(&projection.ray(row as f64, col as f64).at(z), out);
+            }
+        }
+    }
+
+    /// Height z in mm of pixel (row, col)'s surface point: the depth estimate (0 where it is
+    /// absent or NaN) moved by the lights' offset; 0 for distant lights.
+    pub fn depth_at(&self, row: usize, col: usize) -> f64 {
+        match self {
+            Lights::Distant(_) => 0.0,
             Lights::NearField {
-                rig,
                 depth_mm,
-                scale,
                 offset_mm,
+                projection,
+                ..
             } => {
                 let z = depth_mm
                     .and_then(|d| d.get((row, col)).copied())
                     .filter(|z| z.is_finite())
                     .map_or(0.0, f64::from);
-                let z = moved_depth(z, *offset_mm, &rig.camera.projection());
-                let point = rig.camera.ray(row as f64, col as f64).at(z);
-                for (slot, led) in out.iter_mut().zip(&rig.leds) {
-                    *slot = led.light_vector_at(&point) * *scale;
+                moved_depth(z, *offset_mm, projection)
+            }
+        }
+    }
+
+    /// The camera's projection of near-field lights (`None` for distant ones).
+    pub fn projection(&self) -> Option<&Projection> {
+        match self {
+            Lights::Distant(_) => None,
+            Lights::NearField { projection, .. } => Some(projection),
+        }
+    }
+
+    /// Writes the near-field light vectors at scene point `point` into `out` (length
+    /// [`Self::count`]); distant lights ignore the point.
+    pub fn at_point(&self, point: &Vector3<f64>, out: &mut [Vector3<f64>]) {
+        match self {
+            Lights::Distant(v) => out.copy_from_slice(v),
+            Lights::NearField {
+                scale, emitters, ..
+            } => {
+                for (slot, emitter) in out.iter_mut().zip(emitters) {
+                    *slot = emitter.light_vector_at(point) * *scale;
                 }
             }
+        }
+    }
+
+    /// The ray of pixel (row, col): the scene points it sees (a vertical ray for distant
+    /// lights, whose vectors do not depend on the point).
+    pub fn ray(&self, row: usize, col: usize) -> PixelRay {
+        match self {
+            Lights::Distant(_) => PixelRay {
+                base: Vector3::zeros(),
+                slope: Vector3::z(),
+            },
+            Lights::NearField { projection, .. } => projection.ray(row as f64, col as f64),
         }
     }
 
@@ -114,8 +167,8 @@ impl Lights<'_> {
     pub fn view_at(&self, row: usize, col: usize) -> Vector3<f64> {
         match self {
             Lights::Distant(_) => Vector3::z(),
-            Lights::NearField { rig, .. } => {
-                rig.camera.ray(row as f64, col as f64).towards_camera()
+            Lights::NearField { projection, .. } => {
+                projection.ray(row as f64, col as f64).towards_camera()
             }
         }
     }

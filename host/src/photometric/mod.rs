@@ -17,7 +17,7 @@ pub mod solve;
 pub use lights::Lights;
 pub use mask::MaskConfig;
 pub use noise::led_noise_gains;
-pub use solve::{PhotometricResult, estimate_normals, model_misfit};
+pub use solve::{ModelMisfit, PhotometricResult, estimate_normals};
 
 use thiserror::Error;
 

@@ -20,10 +20,11 @@
 //! inputs, solve every pixel in parallel row bands, find the object and its holes ([`super::mask`]),
 //! and, when nothing could be solved, say why.
 
-use super::lights::{describe_geometry, light_rank};
+use super::lights::{describe_geometry, light_rank, moved_depth};
 use super::mask::object_region;
 use super::outcome::Outcome;
 use super::{Lights, PhotometricConfig, PhotometricError, check_shape, noise::led_noise_gains};
+use crate::rig::PixelRay;
 use crate::types::{LedImages, NormalField, NormalPlane};
 use nalgebra::{Matrix3, Vector3};
 use ndarray::{Array2, Array3};
@@ -92,6 +93,32 @@ impl PixelSolver {
         }
     }
 
+    /// The outcome of a pixel that its values `a` and level noise `sigma` alone decide, before
+    /// any light vector is computed: unusable values, or fewer than two LEDs above the shadow
+    /// threshold (step 1 of the module docs; [`Self::solve`] would call it dark).
+    pub fn decided_without_lights(&self, a: &[f64], sigma: f64) -> Option<Outcome> {
+        if a.iter().any(|v| !v.is_finite()) {
+            return Some(Outcome::Unusable);
+        }
+        let brightest = a.iter().copied().fold(0.0, f64::max);
+        if brightest <= 0.0 {
+            return Some(Outcome::Dark);
+        }
+        let above = (0..a.len())
+            .filter(|&i| a[i] > self.shadow_threshold(i, brightest, sigma))
+            .count();
+        (above < 2).then_some(Outcome::Dark)
+    }
+
+    /// The value below which LED i counts as shadowed (step 1 of the module docs).
+    fn shadow_threshold(&self, i: usize, brightest: f64, sigma: f64) -> f64 {
+        if self.with_noise && sigma > 0.0 {
+            f64::from(self.config.shadow_sigmas) * self.gains[i] * sigma
+        } else {
+            f64::from(self.config.shadow_fraction) * brightest
+        }
+    }
+
     /// Solves one pixel from its LED values `a`, light vectors `l`, view vector `v` (towards
     /// the camera) and level noise `sigma`.
     pub fn solve(&self, a: &[f64], l: &[Vector3<f64>], v: &Vector3<f64>, sigma: f64) -> Outcome {
@@ -106,12 +133,7 @@ impl PixelSolver {
         let sigma_of = |i: usize| self.gains[i] * sigma;
         let mut bits = 0usize;
         for (i, (&v, li)) in a.iter().zip(l).enumerate() {
-            let threshold = if statistical {
-                f64::from(self.config.shadow_sigmas) * sigma_of(i)
-            } else {
-                f64::from(self.config.shadow_fraction) * brightest
-            };
-            if v > threshold && li.norm_squared() > 0.0 {
+            if v > self.shadow_threshold(i, brightest, sigma) && li.norm_squared() > 0.0 {
                 bits |= 1 << i;
             }
         }
@@ -390,10 +412,15 @@ fn solve_all(
                     for (v, im) in values.iter_mut().zip(&image_rows) {
                         *v = f64::from(im[c]);
                     }
-                    lights.at(r, c, &mut l);
-                    let view = lights.view_at(r, c);
                     let sigma = noise.map_or(0.0, |n| f64::from(n[(r, c)]));
-                    let outcome = solver.solve(&values, &l, &view, sigma);
+                    // Most of the frame is background: decide it before computing lights.
+                    let outcome = match solver.decided_without_lights(&values, sigma) {
+                        Some(outcome) => outcome,
+                        None => {
+                            lights.at(r, c, &mut l);
+                            solver.solve(&values, &l, &lights.view_at(r, c), sigma)
+                        }
+                    };
                     match outcome {
                         Outcome::Solved(n, rho, used) => {
                             for j in 0..3 {
@@ -501,42 +528,83 @@ fn diagnose(
     ))
 }
 
-/// Relative least-squares misfit Σ w‖A − L·G‖² / Σ w‖A‖² of the Lambertian model over `pixels`
-/// lit by four or more LEDs. It depends on the light vectors, which lets the near-field stage
-/// find the object's absolute depth.
-pub fn model_misfit(
-    images: &LedImages,
-    lights: &Lights,
-    pixels: &[(usize, usize)],
-    noise: Option<&Array2<f32>>,
-    noise_gains: &[f64],
-    config: &PhotometricConfig,
-) -> f64 {
-    let solver = PixelSolver::new(lights, config, noise_gains.to_vec(), noise.is_some());
-    let k = images.images.len();
-    let (misfit, energy) = pixels
-        .par_chunks(1024)
-        .map(|chunk| {
-            let mut values = vec![0.0f64; k];
-            let mut l = vec![Vector3::zeros(); k];
-            let (mut misfit, mut energy) = (0.0, 0.0);
-            for &(r, c) in chunk {
-                for (v, im) in values.iter_mut().zip(&images.images) {
-                    *v = f64::from(im[(r, c)]);
-                }
-                lights.at(r, c, &mut l);
+/// The relative least-squares misfit Σ w‖A − L·G‖² / Σ w‖A‖² of the Lambertian model over a
+/// set of pixels lit by four or more LEDs, as a function of a depth offset. It depends on the
+/// light vectors, which lets the near-field stage find the object's absolute depth. Each
+/// pixel's values, level noise, ray and height are gathered once ([`ModelMisfit::new`]); an
+/// evaluation ([`ModelMisfit::at`]) only moves the points and recomputes their light vectors.
+pub struct ModelMisfit<'a> {
+    lights: &'a Lights<'a>,
+    solver: PixelSolver,
+    leds: usize,
+    /// LED values, `leds` per pixel.
+    values: Vec<f64>,
+    /// Per pixel: ray, view vector, height z and level noise σ.
+    pixels: Vec<(PixelRay, Vector3<f64>, f64, f64)>,
+}
+
+impl<'a> ModelMisfit<'a> {
+    /// Gathers `pixels` of `images` under `lights` (their depth estimate and offset) with the
+    /// level `noise` and per-LED `noise_gains`.
+    pub fn new(
+        images: &LedImages,
+        lights: &'a Lights<'a>,
+        pixels: &[(usize, usize)],
+        noise: Option<&Array2<f32>>,
+        noise_gains: &[f64],
+        config: &PhotometricConfig,
+    ) -> Self {
+        let leds = images.images.len();
+        let mut values = Vec::with_capacity(pixels.len() * leds);
+        let gathered = pixels
+            .iter()
+            .map(|&(r, c)| {
+                values.extend(images.images.iter().map(|im| f64::from(im[(r, c)])));
                 let sigma = noise.map_or(0.0, |n| f64::from(n[(r, c)]));
-                let (m, e) = solver.misfit(&values, &l, &lights.view_at(r, c), sigma);
-                misfit += m;
-                energy += e;
-            }
-            (misfit, energy)
-        })
-        .reduce(|| (0.0, 0.0), |a, b| (a.0 + b.0, a.1 + b.1));
-    if energy > 0.0 {
-        misfit / energy
-    } else {
-        f64::INFINITY
+                (
+                    lights.ray(r, c),
+                    lights.view_at(r, c),
+                    lights.depth_at(r, c),
+                    sigma,
+                )
+            })
+            .collect();
+        Self {
+            lights,
+            solver: PixelSolver::new(lights, config, noise_gains.to_vec(), noise.is_some()),
+            leds,
+            values,
+            pixels: gathered,
+        }
+    }
+
+    /// The misfit with every point moved `offset_mm` towards the camera ([`moved_depth`]);
+    /// infinite when no pixel is solved from four or more LEDs.
+    pub fn at(&self, offset_mm: f64) -> f64 {
+        let k = self.leds;
+        let projection = self.lights.projection();
+        let (misfit, energy) = self
+            .pixels
+            .par_chunks(1024)
+            .zip(self.values.par_chunks(1024 * k))
+            .map(|(chunk, values)| {
+                let mut l = vec![Vector3::zeros(); k];
+                let (mut misfit, mut energy) = (0.0, 0.0);
+                for ((ray, view, z, sigma), a) in chunk.iter().zip(values.chunks_exact(k)) {
+                    let z = projection.map_or(*z, |p| moved_depth(*z, offset_mm, p));
+                    self.lights.at_point(&ray.at(z), &mut l);
+                    let (m, e) = self.solver.misfit(a, &l, view, *sigma);
+                    misfit += m;
+                    energy += e;
+                }
+                (misfit, energy)
+            })
+            .reduce(|| (0.0, 0.0), |a, b| (a.0 + b.0, a.1 + b.1));
+        if energy > 0.0 {
+            misfit / energy
+        } else {
+            f64::INFINITY
+        }
     }
 }
 

@@ -10,8 +10,9 @@
 //!    ([`super::mask`]); the axial depth s of the layer's *interior* ToF pixels (all four
 //!    neighbours in the layer: no blended edge pixels) is interpolated there and becomes the
 //!    scene point X = C + s·d(u) on the ToF camera's ray (rig's pose), whose z is the position
-//!    prior, weighted 1/(k·σ²) with σ the range's standard deviation and k the camera pixels
-//!    per ToF pixel (one ToF sample spread over k pixels carries its weight once).
+//!    prior, weighted 1/(k·n·σ²) with σ the range's standard deviation, n the ToF pixels its
+//!    estimate pooled (spatial smoothing) and k the camera pixels per ToF pixel (one ToF sample
+//!    spread over k pixels, or shared by n smoothed ranges, carries its weight once).
 //! 3. Photometric stereo + integration ([`crate::reconstruct::reconstruct`]) in the rig moved
 //!    so that the object's ToF depth is z = 0 (its near-field light vectors are then right from
 //!    the first pass); the result is *placed* by the weighted mean of prior − depth, and *fused*
@@ -203,7 +204,11 @@ pub fn position_prior(
             interior(rr, cc).then(|| f64::from(range.range_mm[(rr, cc)]))
         });
         let variance = bilinear(u, (rows, cols), &|rr, cc| {
-            interior(rr, cc).then(|| f64::from(range.sigma_mm[(rr, cc)]).powi(2))
+            // One pixel's share of the information: σ² times the pixels its range pooled.
+            interior(rr, cc).then(|| {
+                f64::from(range.sigma_mm[(rr, cc)]).powi(2)
+                    * f64::from(range.samples[(rr, cc)]).max(1.0)
+            })
         });
         if let (Some(s), Some(variance)) = (s, variance)
             && variance > 0.0

@@ -14,6 +14,7 @@ pub mod calibration;
 pub mod chequerboard;
 pub mod histogram;
 pub mod hybrid;
+pub mod layer_smoothing;
 pub mod mask;
 pub mod range;
 
