@@ -93,10 +93,10 @@ pub struct DecodeConfig {
 pub enum SeedMethod {
     /// Each LED's rank-1 template read off the window's signal space ([`super::template`]):
     /// shifts in closed form, a few exposures.
-    #[default]
     RankOne,
     /// Each LED's parametric template scored against the signal space on a grid of shifts
     /// and exposures ([`super::seed`]).
+    #[default]
     Grid,
 }
 
@@ -128,7 +128,7 @@ impl Default for DecodeConfig {
             underexposed_below: 0.02,
             check_led_count: true,
             on_implausible: OnImplausible::Refuse,
-            seeds: SeedMethod::RankOne,
+            seeds: SeedMethod::Grid,
         }
     }
 }
@@ -155,7 +155,7 @@ impl Default for FitLimits {
             rate_ratio: None,
             exposure: None,
             line_delay: None,
-            seeds: SeedMethod::RankOne,
+            seeds: SeedMethod::Grid,
         }
     }
 }

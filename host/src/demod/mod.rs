@@ -26,14 +26,16 @@
 //!    of SPEC §4: the projection of the window onto LED i's subspace is, across pixels,
 //!    A_i(p)·(projected u_i)ᵀ. The eigenvalues beyond the signal give the noise energy σ²_G.
 //!    Randomised subspace iteration keeps it cheap.
-//! 3. [`template`] and [`seed`]: ρ from a one-dimensional scan of how well the signal space
-//!    holds full-exposure templates (unless given); then each LED's template is read off the
-//!    window as the leading eigenvector of its block of the signal space's coordinates in the
-//!    LEDs' chip templates (the rank-1 structure above, [`SeedMethod::RankOne`]), which gives
-//!    Δ_i in closed form for any exposure. The exposures whose templates V holds best, and a
-//!    few spread ones, start the refinement. [`SeedMethod::Grid`] instead scores each LED's
-//!    parametric template against V on a grid of shifts: the fraction |Vᵀt|²/|t|² of a
-//!    candidate t that V holds is 1 for the true (ρ, e, Δ_i) whatever the A_i (MUSIC-style).
+//! 3. [`seed`]: each LED's waveform is found in V on its own — the fraction |Vᵀt|²/|t|² of a
+//!    candidate template t that V holds is 1 for the true (ρ, e, Δ_i) and does not depend on
+//!    the A_i, so neither other LEDs nor a dark background bias it, and the scale and sign
+//!    ambiguity of singular vectors never arises (templates are scored, not read off V).
+//!    ρ comes from a one-dimensional scan, e from a scan at that ρ with Δ_i refined per LED
+//!    on a grid of shifts ([`SeedMethod::Grid`], the default). [`SeedMethod::RankOne`]
+//!    instead reads each LED's template off the window as the leading eigenvector of its
+//!    block of the signal space's coordinates in the LEDs' chip templates ([`template`]),
+//!    which gives Δ_i in closed form — exact at ρ = 1, a seed the refinement must correct
+//!    away from it.
 //! 4. [`fit`]: those seeds start a least-squares refinement of (ρ, e, Δ_i) on the sample
 //!    (variable projection), which pins the templates' amplitude — and with it each LED's
 //!    gain — to the physics of the integration; a rolling shutter is detected when row bands

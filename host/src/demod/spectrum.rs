@@ -81,15 +81,21 @@ pub struct SignalSpace {
 impl SignalSpace {
     /// Analyses the F × F Gram matrix of a centred sample for `leds` LEDs.
     pub fn new(gram: &DMatrix<f64>, leds: usize) -> Self {
-        Self::from_spectrum(&Spectrum::new(gram, leds), gram, leds)
+        Self::cut(&Spectrum::new(gram, leds), leds)
     }
 
     /// The space for `leds` LEDs from a decomposition of `gram` (recomputed when `spectrum`
     /// holds too few eigenpairs for that many LEDs).
     pub fn from_spectrum(spectrum: &Spectrum, gram: &DMatrix<f64>, leds: usize) -> Self {
-        if !spectrum.serves(leds) {
-            return Self::new(gram, leds);
+        if spectrum.serves(leds) {
+            Self::cut(spectrum, leds)
+        } else {
+            Self::new(gram, leds)
         }
+    }
+
+    /// The space for `leds` LEDs cut from the leading eigenpairs in `spectrum`.
+    fn cut(spectrum: &Spectrum, leds: usize) -> Self {
         let f = spectrum.frames;
         let leading = leading_count(f, leds).min(spectrum.values.len());
         let values = spectrum.values[..leading].to_vec();
@@ -116,9 +122,13 @@ impl SignalSpace {
     }
 }
 
-/// The `count` leading eigenpairs of a symmetric positive semi-definite matrix, descending.
+/// The `count` leading eigenpairs of a symmetric positive semi-definite matrix, descending;
+/// none for an empty matrix (a window of no frames) or `count` = 0.
 pub fn leading_eigenpairs(matrix: &DMatrix<f64>, count: usize) -> (Vec<f64>, DMatrix<f64>) {
     let n = matrix.nrows();
+    if n == 0 || count == 0 {
+        return (Vec::new(), DMatrix::zeros(n, 0));
+    }
     let width = (count + OVERSAMPLING).min(n);
     let (values, vectors) = if width >= n {
         let eigen = SymmetricEigen::new(matrix.clone());
