@@ -82,6 +82,22 @@ pub struct DecodeConfig {
     pub check_led_count: bool,
     /// What to do with a decode the verdict finds implausible.
     pub on_implausible: OnImplausible,
+    /// How the timing fit finds its starting points.
+    #[serde(default)]
+    pub seeds: SeedMethod,
+}
+
+/// How the timing fit finds its starting points.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum SeedMethod {
+    /// Each LED's rank-1 template read off the window's signal space ([`super::template`]):
+    /// shifts in closed form, a few exposures.
+    RankOne,
+    /// Each LED's parametric template scored against the signal space on a grid of shifts
+    /// and exposures ([`super::seed`]).
+    #[default]
+    Grid,
 }
 
 /// What [`crate::demod::decode`] does with a decode the quality verdict finds implausible.
@@ -112,6 +128,7 @@ impl Default for DecodeConfig {
             underexposed_below: 0.02,
             check_led_count: true,
             on_implausible: OnImplausible::Refuse,
+            seeds: SeedMethod::Grid,
         }
     }
 }
@@ -127,6 +144,8 @@ pub struct FitLimits {
     pub exposure: Option<f64>,
     /// A known line delay λ (frame periods per row; 0 = global shutter) instead of fitting it.
     pub line_delay: Option<f64>,
+    /// How the starting points are found.
+    pub seeds: SeedMethod,
 }
 
 impl Default for FitLimits {
@@ -136,6 +155,7 @@ impl Default for FitLimits {
             rate_ratio: None,
             exposure: None,
             line_delay: None,
+            seeds: SeedMethod::Grid,
         }
     }
 }

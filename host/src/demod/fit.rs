@@ -26,9 +26,9 @@ use super::config::FitLimits;
 use super::levenberg::{Freedom, Residuals, Solution, minimise, minimise_within};
 use super::sample::PixelSample;
 use super::seed::{Start, starts};
-use super::spectrum::SignalSpace;
+use super::spectrum::{SignalSpace, leading_eigenpairs};
 use super::waveform::{ReceivedWaveform, Timing};
-use nalgebra::{DMatrix, SVD};
+use nalgebra::DMatrix;
 
 /// Position of ρ, e and λ in the parameter vector; the shifts follow.
 const RATE: usize = 0;
@@ -349,7 +349,7 @@ impl Fitter<'_> {
     fn global(&self, space: &SignalSpace) -> Solution {
         let groups = global_groups(space, self.frames);
         let freedom = self.freedom(false);
-        let seeds = starts(space.basis(), self.waves, self.frames, self.limits);
+        let seeds = starts(space, self.waves, self.frames, self.limits);
         let mut best: Option<Solution> = None;
         for Start { timing, shifts } in seeds {
             let mut params = vec![timing.rate_ratio, timing.exposure, 0.0];
@@ -561,23 +561,29 @@ fn compress(sample: &PixelSample, members: &[usize], keep: usize) -> Option<FitG
     let x = DMatrix::from_fn(members.len(), frames, |r, j| sample.pixel(members[r])[j]);
     let row =
         members.iter().map(|&p| sample.rows()[p]).sum::<usize>() as f64 / members.len() as f64;
-    let (directions, values) = leading_directions(x, keep)?;
-    Some(FitGroup {
-        row,
-        data: scale_columns(directions, &values),
-    })
+    let (data, _) = leading_directions(&x, keep)?;
+    Some(FitGroup { row, data })
 }
 
-/// Right singular vectors (F × k) and singular values of `x`, the `keep` largest.
-fn leading_directions(x: DMatrix<f64>, keep: usize) -> Option<(DMatrix<f64>, Vec<f64>)> {
-    let svd = SVD::new(x, false, true);
-    let v_t = svd.v_t?;
-    let mut order: Vec<usize> = (0..svd.singular_values.len()).collect();
-    order.sort_by(|&a, &b| svd.singular_values[b].total_cmp(&svd.singular_values[a]));
-    order.truncate(keep);
-    let directions = DMatrix::from_fn(v_t.ncols(), order.len(), |j, c| v_t[(order[c], j)]);
-    let values = order.iter().map(|&k| svd.singular_values[k]).collect();
-    Some((directions, values))
+/// The `keep` leading right singular vectors of `x` (pixels × F) scaled by their singular
+/// values (F × k), and those singular values, descending: from the eigenpairs of the smaller
+/// Gram matrix, xᵀx or xxᵀ (for the latter the scaled vectors are xᵀu), which costs a
+/// fraction of a full SVD when only a few directions are wanted.
+fn leading_directions(x: &DMatrix<f64>, keep: usize) -> Option<(DMatrix<f64>, Vec<f64>)> {
+    let (pixels, frames) = x.shape();
+    if pixels == 0 || frames == 0 || keep == 0 {
+        return None;
+    }
+    let (values, data) = if pixels >= frames {
+        let (values, vectors) = leading_eigenpairs(&x.tr_mul(x), keep.min(frames));
+        let singular: Vec<f64> = values.iter().map(|v| v.sqrt()).collect();
+        (singular.clone(), scale_columns(vectors, &singular))
+    } else {
+        let (values, vectors) = leading_eigenpairs(&(x * x.transpose()), keep.min(pixels));
+        let singular: Vec<f64> = values.iter().map(|v| v.sqrt()).collect();
+        (singular, x.tr_mul(&vectors))
+    };
+    Some((data, values))
 }
 
 /// Columns of `m` times `scale`.
@@ -597,12 +603,12 @@ fn row_groups(sample: &PixelSample, leds: usize, pixel_noise: f64) -> Vec<FitGro
         .filter_map(|run| {
             let pixels = run.len() as f64;
             let x = sample.matrix(run.clone());
-            let (directions, values) = leading_directions(x, leds)?;
+            let (data, values) = leading_directions(&x, leds)?;
             let edge = (pixels.sqrt() + frames.sqrt()).powi(2) * pixel_noise;
             let strongest = values.first().copied().unwrap_or(0.0);
             (strongest * strongest > ROW_SIGNAL_FACTOR * edge).then(|| FitGroup {
                 row: sample.rows()[run.start] as f64,
-                data: scale_columns(directions, &values),
+                data,
             })
         })
         .collect()

@@ -30,7 +30,12 @@
 //!    candidate template t that V holds is 1 for the true (ρ, e, Δ_i) and does not depend on
 //!    the A_i, so neither other LEDs nor a dark background bias it, and the scale and sign
 //!    ambiguity of singular vectors never arises (templates are scored, not read off V).
-//!    ρ comes from a one-dimensional scan, e from a scan at that ρ with Δ_i refined per LED.
+//!    ρ comes from a one-dimensional scan, e from a scan at that ρ with Δ_i refined per LED
+//!    on a grid of shifts ([`SeedMethod::Grid`], the default). [`SeedMethod::RankOne`]
+//!    instead reads each LED's template off the window as the leading eigenvector of its
+//!    block of the signal space's coordinates in the LEDs' chip templates ([`template`]),
+//!    which gives Δ_i in closed form — exact at ρ = 1, a seed the refinement must correct
+//!    away from it.
 //! 4. [`fit`]: those seeds start a least-squares refinement of (ρ, e, Δ_i) on the sample
 //!    (variable projection), which pins the templates' amplitude — and with it each LED's
 //!    gain — to the physics of the integration; a rolling shutter is detected when row bands
@@ -65,13 +70,14 @@ mod spectrum;
 mod stats;
 #[cfg(test)]
 mod synthetic;
+mod template;
 #[cfg(test)]
 mod tests;
 pub mod thesis;
 pub mod waveform;
 mod window;
 
-pub use config::{DecodeConfig, Estimator, LedCount, Linearize, OnImplausible, Roi};
+pub use config::{DecodeConfig, Estimator, LedCount, Linearize, OnImplausible, Roi, SeedMethod};
 pub use error::DemodError;
 pub use matched::WindowAmplitudes;
 pub use quality::{FitQuality, LedQuality, Verdict, VerdictStatus};
@@ -86,7 +92,7 @@ use nalgebra::DMatrix;
 use ndarray::Array2;
 use rayon::prelude::*;
 use sample::PixelSample;
-use spectrum::SignalSpace;
+use spectrum::{SignalSpace, Spectrum};
 use stats::PixelStats;
 use waveform::ReceivedWaveform;
 use window::{CodeMap, Region, read_window};
@@ -323,11 +329,13 @@ fn validate(config: &DecodeConfig, format: &FrameFormat) -> Result<Roi, DemodErr
     Ok(roi)
 }
 
-/// A window's pixel sample and its Gram matrix: the timing fit's input.
+/// A window's pixel sample, its Gram matrix and that matrix's leading eigenpairs: the timing
+/// fit's input, shared by the LED-count check and the decode.
 #[derive(Debug, Clone)]
 pub struct WindowSample {
     sample: PixelSample,
     gram: DMatrix<f64>,
+    spectrum: Spectrum,
 }
 
 /// The outcome of the LED-count check.
@@ -368,6 +376,8 @@ pub struct WindowDecoder {
     code_limits: CodeLimits,
     fit_limits: FitLimits,
     estimator: Estimator,
+    /// Most LEDs a window's signal space is analysed for (the count check's probe).
+    spectrum_leds: usize,
 }
 
 impl WindowDecoder {
@@ -383,8 +393,14 @@ impl WindowDecoder {
                 rate_ratio: config.rate_ratio,
                 exposure: config.exposure,
                 line_delay: config.line_time_s.map(|t| t * format.fps),
+                seeds: config.seeds,
             },
             estimator: config.estimator,
+            spectrum_leds: match config.leds {
+                LedCount::Fixed(n) if config.check_led_count => (n + 1).min(MAX_LEDS),
+                LedCount::Fixed(n) => n,
+                LedCount::Auto => AUTO_MAX_LEDS,
+            },
         })
     }
 
@@ -403,7 +419,12 @@ impl WindowDecoder {
             self.code_limits,
         );
         let gram = sample.gram();
-        WindowSample { sample, gram }
+        let spectrum = Spectrum::new(&gram, self.spectrum_leds);
+        WindowSample {
+            sample,
+            gram,
+            spectrum,
+        }
     }
 
     /// The LED count to decode (module docs): with `check`, a fit of one LED more than a
@@ -441,7 +462,7 @@ impl WindowDecoder {
             return Err(DemodError::NothingToDecode("saturated"));
         }
         let waves: Vec<ReceivedWaveform> = (0..probe).map(ReceivedWaveform::new).collect();
-        let space = SignalSpace::new(&window.gram, probe);
+        let space = SignalSpace::from_spectrum(&window.spectrum, &window.gram, probe);
         let fit = fit_timing(
             &window.sample,
             &space,
@@ -501,7 +522,7 @@ impl WindowDecoder {
         let count = frames.len();
         let height = self.roi.height;
         let waves: Vec<ReceivedWaveform> = (0..leds).map(ReceivedWaveform::new).collect();
-        let space = SignalSpace::new(&window.gram, leds);
+        let space = SignalSpace::from_spectrum(&window.spectrum, &window.gram, leds);
         let fit = match seed {
             Some(previous) if previous.model.shifts.len() == leds => previous.clone(),
             Some(previous) if previous.model.shifts.len() > leds => refit_timing(

@@ -14,7 +14,9 @@
 //! exposures, because at ρ ≈ 1 the exposure barely changes the templates) start the
 //! least-squares refinement ([`super::fit`]).
 
-use super::config::FitLimits;
+use super::config::{FitLimits, SeedMethod};
+use super::spectrum::SignalSpace;
+use super::template::rank_one_templates;
 use super::waveform::{ReceivedWaveform, Timing};
 use nalgebra::DMatrixView;
 use rayon::prelude::*;
@@ -140,15 +142,19 @@ fn golden_max(mut lo: f64, mut hi: f64, mut f: impl FnMut(f64) -> f64) -> (f64, 
     (middle, f(middle))
 }
 
-/// Starting points for `waves` from the signal space `space` (F × r) of a window of `frames`.
+/// Starting points for `waves` from the signal space `space` of a window of `frames`: ρ from
+/// the rate scan (unless given), then each LED's shift from its rank-1 template
+/// ([`super::template`], [`SeedMethod::RankOne`]) or from a grid of shifts
+/// ([`SeedMethod::Grid`], also when the window cannot hold the chip templates), at the
+/// exposures whose templates the signal space holds best and a few spread ones.
 pub fn starts(
-    space: DMatrixView<'_, f64>,
+    space: &SignalSpace,
     waves: &[ReceivedWaveform],
     frames: usize,
     limits: &FitLimits,
 ) -> Vec<Start> {
     let scorer = Scorer {
-        space,
+        space: space.basis(),
         waves,
         frames,
     };
@@ -159,6 +165,10 @@ pub fn starts(
         Some(e) => vec![e],
         None => EXPOSURE_TENTHS.rev().map(|k| f64::from(k) / 10.0).collect(),
     };
+    let templates = match limits.seeds {
+        SeedMethod::RankOne => rank_one_templates(space, waves, rate, frames),
+        SeedMethod::Grid => None,
+    };
     let scored: Vec<(f64, f64, Vec<f64>)> = exposures
         .par_iter()
         .map(|&exposure| {
@@ -166,7 +176,20 @@ pub fn starts(
                 rate_ratio: rate,
                 exposure,
             };
-            let (score, shifts) = scorer.total(timing, SHIFT_STEP, true);
+            let (score, shifts) = match &templates {
+                Some(templates) => {
+                    let mut column = vec![0.0; frames];
+                    let shifts: Vec<f64> =
+                        templates.iter().map(|t| t.shift(rate, exposure)).collect();
+                    let score = shifts
+                        .iter()
+                        .enumerate()
+                        .map(|(led, &shift)| scorer.score(led, timing, shift, &mut column))
+                        .sum();
+                    (score, shifts)
+                }
+                None => scorer.total(timing, SHIFT_STEP, true),
+            };
             (score, exposure, shifts)
         })
         .collect();

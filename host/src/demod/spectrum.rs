@@ -21,6 +21,50 @@ const POWER_ITERATIONS: usize = 3;
 /// An eigenvalue above this multiple of σ²_G counts as signal.
 const SIGNAL_FACTOR: f64 = 2.0;
 
+/// Leading eigenpairs of a window's Gram matrix, computed once and shared by every LED count
+/// asked of the window (the LED-count check's and the decode's).
+#[derive(Debug, Clone)]
+pub struct Spectrum {
+    /// Eigenvectors (F × k, columns) of the `values`, descending.
+    vectors: DMatrix<f64>,
+    /// The leading eigenvalues, descending.
+    values: Vec<f64>,
+    /// tr G: the sample's total energy.
+    trace: f64,
+    /// F.
+    frames: usize,
+}
+
+impl Spectrum {
+    /// Enough leading eigenpairs of the F × F Gram matrix of a centred sample for up to
+    /// `leds` LEDs.
+    pub fn new(gram: &DMatrix<f64>, leds: usize) -> Self {
+        let frames = gram.nrows();
+        let (values, vectors) = leading_eigenpairs(gram, leading_count(frames, leds));
+        Self {
+            vectors,
+            values,
+            trace: gram.trace(),
+            frames,
+        }
+    }
+
+    /// The LED count the decomposition serves.
+    fn serves(&self, leds: usize) -> bool {
+        self.values.len() >= leading_count(self.frames, leds)
+    }
+}
+
+/// Directions beyond the constant (removed by centring) that may hold the signal of `leds`
+/// LEDs in a window of `frames`, leaving at least a quarter of the window (and two
+/// directions) to measure the noise on.
+fn leading_count(frames: usize, leds: usize) -> usize {
+    let noise_dims = ((frames.saturating_sub(1)) / 4).max(2);
+    (3 * leds + 2)
+        .min(frames.saturating_sub(1 + noise_dims))
+        .max(1)
+}
+
 /// Leading eigenpairs of the Gram matrix and the noise energy per dimension.
 #[derive(Debug, Clone)]
 pub struct SignalSpace {
@@ -37,18 +81,30 @@ pub struct SignalSpace {
 impl SignalSpace {
     /// Analyses the F × F Gram matrix of a centred sample for `leds` LEDs.
     pub fn new(gram: &DMatrix<f64>, leds: usize) -> Self {
-        let f = gram.nrows();
-        // Directions beyond the constant (removed by centring) that may hold signal, leaving at
-        // least a quarter of the window (and two directions) to measure the noise on.
-        let noise_dims = ((f.saturating_sub(1)) / 4).max(2);
-        let leading = (3 * leds + 2).min(f.saturating_sub(1 + noise_dims)).max(1);
-        let (values, vectors) = leading_eigenpairs(gram, leading);
-        let captured: f64 = values.iter().take(leading).sum();
+        Self::cut(&Spectrum::new(gram, leds), leds)
+    }
+
+    /// The space for `leds` LEDs from a decomposition of `gram` (recomputed when `spectrum`
+    /// holds too few eigenpairs for that many LEDs).
+    pub fn from_spectrum(spectrum: &Spectrum, gram: &DMatrix<f64>, leds: usize) -> Self {
+        if spectrum.serves(leds) {
+            Self::cut(spectrum, leds)
+        } else {
+            Self::new(gram, leds)
+        }
+    }
+
+    /// The space for `leds` LEDs cut from the leading eigenpairs in `spectrum`.
+    fn cut(spectrum: &Spectrum, leds: usize) -> Self {
+        let f = spectrum.frames;
+        let leading = leading_count(f, leds).min(spectrum.values.len());
+        let values = spectrum.values[..leading].to_vec();
+        let vectors = spectrum.vectors.columns(0, leading).into_owned();
+        let captured: f64 = values.iter().sum();
         let rest = f.saturating_sub(1 + leading).max(1) as f64;
-        let noise = ((gram.trace() - captured) / rest).max(f64::MIN_POSITIVE);
+        let noise = ((spectrum.trace - captured) / rest).max(f64::MIN_POSITIVE);
         let significant = values
             .iter()
-            .take(leading)
             .filter(|&&v| v > SIGNAL_FACTOR * noise)
             .count();
         let rank = significant.max(leds.min(leading)).min(vectors.ncols());
@@ -66,9 +122,13 @@ impl SignalSpace {
     }
 }
 
-/// The `count` leading eigenpairs of a symmetric positive semi-definite matrix, descending.
-fn leading_eigenpairs(matrix: &DMatrix<f64>, count: usize) -> (Vec<f64>, DMatrix<f64>) {
+/// The `count` leading eigenpairs of a symmetric positive semi-definite matrix, descending;
+/// none for an empty matrix (a window of no frames) or `count` = 0.
+pub fn leading_eigenpairs(matrix: &DMatrix<f64>, count: usize) -> (Vec<f64>, DMatrix<f64>) {
     let n = matrix.nrows();
+    if n == 0 || count == 0 {
+        return (Vec::new(), DMatrix::zeros(n, 0));
+    }
     let width = (count + OVERSAMPLING).min(n);
     let (values, vectors) = if width >= n {
         let eigen = SymmetricEigen::new(matrix.clone());

@@ -4,10 +4,15 @@ use super::synthetic::{Scene, gain_and_noise, render};
 use super::*;
 
 fn run(scene: &Scene, estimator: Estimator) -> (Decoded, Vec<Vec<f32>>) {
+    run_seeded(scene, estimator, SeedMethod::default())
+}
+
+fn run_seeded(scene: &Scene, estimator: Estimator, seeds: SeedMethod) -> (Decoded, Vec<Vec<f32>>) {
     let (mut source, truth, _) = render(scene);
     let config = DecodeConfig {
         leds: LedCount::Fixed(scene.leds),
         estimator,
+        seeds,
         ..DecodeConfig::default()
     };
     let decoded = decode(&mut source, &config, &mut |_, _| {}).expect("decodes");
@@ -58,13 +63,23 @@ fn waveform_estimator_gain_within_one_percent_and_less_noisy_than_thesis() {
 
 #[test]
 fn rate_mismatch_of_five_percent_decodes() {
-    for rate in [0.95, 1.05] {
+    rate_mismatch_decodes(&[0.95, 1.05], SeedMethod::default());
+}
+
+#[test]
+fn rank_one_seeds_converge_off_the_chip_rate() {
+    rate_mismatch_decodes(&[0.98, 1.02], SeedMethod::RankOne);
+}
+
+/// A decode at each of `rates` (exposure 0.8) finds the rate ratio and every LED's gain.
+fn rate_mismatch_decodes(rates: &[f64], seeds: SeedMethod) {
+    for &rate in rates {
         let scene = Scene {
             rate_ratio: rate,
             exposure: 0.8,
             ..Scene::default()
         };
-        let (decoded, truth) = run(&scene, Estimator::Waveform);
+        let (decoded, truth) = run_seeded(&scene, Estimator::Waveform, seeds);
         assert!(
             (decoded.report.rate_ratio - rate).abs() < 1e-3,
             "{:?}",
@@ -73,7 +88,7 @@ fn rate_mismatch_of_five_percent_decodes() {
         for (i, (g, _)) in gains(&decoded, &truth).iter().enumerate() {
             assert!(
                 (g - 1.0).abs() < 0.01,
-                "rate {rate} LED {}: gain {g}",
+                "rate {rate} ({seeds:?} seeds) LED {}: gain {g}",
                 i + 1
             );
         }
