@@ -1,6 +1,10 @@
 //! The time-of-flight side of `meb simulate --tof` (thesis Ch. 6): the rig's SPAD camera
 //! records reverse-mode TCSPC histograms of the scene and of the reference board, and both
-//! cameras see chequerboards for `meb tof calibrate`. Written into `tof/` of the capture folder,
+//! cameras see chequerboards for `meb tof calibrate`. The reference is the whole board as every
+//! pixel sees it (H×W×bins, [`meb::simulate::tof::TofCapture::reference_pixels`]), which
+//! `meb tof range` pools into one on-axis reference (each pixel moved back by D·(1/cos θ − 1),
+//! [`meb::tof::estimate_range`]): the photon noise of a few central pixels would be a timing
+//! error shared by every range (about 2 mm on the thesis capture). Written into `tof/` of the capture folder,
 //! with `tof.json` holding the settings, the boards' ranges and the commands that use them.
 
 use anyhow::{Context, Result, ensure};
@@ -102,7 +106,7 @@ pub fn write_tof(
     let out = dir.join("tof");
     std::fs::create_dir_all(&out).map_err(|e| FilesError::write(&out, e))?;
     write_npy(&out.join("histograms.npy"), &capture_tof.histograms)?;
-    write_npy(&out.join("reference.npy"), &capture_tof.reference)?;
+    write_npy(&out.join("reference.npy"), &capture_tof.reference_pixels)?;
     write_npy(&out.join("truth_range.npy"), &capture_tof.truth_range_mm)?;
     let labels = camera_labels(settings.scene, settings.groups, &rig.camera);
     write_npy(&dir.join("object_labels.npy"), &labels)?;
