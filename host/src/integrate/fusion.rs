@@ -20,6 +20,7 @@
 //! J. Sci. Comput. 2009): B r = MG(r) + Σ_c 1_c·(Σ_{i∈c} r_i)/(Σ_{i∈c} λ_i). Components with no
 //! position at all cannot be placed and are left out.
 
+use super::least_squares::Topology;
 use super::multigrid::{GridLaplacian, Multigrid, NONE};
 use super::pcg::{Stop, preconditioned_cg};
 use super::{IntegrateError, SurfaceGradients};
@@ -196,8 +197,6 @@ struct System {
 impl System {
     /// Unknowns: mask pixels with a mask neighbour or a position, in raster order.
     fn assemble(g: &SurfaceGradients, prior: &PositionPrior, h: f64, edge_variance: f64) -> Self {
-        let (rows, cols) = g.mask.dim();
-        let inside = |r: usize, c: usize| r < rows && c < cols && g.mask[(r, c)];
         let lambda = |r: usize, c: usize| {
             let w = f64::from(prior.weight[(r, c)]);
             let z = f64::from(prior.depth_mm[(r, c)]);
@@ -207,44 +206,14 @@ impl System {
                 (0.0, 0.0)
             }
         };
-        let mut index = vec![NONE; rows * cols];
-        let mut cells = Vec::new();
-        for r in 0..rows {
-            for c in 0..cols {
-                if !inside(r, c) {
-                    continue;
-                }
-                let linked = (r > 0 && inside(r - 1, c))
-                    || inside(r + 1, c)
-                    || (c > 0 && inside(r, c - 1))
-                    || inside(r, c + 1);
-                if linked || lambda(r, c).0 > 0.0 {
-                    index[r * cols + c] = cells.len() as u32;
-                    cells.push((r, c));
-                }
-            }
-        }
-        let at = |r: usize, c: usize| {
-            if r < rows && c < cols {
-                index[r * cols + c]
-            } else {
-                NONE
-            }
-        };
-        let n = cells.len();
-        let mut neighbours = Vec::with_capacity(n);
+        let topology = Topology::with_isolated(&g.mask, |(r, c)| lambda(r, c).0 > 0.0);
+        let n = topology.len();
         let mut weights = Vec::with_capacity(n);
         let mut diag = Vec::with_capacity(n);
         let mut rhs = vec![0.0; n];
         let mut data_weight = Vec::with_capacity(n);
         let mut prior_z = Vec::with_capacity(n);
-        for (k, &(r, c)) in cells.iter().enumerate() {
-            let nb = [
-                at(r, c + 1),
-                at(r + 1, c),
-                if c > 0 { at(r, c - 1) } else { NONE },
-                if r > 0 { at(r - 1, c) } else { NONE },
-            ];
+        for (k, (&(r, c), &nb)) in topology.cells.iter().zip(&topology.neighbours).enumerate() {
             let w = nb.map(|j| if j == NONE { 0.0 } else { 1.0 });
             let (l, z) = lambda(r, c);
             diag.push(w.iter().sum::<f64>() + l + REGULARISATION);
@@ -262,11 +231,16 @@ impl System {
                 rhs[k] -= e;
                 rhs[nb[1] as usize] += e;
             }
-            neighbours.push(nb);
             weights.push(w);
         }
         Self {
-            laplacian: GridLaplacian::new((rows, cols), cells, neighbours, weights, diag),
+            laplacian: GridLaplacian::new(
+                topology.shape,
+                topology.cells,
+                topology.neighbours,
+                weights,
+                diag,
+            ),
             rhs,
             data_weight,
             prior: prior_z,

@@ -34,18 +34,23 @@ pub(crate) struct Topology {
 impl Topology {
     /// The graph of `mask`.
     pub fn new(mask: &Array2<bool>) -> Self {
+        Self::with_isolated(mask, |_| false)
+    }
+
+    /// The graph of `mask`, also keeping the mask pixels without a mask neighbour for which
+    /// `keep` holds (isolated nodes, e.g. pixels tied only to a position prior).
+    pub fn with_isolated(mask: &Array2<bool>, keep: impl Fn((usize, usize)) -> bool) -> Self {
         let (rows, cols) = mask.dim();
         let inside = |r: usize, c: usize| r < rows && c < cols && mask[(r, c)];
         let mut index = vec![NONE; rows * cols];
         let mut cells = Vec::new();
         for r in 0..rows {
             for c in 0..cols {
-                let connected = inside(r, c)
-                    && ((r > 0 && inside(r - 1, c))
-                        || inside(r + 1, c)
-                        || (c > 0 && inside(r, c - 1))
-                        || inside(r, c + 1));
-                if connected {
+                let linked = (r > 0 && inside(r - 1, c))
+                    || inside(r + 1, c)
+                    || (c > 0 && inside(r, c - 1))
+                    || inside(r, c + 1);
+                if inside(r, c) && (linked || keep((r, c))) {
                     index[r * cols + c] = cells.len() as u32;
                     cells.push((r, c));
                 }
