@@ -429,6 +429,27 @@ fn hybrid_chain_through_the_binary_places_each_object_at_its_absolute_depth() {
         ] {
             assert!(folder.join(file).is_file(), "{}: {file}", folder.display());
         }
+        // Its mask: at least 98 % of the object's pixels and none of another object.
+        let mask = read_mask(&folder.join("object_mask.png")).unwrap();
+        let (mut covered, mut foreign, mut wall) = (0, 0, 0);
+        for (&m, &l) in mask.iter().zip(&truth_labels) {
+            match (m, l) {
+                (true, l) if l == k as i32 => covered += 1,
+                (true, l) if l >= 0 => foreign += 1,
+                (true, _) => wall += 1,
+                _ => {}
+            }
+        }
+        eprintln!(
+            "  mask: {:.2} % of its {object} pixels, {foreign} of another object, {wall} of the wall",
+            100.0 * covered as f64 / object as f64
+        );
+        assert_eq!(foreign, 0, "{}", names[k]);
+        assert!(
+            covered as f64 >= 0.98 * object as f64,
+            "{}: mask holds {covered} of {object} pixels",
+            names[k]
+        );
         let z_ply: Vec<f64> = common::ply_points(&folder.join("surface.ply"))
             .iter()
             .map(|p| f64::from(p[2]))

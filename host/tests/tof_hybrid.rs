@@ -146,12 +146,10 @@ fn per_object_depth_beats_the_thesis_with_fusion() {
             o.layer.tof_pixels
         );
         assert_eq!(foreign, 0, "{}", hybrid.names[k]);
-        // The aim is 98 %; measured 98.6 % (sphere), 98.0 % (head), 96.2 % (cube: the SPAD,
-        // from its own pose, does not see all of the cube's faces the camera sees).
-        let least = [0.98, 0.975, 0.955][k];
+        // The aim: at least 98 % of each object's pixels (measured 99.4, 99.2 and 99.6 %).
         assert!(
-            covered as f64 >= least * object as f64,
-            "{}",
+            covered as f64 >= 0.98 * object as f64,
+            "{}: {covered} of {object} pixels",
             hybrid.names[k]
         );
     }
