@@ -59,7 +59,7 @@ fn range_calibrate_and_segment_the_hybrid_scene() {
     let dir = tempfile::tempdir().unwrap();
     let rig = rig();
     let tof = rig.tof_camera.clone().unwrap();
-    let (hybrid, capture) = hybrid_capture(&tof);
+    let (hybrid, capture) = hybrid_capture(&tof, 0);
     let histograms = dir.path().join("histograms.npy");
     let reference = dir.path().join("reference.npy");
     write_npy(&histograms, &capture.histograms).unwrap();
