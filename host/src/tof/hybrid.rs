@@ -15,7 +15,8 @@
 //!    spread over k pixels, or shared by n smoothed ranges, carries its weight once).
 //! 3. Photometric stereo + integration ([`crate::reconstruct::reconstruct`]) in the rig moved
 //!    so that the object's ToF depth is z = 0 (its near-field light vectors are then right from
-//!    the first pass); the result is *placed* by the weighted mean of prior − depth, and *fused*
+//!    the first pass); the result is *placed* by the weighted mean of prior − depth over the
+//!    pixels with measured normals, and *fused*
 //!    with the positions by [`crate::integrate::fusion`] (depth that follows the normals while
 //!    staying near the ToF range).
 
@@ -319,9 +320,18 @@ pub fn reconstruct_objects(
             .depth_mm
             .mapv_inplace(|z| z + z0 as f32);
         let depth = &reconstruction.integration.depth.depth_mm;
+        // The offset from the pixels with measured normals (three or more LEDs) when there are
+        // any: two-LED pixels' depth follows a guessed normal and can be centimetres off.
+        let measured = &reconstruction.photometric.field.mask;
+        let any_measured = measured.iter().any(|&m| m);
         let (mut sum_w, mut sum_wd) = (0.0, 0.0);
-        for ((z, &p), &w) in depth.iter().zip(&prior.depth_mm).zip(&prior.weight) {
-            if z.is_finite() && p.is_finite() && w > 0.0 {
+        for (((z, &p), &w), &m) in depth
+            .iter()
+            .zip(&prior.depth_mm)
+            .zip(&prior.weight)
+            .zip(measured)
+        {
+            if z.is_finite() && p.is_finite() && w > 0.0 && (m || !any_measured) {
                 sum_w += f64::from(w);
                 sum_wd += f64::from(w) * f64::from(p - z);
             }
