@@ -252,7 +252,7 @@ fn period_ratio(frames: &PeriodFrames, decoded: &Decoded, lit: &[LitPixel]) -> O
     let n = frames.period;
     let slip = n as f64 * (decoded.report.rate_ratio - 1.0).abs();
     let pairs = frames.frames.len().saturating_sub(n);
-    if n == 0 || pairs < 2 || !(slip <= MAX_PERIOD_SLIP) {
+    if n == 0 || pairs < 2 || slip.is_nan() || slip > MAX_PERIOD_SLIP {
         return None;
     }
     let width = decoded.noise.ncols();
