@@ -79,6 +79,10 @@ pub struct NormalPlane {
     pub across: nalgebra::Vector3<f64>,
     /// The normal has a positive component along it (e.g. L₁/|L₁| + L₂/|L₂|).
     pub towards: nalgebra::Vector3<f64>,
+    /// g₀: the albedo-scaled normal ρn of least norm that fits both readings (in the plane of
+    /// L₁ and L₂, on the circle); with albedo ρ ≥ |g₀| the normal is g₀/ρ ± √(1 − |g₀|²/ρ²)·ĉ
+    /// for the unit ĉ on the circle perpendicular to g₀ (zero when unknown).
+    pub least_albedo: nalgebra::Vector3<f64>,
 }
 
 /// How a reconstructed pixel's depth is known (written as `confidence.npy`, one byte a pixel).

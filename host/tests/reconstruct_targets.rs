@@ -17,8 +17,9 @@ use common::{OUT_OF_PLANE_LEDS, rig_toml, run_ok};
 /// The thesis camera's grid pitch: 2·420·tan(21.5°)/1280 mm.
 const THESIS_PITCH_MM: f64 = 0.258_49;
 
-/// Depth RMSE bound of Suzanne with the bilateral integrator (measured 5.11 mm), mm.
-const SUZANNE_MAX_RMSE_MM: f64 = 5.5;
+/// Depth RMSE target of Suzanne with the bilateral integrator, mm (measured through `meb
+/// reconstruct` on simulator seeds 1–4: 4.86 / 3.86 / 4.44 / 3.65 mm).
+const SUZANNE_MAX_RMSE_MM: f64 = 5.0;
 
 /// Depth RMSE bound of the blobby shape (measured 0.14 mm), mm.
 const BLOBBY_MAX_RMSE_MM: f64 = 1.0;
@@ -52,6 +53,12 @@ impl Bench {
 
     /// `meb simulate` with the thesis capture settings and `scene` arguments into `name`.
     fn simulate(&self, name: &str, scene: &[&str]) {
+        self.simulate_seed(name, 1, scene);
+    }
+
+    /// [`Self::simulate`] with the simulator's noise seed `seed`.
+    fn simulate_seed(&self, name: &str, seed: u64, scene: &[&str]) {
+        let seed = seed.to_string();
         let mut args = vec![
             "simulate",
             "--rig",
@@ -69,7 +76,7 @@ impl Bench {
             "--peak",
             "0.25",
             "--seed",
-            "1",
+            &seed,
             "--out",
             "OUT",
         ];
@@ -143,29 +150,30 @@ fn sphere_under_strong_background_light_meets_its_target() {
     assert!(rmse <= 0.25, "RMSE {rmse} mm");
 }
 
-/// Blender's Suzanne, 90 mm wide, face to the camera: ≥ 90 % of the surface lit by ≥ 3 LEDs
-/// reconstructed. Depth: the target is RMSE ≤ 5 mm and is not met yet (measured 5.11 mm with
-/// `--integrator bilateral`, 7.96 mm with the least-squares default; the thesis' monkey:
-/// 10.9 mm). Most of what is left is the ears sitting about 11 mm too close to the camera as a
-/// whole: they stay joined to the head through two-LED pixels at their roots. This test holds
-/// what is reached, ≤ [`SUZANNE_MAX_RMSE_MM`] with the bilateral integrator, and that it beats
-/// least squares across the brow, nose and ears.
+/// Blender's Suzanne, 90 mm wide, face to the camera, on two simulator seeds: ≥ 90 % of the
+/// surface lit by ≥ 3 LEDs reconstructed and depth RMSE ≤ [`SUZANNE_MAX_RMSE_MM`] with
+/// `--integrator bilateral` (the thesis' monkey: 10.9 mm), and bilateral beats least squares
+/// (7.6 mm) across the brow, nose and ears.
 #[test]
 fn suzanne_head_coverage_and_depth() {
     let bench = Bench::new(&rig_toml(384, 288, THESIS_PITCH_MM, &OUT_OF_PLANE_LEDS));
     let mesh = concat!(env!("CARGO_MANIFEST_DIR"), "/tests/fixtures/suzanne.obj");
-    bench.simulate(
-        "head",
-        &["--scene", "mesh", "--mesh", mesh, "--size-mm", "90"],
-    );
-    let seconds = bench.reconstruct("head", "rec", &["--integrator", "bilateral"]);
-    let (coverage, rmse) = bench.accuracy("head", "rec");
-    println!(
-        "Suzanne 90 mm, bilateral: {:.2} % of the ≥3-lit surface, RMSE {rmse:.3} mm, {seconds:.1} s",
-        100.0 * coverage
-    );
-    assert!(coverage >= 0.90, "coverage {coverage}");
-    assert!(rmse <= SUZANNE_MAX_RMSE_MM, "RMSE {rmse} mm");
+    let scene = ["--scene", "mesh", "--mesh", mesh, "--size-mm", "90"];
+    bench.simulate("head", &scene);
+    bench.simulate_seed("head2", 2, &scene);
+    let mut rmse = f64::NAN;
+    for (capture, out) in [("head2", "rec2"), ("head", "rec")] {
+        let seconds = bench.reconstruct(capture, out, &["--integrator", "bilateral"]);
+        let (coverage, r) = bench.accuracy(capture, out);
+        rmse = r;
+        println!(
+            "Suzanne 90 mm ({capture}), bilateral: {:.2} % of the ≥3-lit surface, RMSE {rmse:.3} \
+             mm, {seconds:.1} s",
+            100.0 * coverage
+        );
+        assert!(coverage >= 0.90, "{capture}: coverage {coverage}");
+        assert!(rmse <= SUZANNE_MAX_RMSE_MM, "{capture}: RMSE {rmse} mm");
+    }
     check_confidence(&bench.path("rec"));
     // Least squares (the default) smooths across the brow, nose and ears.
     let seconds = bench.reconstruct("head", "ls", &[]);

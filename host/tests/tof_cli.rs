@@ -59,7 +59,7 @@ fn range_calibrate_and_segment_the_hybrid_scene() {
     let dir = tempfile::tempdir().unwrap();
     let rig = rig();
     let tof = rig.tof_camera.clone().unwrap();
-    let (hybrid, capture) = hybrid_capture(&tof);
+    let (hybrid, capture) = hybrid_capture(&tof, 0);
     let histograms = dir.path().join("histograms.npy");
     let reference = dir.path().join("reference.npy");
     write_npy(&histograms, &capture.histograms).unwrap();
@@ -289,11 +289,12 @@ fn range_calibrate_and_segment_the_hybrid_scene() {
 }
 
 /// Absolute depth bounds per object of the hybrid chain, mm (no offset removed). Measured
-/// fused through the binary: sphere 0.45, head 0.58, cube 0.96 mm (the library test
-/// `tof_hybrid`, on LED images with 1 % noise: 0.48, 0.58, 0.91 mm), with the pooled per-pixel
-/// reference board `meb simulate --tof` writes; the bounds are 1.3× those (thesis: sphere 2.06,
-/// cube 3.6 mm).
-const FUSED_BOUND_MM: [f64; 3] = [0.6, 0.75, 1.25];
+/// fused through the binary: sphere 0.43, head 0.54, cube 0.90 mm (the library test
+/// `tof_hybrid`, on LED images with 1 % noise: 0.44, 0.54, 0.94 mm, and 0.58, 0.78, 0.85 mm on
+/// other seeds), with the pooled per-pixel reference board `meb simulate --tof` writes. The
+/// sphere's bound is the aim (thesis 2.06 mm / 4); the cube's aim (3.6 mm / 4 = 0.9 mm) is met
+/// here but not on every seed, so its bound is 1.0 mm.
+const FUSED_BOUND_MM: [f64; 3] = [0.52, 0.65, 1.0];
 
 /// Share of each object's true pixels with a fused depth. Photometric stereo needs three lit
 /// LEDs; the LEDs, 150–350 mm above the objects, light 70 % of the sphere's pixels, 74 % of the
@@ -429,6 +430,27 @@ fn hybrid_chain_through_the_binary_places_each_object_at_its_absolute_depth() {
         ] {
             assert!(folder.join(file).is_file(), "{}: {file}", folder.display());
         }
+        // Its mask: at least 98 % of the object's pixels and none of another object.
+        let mask = read_mask(&folder.join("object_mask.png")).unwrap();
+        let (mut covered, mut foreign, mut wall) = (0, 0, 0);
+        for (&m, &l) in mask.iter().zip(&truth_labels) {
+            match (m, l) {
+                (true, l) if l == k as i32 => covered += 1,
+                (true, l) if l >= 0 => foreign += 1,
+                (true, _) => wall += 1,
+                _ => {}
+            }
+        }
+        eprintln!(
+            "  mask: {:.2} % of its {object} pixels, {foreign} of another object, {wall} of the wall",
+            100.0 * covered as f64 / object as f64
+        );
+        assert_eq!(foreign, 0, "{}", names[k]);
+        assert!(
+            covered as f64 >= 0.98 * object as f64,
+            "{}: mask holds {covered} of {object} pixels",
+            names[k]
+        );
         let z_ply: Vec<f64> = common::ply_points(&folder.join("surface.ply"))
             .iter()
             .map(|p| f64::from(p[2]))

@@ -12,8 +12,9 @@ pub(crate) enum Outcome {
     Unusable,
     /// Fewer than two LEDs light it.
     Dark,
-    /// Lit by two LEDs: the normal is on a circle.
-    TwoLeds(Vector3<f64>, Vector3<f64>),
+    /// Lit by two LEDs: the normal is on a circle (across, towards and least albedo-scaled
+    /// normal of [`crate::types::NormalPlane`]).
+    TwoLeds(Vector3<f64>, Vector3<f64>, Vector3<f64>),
     /// Normal, albedo and LEDs used.
     Solved(Vector3<f64>, f64, u8),
     /// Three or more LEDs light it but their light vectors do not span space.

@@ -262,7 +262,15 @@ fn two_led_plane(a: &[f64], l: &[Vector3<f64>], bits: usize) -> Outcome {
     if ui.cross(&uj).norm() < 1e-6 || across.norm() <= 0.0 {
         return Outcome::Dark; // parallel lights carry one direction only
     }
-    Outcome::TwoLeds(across, ui + uj)
+    // g₀ = α·L_i + β·L_j with g₀·L_i = A_i, g₀·L_j = A_j.
+    let (ii, ij, jj) = (l[i].dot(&l[i]), l[i].dot(&l[j]), l[j].dot(&l[j]));
+    let det = ii * jj - ij * ij;
+    let least_albedo = if det > 0.0 {
+        l[i] * ((jj * a[i] - ij * a[j]) / det) + l[j] * ((ii * a[j] - ij * a[i]) / det)
+    } else {
+        Vector3::zeros()
+    };
+    Outcome::TwoLeds(across, ui + uj, least_albedo)
 }
 
 /// The upper quantile of χ² with `dof` degrees of freedom at a one-sided normal deviate `z`
@@ -452,10 +460,11 @@ fn assemble(
         let inside = region.object[(r, c)];
         match outcome {
             Outcome::Solved(..) if inside => valid[(r, c)] = true,
-            Outcome::TwoLeds(across, towards) if inside => planes.push(NormalPlane {
+            Outcome::TwoLeds(across, towards, least_albedo) if inside => planes.push(NormalPlane {
                 pixel: (r, c),
                 across: *across,
                 towards: *towards,
+                least_albedo: *least_albedo,
             }),
             _ => {
                 if !inside {

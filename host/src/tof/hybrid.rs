@@ -7,15 +7,16 @@
 //!    camera together so that each pixel has one owner, the owners' boundaries are snapped to
 //!    the LED images' edges within ±one ToF pixel (watershed), and each object mask is cleaned.
 //! 2. Positions: every camera pixel of an object is traced to the ToF image
-//!    ([`super::mask`]); the axial depth s of the layer's *interior* ToF pixels (all four
-//!    neighbours in the layer: no blended edge pixels) is interpolated there and becomes the
+//!    ([`super::mask`]); the axial depth s of the layer's *interior* ToF pixels (a margin of
+//!    ToF pixels inside the layer: no blended edge pixels) is interpolated there and becomes the
 //!    scene point X = C + s·d(u) on the ToF camera's ray (rig's pose), whose z is the position
 //!    prior, weighted 1/(k·n·σ²) with σ the range's standard deviation, n the ToF pixels its
 //!    estimate pooled (spatial smoothing) and k the camera pixels per ToF pixel (one ToF sample
 //!    spread over k pixels, or shared by n smoothed ranges, carries its weight once).
 //! 3. Photometric stereo + integration ([`crate::reconstruct::reconstruct`]) in the rig moved
 //!    so that the object's ToF depth is z = 0 (its near-field light vectors are then right from
-//!    the first pass); the result is *placed* by the weighted mean of prior − depth, and *fused*
+//!    the first pass); the result is *placed* by the weighted mean of prior − depth over the
+//!    pixels with measured normals, and *fused*
 //!    with the positions by [`crate::integrate::fusion`] (depth that follows the normals while
 //!    staying near the ToF range).
 
@@ -46,6 +47,11 @@ pub struct HybridConfig {
     pub snap_tof_pixels: f64,
     /// Also reconstruct layers touching the ToF image border (usually the background).
     pub include_border_layers: bool,
+    /// ToF pixels give positions only this far (Chebyshev distance, ToF pixels) inside their
+    /// layer: nearer its edge, the range blends the neighbouring surface (mixed pixels, and the
+    /// range smoothing's window reaching them; its default radius is 3 too). An object too
+    /// thin for the margin gets positions with a smaller one.
+    pub prior_margin_tof_pixels: usize,
 }
 
 impl Default for HybridConfig {
@@ -55,6 +61,7 @@ impl Default for HybridConfig {
             fusion: FusionConfig::default(),
             snap_tof_pixels: 1.0,
             include_border_layers: false,
+            prior_margin_tof_pixels: 3,
         }
     }
 }
@@ -166,28 +173,28 @@ pub fn object_masks(
     Ok(objects)
 }
 
-/// ToF positions (scene z and weight) on the camera grid for the pixels of `mask`.
+/// ToF positions (scene z and weight) on the camera grid for the pixels of `mask`, from the
+/// layer's ToF pixels at least `margin` ToF pixels inside it (Chebyshev distance).
 pub fn position_prior(
     layer: &Layer,
     mask: &Array2<bool>,
     range: &RangeMap,
     calibration: &Calibration,
     rig: &Rig,
+    margin: usize,
 ) -> Result<PositionPrior, HybridError> {
     let tof = rig.tof_camera.as_ref().ok_or(HybridError::NoTofCamera)?;
     let (rows, cols) = range.range_mm.dim();
+    let inside = Array2::from_shape_fn((rows, cols), |(r, c)| {
+        r >= margin
+            && c >= margin
+            && r + margin < rows
+            && c + margin < cols
+            && (r - margin..=r + margin)
+                .all(|rr| (c - margin..=c + margin).all(|cc| layer.tof_mask[(rr, cc)]))
+    });
     let interior = |r: usize, c: usize| {
-        layer.tof_mask[(r, c)]
-            && r > 0
-            && c > 0
-            && r + 1 < rows
-            && c + 1 < cols
-            && layer.tof_mask[(r - 1, c)]
-            && layer.tof_mask[(r + 1, c)]
-            && layer.tof_mask[(r, c - 1)]
-            && layer.tof_mask[(r, c + 1)]
-            && range.range_mm[(r, c)].is_finite()
-            && range.sigma_mm[(r, c)].is_finite()
+        inside[(r, c)] && range.range_mm[(r, c)].is_finite() && range.sigma_mm[(r, c)].is_finite()
     };
     let k = mask::camera_pixels_per_tof_pixel(calibration, Some(layer.median_mm))
         .powi(2)
@@ -290,10 +297,17 @@ pub fn reconstruct_objects(
     for (index, (layer, mask)) in found.into_iter().enumerate() {
         let object = index + 1;
         let start = Instant::now();
-        let prior = position_prior(&layer, &mask, range, calibration, rig)?;
-        let Some(z0) = weighted_median(&prior) else {
+        let mut placement = None;
+        for margin in (0..=hybrid.prior_margin_tof_pixels).rev() {
+            let prior = position_prior(&layer, &mask, range, calibration, rig, margin)?;
+            if let Some(z0) = weighted_median(&prior) {
+                placement = Some((prior, z0));
+                break;
+            }
+        }
+        let Some((prior, z0)) = placement else {
             return Err(TofError::Empty(format!(
-                "object {object}: no interior ToF pixel maps into its mask (is the calibration for this scene?)"
+                "object {object}: no ToF pixel of its layer maps into its mask (is the calibration for this scene?)"
             ))
             .into());
         };
@@ -306,9 +320,18 @@ pub fn reconstruct_objects(
             .depth_mm
             .mapv_inplace(|z| z + z0 as f32);
         let depth = &reconstruction.integration.depth.depth_mm;
+        // The offset from the pixels with measured normals (three or more LEDs) when there are
+        // any: two-LED pixels' depth follows a guessed normal and can be centimetres off.
+        let measured = &reconstruction.photometric.field.mask;
+        let any_measured = measured.iter().any(|&m| m);
         let (mut sum_w, mut sum_wd) = (0.0, 0.0);
-        for ((z, &p), &w) in depth.iter().zip(&prior.depth_mm).zip(&prior.weight) {
-            if z.is_finite() && p.is_finite() && w > 0.0 {
+        for (((z, &p), &w), &m) in depth
+            .iter()
+            .zip(&prior.depth_mm)
+            .zip(&prior.weight)
+            .zip(measured)
+        {
+            if z.is_finite() && p.is_finite() && w > 0.0 && (m || !any_measured) {
                 sum_w += f64::from(w);
                 sum_wd += f64::from(w) * f64::from(p - z);
             }

@@ -7,8 +7,9 @@
 //! neighbouring layer whose range is nearest.
 //!
 //! A layer becomes a camera mask by inverse mapping: camera pixel p is traced back to the ToF
-//! image with the calibration's homography at the layer's own range (fixed point: the range
-//! sampled where p lands selects the homography), the layer's indicator is interpolated
+//! image with the calibration's homography at the layer's own range (the front-most range s
+//! at which the layer's range map, sampled where p lands at s, equals s), the layer's
+//! indicator is interpolated
 //! bilinearly there, and p belongs to the layer where that exceeds 1/2 (with several layers,
 //! to the one with the largest share). Clean-up replaces the thesis' MATLAB active contour:
 //! morphological opening and closing, holes filled, the largest connected part kept, and —
@@ -247,7 +248,18 @@ pub(crate) fn bilinear(
 }
 
 /// ToF position (x, y) seen at camera pixel `p` = (x, y) by `layer`'s surface, and the range
-/// used: the homography at the layer's median range, then twice at the range found there.
+/// used there.
+///
+/// The camera pixel's ray, at ToF range s, lands on ToF position u(s) (the calibration's
+/// homography at s). Walking s from near to far over the layer's ranges (widened by half their
+/// spread), the first s where the layer's interpolated range R(u(s)) falls from beyond s to
+/// at or before it is where the ray meets the layer's surface: the front-most crossing, as the
+/// camera sees it; R(u(s)) = s is solved there by linear interpolation between the two steps,
+/// which advance u by at most a quarter ToF pixel. A fixed point started at the layer's median
+/// range would land off the layer wherever the surface lies far from the median (the parallax
+/// between the two cameras moves u by a few ToF pixels across a deep object's range) and
+/// never recover. Without a crossing (the ray misses the layer), the homography at the range
+/// sampled there (the median's, then twice the range found) is used.
 pub(crate) fn trace_to_tof(
     layer: &Layer,
     range: &Array2<f32>,
@@ -257,6 +269,31 @@ pub(crate) fn trace_to_tof(
     let layer_range = |r: usize, c: usize| {
         (layer.tof_mask[(r, c)] && range[(r, c)].is_finite()).then(|| f64::from(range[(r, c)]))
     };
+    let [lo, hi] = layer.range_mm;
+    let margin = 0.5 * (hi - lo) + TRACE_MARGIN_MM;
+    let (near, far) = (lo - margin, hi + margin);
+    let (u_near, u_far) = (
+        calibration.camera_to_tof(p, Some(near)),
+        calibration.camera_to_tof(p, Some(far)),
+    );
+    let sweep = (u_far[0] - u_near[0]).hypot(u_far[1] - u_near[1]);
+    if sweep.is_finite() {
+        let steps = (sweep / TRACE_STEP_TOF_PIXELS).ceil().max(1.0) as usize;
+        let mut previous: Option<(f64, f64)> = None;
+        for i in 0..=steps {
+            let s = near + (far - near) * i as f64 / steps as f64;
+            let u = calibration.camera_to_tof(p, Some(s));
+            let gap = bilinear(u, range.dim(), &layer_range).map(|v| v - s);
+            if let (Some((s0, g0)), Some(g)) = (previous, gap)
+                && g0 > 0.0
+                && g <= 0.0
+            {
+                let crossing = s0 + (s - s0) * g0 / (g0 - g);
+                return (calibration.camera_to_tof(p, Some(crossing)), crossing);
+            }
+            previous = gap.map(|g| (s, g));
+        }
+    }
     let mut s = layer.median_mm;
     let mut u = calibration.camera_to_tof(p, Some(s));
     for _ in 0..2 {
@@ -267,6 +304,12 @@ pub(crate) fn trace_to_tof(
     }
     (u, s)
 }
+
+/// Range beyond the layer's own spread (each side) that [`trace_to_tof`] searches, mm.
+const TRACE_MARGIN_MM: f64 = 10.0;
+
+/// Largest move of the traced ToF position between two steps of [`trace_to_tof`], ToF pixels.
+const TRACE_STEP_TOF_PIXELS: f64 = 0.25;
 
 /// Camera masks of `layers` (sorted nearest first, as [`segment`] gives them): each pixel goes
 /// to the nearest layer covering over half of it. Nearest, not most: the camera sees the near
@@ -401,20 +444,22 @@ const WATERSHED_LINE: i32 = -1;
 const IN_QUEUE: i32 = -2;
 
 /// Marker-controlled watershed by Meyer's flooding (F. Meyer, "Color image segmentation",
-/// ICIP 1992; the variant of OpenCV's `watershed`): `markers` (row-major, `cols` wide) hold
-/// region labels > 0 and 0 for unknown pixels. Unknown pixels are flooded from the markers in
+/// ICIP 1992; the variant of OpenCV's `watershed`, on any number of channels): `markers` (row-major, `cols` wide) hold
+/// region labels > 0 and 0 for unknown pixels; `channels` are 8-bit image planes of the same
+/// size. Unknown pixels are flooded from the markers in
 /// order of the largest channel difference to the pixel they are reached from (256 FIFO
 /// levels); a pixel reached by two regions, and the image's outermost ring, become
 /// [`WATERSHED_LINE`].
-fn watershed(colour: &[[u8; 3]], cols: usize, markers: &mut [i32]) {
+fn watershed(channels: &[Vec<u8>], cols: usize, markers: &mut [i32]) {
     let rows = markers.len() / cols.max(1);
     if rows < 3 || cols < 3 {
         markers.fill(WATERSHED_LINE);
         return;
     }
     let diff = |i: usize, j: usize| {
-        (0..3)
-            .map(|ch| colour[i][ch].abs_diff(colour[j][ch]))
+        channels
+            .iter()
+            .map(|plane| plane[i].abs_diff(plane[j]))
             .max()
             .unwrap_or(0) as usize
     };
@@ -572,7 +617,8 @@ pub fn snap_to_edges(
         .indexed_iter()
         .map(|(p, &o)| if unsure[p] { 0 } else { o + 1 })
         .collect();
-    // Three 8-bit channels from the image channels (each scaled to its 99th percentile).
+    // One 8-bit plane per image channel (each scaled to its 99th percentile): every LED image
+    // counts, since an object's edge may show in one light only.
     let scaled: Vec<Vec<u8>> = image
         .iter()
         .map(|c| {
@@ -596,16 +642,13 @@ pub fn snap_to_edges(
                 .collect()
         })
         .collect();
-    let channel = |ch: usize| &scaled[(ch * scaled.len()) / 3];
-    let bgr: Vec<[u8; 3]> = (0..rows * cols)
-        .map(|i| [channel(0)[i], channel(1)[i], channel(2)[i]])
-        .collect();
     let mut labels = markers;
-    watershed(&bgr, cols, &mut labels);
+    watershed(&scaled, cols, &mut labels);
     // Watershed lines (−1) join the neighbouring region of the most similar colour.
     let distance = |i: usize, j: usize| {
-        (0..3)
-            .map(|ch| (i32::from(bgr[i][ch]) - i32::from(bgr[j][ch])).abs())
+        scaled
+            .iter()
+            .map(|plane| i32::from(plane[i].abs_diff(plane[j])))
             .sum::<i32>()
     };
     let resolved: Vec<i32> = (0..rows * cols)
@@ -780,15 +823,10 @@ mod tests {
     #[test]
     fn watershed_floods_from_markers_and_meets_on_the_ridge() {
         let (rows, cols) = (9, 12);
-        let colour: Vec<[u8; 3]> = (0..rows * cols)
-            .map(|i| {
-                if i % cols == 6 {
-                    [200, 200, 200]
-                } else {
-                    [20, 20, 20]
-                }
-            })
+        let plane: Vec<u8> = (0..rows * cols)
+            .map(|i| if i % cols == 6 { 200 } else { 20 })
             .collect();
+        let colour = vec![plane.clone(), plane.clone(), plane];
         let mut markers = vec![0; rows * cols];
         markers[4 * cols + 2] = 1;
         markers[4 * cols + 10] = 2;

@@ -65,9 +65,13 @@ pub fn board_view(rig: &Rig, board: &Chequerboard, seed: u64) -> BoardView {
     }
 }
 
-/// The thesis' hybrid scene and its SPAD capture at the thesis' settings.
-pub fn hybrid_capture(tof: &TofCamera) -> (HybridScene, TofCapture) {
+/// The thesis' hybrid scene and its SPAD capture at the thesis' settings (photons of `seed`).
+pub fn hybrid_capture(tof: &TofCamera, seed: u64) -> (HybridScene, TofCapture) {
     let hybrid = thesis_hybrid_scene();
-    let capture = render_tof(&hybrid.scene, &hybrid.groups, tof, &TofSimConfig::default()).unwrap();
+    let config = TofSimConfig {
+        seed,
+        ..TofSimConfig::default()
+    };
+    let capture = render_tof(&hybrid.scene, &hybrid.groups, tof, &config).unwrap();
     (hybrid, capture)
 }
