@@ -82,7 +82,7 @@ pub fn judge(decoded: &Decoded, motion: Option<&MotionEstimate>, force: bool) ->
 mod tests {
     use super::*;
     use crate::demod::quality::Verdict;
-    use crate::demod::{DecodeReport, Estimator, LedQuality, LedReport};
+    use crate::demod::{LedQuality, LedReport};
     use crate::types::LedImages;
     use ndarray::Array2;
 
@@ -112,36 +112,15 @@ mod tests {
             .collect();
         problems.extend(extra.iter().map(|p| p.to_string()));
         let dim = (4, 4);
-        Decoded {
-            leds: LedImages {
-                images: vec![Array2::zeros(dim); unexplained.len()],
-            },
-            noise: Array2::zeros(dim),
-            saturated: Array2::from_elem(dim, false),
-            underexposed: Array2::from_elem(dim, false),
-            report: DecodeReport {
-                estimator: Estimator::Waveform,
-                leds: unexplained.len(),
-                detected_leds: None,
-                frames_used: 32,
-                windows: 1,
-                width: 4,
-                height: 4,
-                rate_ratio: 1.0,
-                fps: 1000.0,
-                chip_rate_hz: 1000.0,
-                exposure: 1.0,
-                line_time_us: 0.0,
-                line_delay_frames: 0.0,
-                row_bands: 1,
-                fit_residual: 0.0,
-                median_noise: 0.0,
-                saturated_pixels: 0,
-                underexposed_pixels: 0,
-                per_led,
-                verdict: Verdict::from_findings(problems, vec![]),
-            },
-        }
+        let mut decoded =
+            crate::video::motion::tests::decoded(Array2::zeros(dim), Array2::zeros(dim));
+        decoded.leds = LedImages {
+            images: vec![Array2::zeros(dim); unexplained.len()],
+        };
+        decoded.report.leds = unexplained.len();
+        decoded.report.per_led = per_led;
+        decoded.report.verdict = Verdict::from_findings(problems, vec![]);
+        decoded
     }
 
     fn motion(moving: bool, energy: f64) -> MotionEstimate {
