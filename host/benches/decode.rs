@@ -6,14 +6,6 @@
 //! ~28× slower); 128 frames 30.6–58.9 ms, median of six runs 48.3 ms. Before the kernel and
 //! fit rework: 88 ms and 223 ms. The 128-frame case includes the five-LED count check
 //! (`check_led_count`).
-//!
-//! Instruction counts per decode (callgrind, release build; load-independent, measured while
-//! the machine was loaded, so no milliseconds): before the count check's fit was made cheaper
-//! (allocation-free least squares that stops at a thousandth of a noise variance, a cheap
-//! rolling-shutter screen before any band compression, a local shift search in the rate
-//! refinement) the main thread ran 416.5 M (128 frames) and 65.2 M (32 frames) instructions,
-//! after it 103.2 M and 30.5 M. The rayon workers (per-pixel matched filter, pixel sample,
-//! seed scans) are unchanged at 604 M and 175 M.
 
 use criterion::{BatchSize, Criterion, criterion_group, criterion_main};
 use meb::capture::memory::MemorySource;
