@@ -21,13 +21,30 @@ impl TemplateBasis {
     /// Factors the column-major template `columns[k][j]` (K columns of F frames).
     pub fn new(columns: &[Vec<f64>]) -> Self {
         let k_count = columns.len();
-        let frames = columns.first().map_or(0, Vec::len);
-        let mut q: Vec<f64> = columns.iter().flatten().copied().collect();
+        let mut q: Vec<Vec<f64>> = Vec::with_capacity(k_count);
         let mut r = vec![0.0f64; k_count * k_count];
-        orthonormalise(&mut q, frames, Some(&mut r));
+        for (k, column) in columns.iter().enumerate() {
+            let scale = column.iter().map(|v| v * v).sum::<f64>().sqrt().max(1e-300);
+            let mut v = column.clone();
+            for (l, ql) in q.iter().enumerate() {
+                let d: f64 = ql.iter().zip(&v).map(|(a, b)| a * b).sum();
+                r[l * k_count + k] = d;
+                for (vi, qi) in v.iter_mut().zip(ql) {
+                    *vi -= d * qi;
+                }
+            }
+            let norm = v.iter().map(|x| x * x).sum::<f64>().sqrt();
+            if norm > 1e-7 * scale {
+                r[k * k_count + k] = norm;
+                v.iter_mut().for_each(|x| *x /= norm);
+            } else {
+                v.iter_mut().for_each(|x| *x = 0.0);
+            }
+            q.push(v);
+        }
         let r_inverse = upper_inverse(&r, k_count);
         Self {
-            rows: q.chunks(frames.max(1)).map(<[f64]>::to_vec).collect(),
+            rows: q,
             r_inverse,
             columns: k_count,
         }
@@ -47,40 +64,6 @@ impl TemplateBasis {
     pub fn variance_factor(&self, k: usize) -> f64 {
         let n = self.columns;
         (k..n).map(|col| self.r_inverse[k * n + col].powi(2)).sum()
-    }
-}
-
-/// Modified Gram–Schmidt in place: `q` holds K columns of `frames` values one after another
-/// and becomes Q's rows (a column that the earlier ones explain to 1e-7 of its length becomes
-/// zero); `r`, when given (K×K row-major, zeroed), receives R. Allocation-free, so the timing
-/// fit can run it in its innermost loop.
-pub fn orthonormalise(q: &mut [f64], frames: usize, mut r: Option<&mut [f64]>) {
-    if frames == 0 {
-        return;
-    }
-    let k_count = q.len() / frames;
-    for k in 0..k_count {
-        let (done, rest) = q.split_at_mut(k * frames);
-        let v = &mut rest[..frames];
-        let scale = v.iter().map(|x| x * x).sum::<f64>().sqrt().max(1e-300);
-        for (l, ql) in done.chunks_exact(frames).enumerate() {
-            let d: f64 = ql.iter().zip(v.iter()).map(|(a, b)| a * b).sum();
-            if let Some(r) = r.as_deref_mut() {
-                r[l * k_count + k] = d;
-            }
-            for (vi, qi) in v.iter_mut().zip(ql) {
-                *vi -= d * qi;
-            }
-        }
-        let norm = v.iter().map(|x| x * x).sum::<f64>().sqrt();
-        if norm > 1e-7 * scale {
-            if let Some(r) = r.as_deref_mut() {
-                r[k * k_count + k] = norm;
-            }
-            v.iter_mut().for_each(|x| *x /= norm);
-        } else {
-            v.iter_mut().for_each(|x| *x = 0.0);
-        }
     }
 }
 

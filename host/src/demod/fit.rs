@@ -14,18 +14,14 @@
 //! singular directions (one row of the sample has one set of templates).
 //!
 //! Phases ([`fit_timing`]): (1) each seed of [`super::seed`] is refined with λ = 0 and the best
-//! kept, each refinement ending when a step gains less than a thousandth of a noise variance;
-//! (2) unless the line delay is given, a cheap test first asks whether the rows disagree at
-//! all — one Gauss–Newton step of each row band's own shifts on the raw sample pixels, whose
-//! predicted gain is about one noise variance per shift when they agree — and only then are
-//! the bands compressed, get their own shifts, the shifts' trend across the bands seeds λ,
-//! and a band-wise refinement (several exposures, then a grid re-search of each LED's shift,
-//! then again least squares) decides whether the rows disagree: when λ explains
-//! significantly more than noise would, (3) the fit is redone row by row. Finally each
-//! carrier's sign is chosen so that the sample's on-levels are positive (a half-period shift
-//! negates a carrier, SPEC §2).
+//! kept; (2) unless the line delay is given, row bands of the sample get their own shifts, the
+//! shifts' trend across the bands seeds λ, and a band-wise refinement (several exposures, then
+//! a grid re-search of each LED's shift, then again least squares) decides whether the rows
+//! disagree: when λ explains significantly more than noise would, (3) the fit is redone row by
+//! row. Finally each carrier's sign is chosen so that the sample's on-levels are positive (a
+//! half-period shift negates a carrier, SPEC §2).
 
-use super::basis::{TemplateBasis, orthonormalise};
+use super::basis::TemplateBasis;
 use super::config::FitLimits;
 use super::levenberg::{Freedom, Residuals, Solution, minimise, minimise_within};
 use super::sample::PixelSample;
@@ -33,7 +29,6 @@ use super::seed::{Start, starts};
 use super::spectrum::{SignalSpace, leading_eigenpairs};
 use super::waveform::{ReceivedWaveform, Timing};
 use nalgebra::DMatrix;
-use std::cell::RefCell;
 
 /// Position of ρ, e and λ in the parameter vector; the shifts follow.
 const RATE: usize = 0;
@@ -47,9 +42,6 @@ const SHIFTS: usize = 3;
 const MIN_EXPOSURE: f64 = 0.02;
 /// Largest readout time of the region the fit allows, frame periods: |λ|·height.
 const MAX_READOUT: f64 = 1.5;
-/// A refinement step that lowers the cost by less than this many noise variances σ² ends
-/// the refinement: the parameters then move by a few hundredths of their standard errors.
-const CONVERGED: f64 = 1e-3;
 /// Largest number of row bands of the rolling-shutter test.
 const TEST_BANDS: usize = 8;
 /// Fewest rows per band of the rolling-shutter test.
@@ -120,38 +112,19 @@ impl TimingModel {
 
     /// The K = N+1 template columns `[1, t_0, …]` (t_i = u_i − ½) of region row `row`.
     pub fn columns(&self, waves: &[ReceivedWaveform], row: f64, frames: usize) -> Vec<Vec<f64>> {
-        if frames == 0 {
-            return vec![Vec::new(); waves.len() + 1];
-        }
-        let mut flat = vec![0.0; (waves.len() + 1) * frames];
         let offset = self.line_delay * row * self.timing.rate_ratio;
-        fill_columns(self.timing, waves, &self.shifts, offset, &mut flat);
-        flat.chunks(frames.max(1)).map(<[f64]>::to_vec).collect()
+        let mut columns = vec![vec![1.0; frames]];
+        for (wave, &shift) in waves.iter().zip(&self.shifts) {
+            let mut column = vec![0.0; frames];
+            self.timing.fill_template(wave, shift + offset, &mut column);
+            columns.push(column);
+        }
+        columns
     }
 
     /// The least-squares basis of region row `row`.
     pub fn basis(&self, waves: &[ReceivedWaveform], row: f64, frames: usize) -> TemplateBasis {
         TemplateBasis::new(&self.columns(waves, row, frames))
-    }
-}
-
-/// Writes the K = N+1 template columns `[1, t_0, …]` one after another into `out` (K·F
-/// values), each LED's shifted by `offset` chips.
-fn fill_columns(
-    timing: Timing,
-    waves: &[ReceivedWaveform],
-    shifts: &[f64],
-    offset: f64,
-    out: &mut [f64],
-) {
-    let frames = out.len() / (waves.len() + 1);
-    if frames == 0 {
-        return;
-    }
-    let (constant, rest) = out.split_at_mut(frames);
-    constant.fill(1.0);
-    for ((wave, &shift), column) in waves.iter().zip(shifts).zip(rest.chunks_exact_mut(frames)) {
-        timing.fill_template(wave, shift + offset, column);
     }
 }
 
@@ -186,45 +159,31 @@ struct Projection<'a> {
     waves: &'a [ReceivedWaveform],
     groups: &'a [FitGroup],
     frames: usize,
-    /// The templates' orthonormal basis Q (K·F), reused by every evaluation.
-    basis: RefCell<Vec<f64>>,
-}
-
-impl<'a> Projection<'a> {
-    fn new(waves: &'a [ReceivedWaveform], groups: &'a [FitGroup], frames: usize) -> Self {
-        Self {
-            waves,
-            groups,
-            frames,
-            basis: RefCell::new(vec![0.0; (waves.len() + 1) * frames]),
-        }
-    }
 }
 
 impl Residuals for Projection<'_> {
     fn residuals(&self, params: &[f64], out: &mut Vec<f64>) {
         out.clear();
-        let frames = self.frames;
-        if frames == 0 {
-            return;
-        }
-        let timing = Timing {
-            rate_ratio: params[RATE],
-            exposure: params[EXPOSURE],
-        };
-        let mut q = self.basis.borrow_mut();
+        let model = TimingModel::from_params(params);
+        let mut projection = Vec::new();
         for group in self.groups {
-            let offset = params[LINE_DELAY] * group.row * params[RATE];
-            fill_columns(timing, self.waves, &params[SHIFTS..], offset, &mut q);
-            orthonormalise(&mut q, frames, None);
-            for column in group.data.as_slice().chunks_exact(frames) {
-                let start = out.len();
-                out.extend_from_slice(column);
-                let residual = &mut out[start..];
-                for ql in q.chunks_exact(frames) {
-                    let c: f64 = ql.iter().zip(column).map(|(a, b)| a * b).sum();
-                    residual.iter_mut().zip(ql).for_each(|(r, v)| *r -= c * v);
-                }
+            let basis = model.basis(self.waves, group.row, self.frames);
+            for column in group.data.column_iter() {
+                projection.clear();
+                projection.extend(
+                    basis
+                        .rows
+                        .iter()
+                        .map(|q| q.iter().zip(column.iter()).map(|(a, b)| a * b).sum::<f64>()),
+                );
+                out.extend(column.iter().enumerate().map(|(j, &d)| {
+                    d - basis
+                        .rows
+                        .iter()
+                        .zip(&projection)
+                        .map(|(q, c)| q[j] * c)
+                        .sum::<f64>()
+                }));
             }
         }
     }
@@ -246,7 +205,6 @@ pub fn fit_timing(
         frames,
         height,
         limits,
-        tolerance: CONVERGED * pixel_noise,
     };
     let global = fitter.global(space);
     let (solution, rolling) = match limits.line_delay {
@@ -281,7 +239,6 @@ pub fn refit_timing(
         frames,
         height,
         limits,
-        tolerance: CONVERGED * pixel_noise,
     };
     let mut start = previous.model.params();
     start.truncate(SHIFTS + leds);
@@ -312,8 +269,6 @@ struct Fitter<'a> {
     frames: usize,
     height: usize,
     limits: &'a FitLimits,
-    /// A least-squares step that lowers the cost by less than this ends the refinement.
-    tolerance: f64,
 }
 
 impl Fitter<'_> {
@@ -382,8 +337,12 @@ impl Fitter<'_> {
 
     /// Least squares over `groups` from `start`.
     fn solve(&self, groups: &[FitGroup], start: &[f64], freedom: &Freedom) -> Solution {
-        let problem = Projection::new(self.waves, groups, self.frames);
-        minimise(&problem, start, freedom, self.tolerance)
+        let problem = Projection {
+            waves: self.waves,
+            groups,
+            frames: self.frames,
+        };
+        minimise(&problem, start, freedom)
     }
 
     /// Phase (1): every seed refined with a global shutter; the lowest cost wins.
@@ -438,9 +397,6 @@ impl Fitter<'_> {
         for (p, &row) in sample.rows().iter().enumerate() {
             members[(row * bands / height).min(bands - 1)].push(p);
         }
-        if self.rows_agree(sample, &members, &global.params, pixel_noise) {
-            return None;
-        }
         let groups: Vec<FitGroup> = members
             .iter()
             .filter(|m| m.len() >= 2)
@@ -453,21 +409,21 @@ impl Fitter<'_> {
         let mut shifts_only = self.freedom(false);
         shifts_only.free[RATE] = false;
         shifts_only.free[EXPOSURE] = false;
+        let (mut sxy, mut sxx, mut sw, mut swx) = (0.0, 0.0, 0.0, 0.0);
         let mut trend = Vec::new();
         let mut gained = 0.0;
         let mut residual = Vec::new();
         for group in &groups {
             let single = std::slice::from_ref(group);
-            let problem = Projection::new(self.waves, single, self.frames);
+            let problem = Projection {
+                waves: self.waves,
+                groups: single,
+                frames: self.frames,
+            };
             problem.residuals(&global.params, &mut residual);
             let before: f64 = residual.iter().map(|r| r * r).sum();
-            let solution = minimise_within(
-                &problem,
-                &global.params,
-                &shifts_only,
-                SCREEN_ITERATIONS,
-                self.tolerance,
-            );
+            let solution =
+                minimise_within(&problem, &global.params, &shifts_only, SCREEN_ITERATIONS);
             gained += before - solution.cost;
             let weight = group.data.norm_squared();
             for (i, wave) in self.waves.iter().enumerate() {
@@ -478,7 +434,16 @@ impl Fitter<'_> {
                 trend.push((group.row, offset, weight));
             }
         }
-        let (chips_per_row, centre) = weighted_trend(&trend);
+        for &(row, _, w) in &trend {
+            sw += w;
+            swx += w * row;
+        }
+        let centre = swx / sw.max(f64::MIN_POSITIVE);
+        for &(row, offset, w) in &trend {
+            sxy += w * (row - centre) * offset;
+            sxx += w * (row - centre) * (row - centre);
+        }
+        let chips_per_row = if sxx > 0.0 { sxy / sxx } else { 0.0 };
         let shifts = (groups.len() * self.waves.len()) as f64;
         if gained < AGREEMENT * shifts * pixel_noise
             && (chips_per_row * height as f64).abs() < MIN_RAMP_CHIPS
@@ -515,102 +480,6 @@ impl Fitter<'_> {
             .then_some(best)
     }
 
-    /// The cheap first test of phase (2), on the raw sample pixels of each band (`members`)
-    /// without compressing them: one Gauss–Newton step of the band's own shifts from the global
-    /// fit `params`, whose predicted cost decrease is g·H⁻¹g with, over the band's pixels p
-    /// (coefficients a_p, residual r_p, projected shift derivatives d̃_i of the templates),
-    /// `g_i = Σ_p a_pi·(d̃_i·r_p)` and `H_il = Σ_p a_pi·a_pl·(d̃_i·d̃_l)` (Kaufman's
-    /// variable-projection Jacobian, BIT 1975). When the rows agree its expectation is one
-    /// noise variance per shift. True when the decrease stays below half the full test's
-    /// threshold and the steps' trend across the bands (weighted by H_ii) stays below
-    /// [`MIN_RAMP_CHIPS`] over the region: then the full test would not find a disagreement.
-    fn rows_agree(
-        &self,
-        sample: &PixelSample,
-        members: &[Vec<usize>],
-        params: &[f64],
-        pixel_noise: f64,
-    ) -> bool {
-        let frames = self.frames;
-        let leds = self.waves.len();
-        let model = TimingModel::from_params(params);
-        let basis = model.basis(self.waves, 0.0, frames);
-        let columns = model.columns(self.waves, 0.0, frames);
-        let step = 1e-6;
-        let mut moved = vec![0.0; frames];
-        let derivatives: Vec<Vec<f64>> = (0..leds)
-            .map(|i| {
-                model
-                    .timing
-                    .fill_template(&self.waves[i], model.shifts[i] + step, &mut moved);
-                let mut d: Vec<f64> = moved
-                    .iter()
-                    .zip(&columns[i + 1])
-                    .map(|(a, b)| (a - b) / step)
-                    .collect();
-                for q in &basis.rows {
-                    let c: f64 = q.iter().zip(&d).map(|(a, b)| a * b).sum();
-                    d.iter_mut().zip(q).for_each(|(x, v)| *x -= c * v);
-                }
-                d
-            })
-            .collect();
-        let overlap = DMatrix::from_fn(leds, leds, |i, l| {
-            derivatives[i]
-                .iter()
-                .zip(&derivatives[l])
-                .map(|(a, b)| a * b)
-                .sum::<f64>()
-        });
-        let k = basis.columns;
-        let (mut projections, mut coefficients) = (vec![0.0; k], vec![0.0; k]);
-        let mut residual = vec![0.0; frames];
-        let mut trend = Vec::new();
-        let mut gained = 0.0;
-        let mut bands = 0usize;
-        for band in members.iter().filter(|m| m.len() >= 2) {
-            let mut levels = DMatrix::<f64>::zeros(leds, leds);
-            let mut gradient = nalgebra::DVector::<f64>::zeros(leds);
-            let row =
-                band.iter().map(|&p| sample.rows()[p]).sum::<usize>() as f64 / band.len() as f64;
-            for &p in band {
-                let x = sample.pixel(p);
-                residual.copy_from_slice(x);
-                for (q, b) in basis.rows.iter().zip(projections.iter_mut()) {
-                    *b = q.iter().zip(x).map(|(a, v)| a * v).sum();
-                    residual.iter_mut().zip(q).for_each(|(r, v)| *r -= *b * v);
-                }
-                basis.coefficients(&projections, &mut coefficients);
-                let a = &coefficients[1..];
-                for (i, (derivative, &ai)) in derivatives.iter().zip(a).enumerate() {
-                    let along: f64 = derivative.iter().zip(&residual).map(|(d, r)| d * r).sum();
-                    gradient[i] += ai * along;
-                    for (l, &al) in a.iter().enumerate() {
-                        levels[(i, l)] += ai * al;
-                    }
-                }
-            }
-            let mut information = levels.component_mul(&overlap);
-            let ridge = 1e-12 * information.trace().max(f64::MIN_POSITIVE);
-            for i in 0..leds {
-                information[(i, i)] += ridge;
-            }
-            let Some(cholesky) = information.clone().cholesky() else {
-                return false;
-            };
-            let steps = cholesky.solve(&gradient);
-            gained += gradient.dot(&steps);
-            bands += 1;
-            for (i, &offset) in steps.iter().enumerate() {
-                trend.push((row, offset, information[(i, i)]));
-            }
-        }
-        let (chips_per_row, _) = weighted_trend(&trend);
-        let shifts = (bands * leds) as f64;
-        gained < 0.5 * AGREEMENT * shifts * pixel_noise
-            && (chips_per_row * self.height as f64).abs() < MIN_RAMP_CHIPS
-    }
-
     /// The exposures to start a refinement from: `fitted` and `spread` (only the known
     /// exposure when it is given).
     fn exposures(&self, fitted: f64, spread: &[f64]) -> Vec<f64> {
@@ -629,7 +498,11 @@ impl Fitter<'_> {
     /// Re-searches each LED's shift on a grid with the rest held (escapes a shift caught a
     /// chip away, which the least-squares steps cannot cross).
     fn backfit(&self, groups: &[FitGroup], mut params: Vec<f64>) -> Vec<f64> {
-        let problem = Projection::new(self.waves, groups, self.frames);
+        let problem = Projection {
+            waves: self.waves,
+            groups,
+            frames: self.frames,
+        };
         let mut residual = Vec::new();
         for _ in 0..BACKFIT_SWEEPS {
             for (i, wave) in self.waves.iter().enumerate() {
@@ -673,19 +546,6 @@ impl Fitter<'_> {
         }
         best.unwrap_or_else(|| self.solve(&groups, start, &freedom))
     }
-}
-
-/// Weighted least-squares slope of offsets over rows from `(row, offset, weight)` points, and
-/// the weighted mean row it pivots on.
-fn weighted_trend(points: &[(f64, f64, f64)]) -> (f64, f64) {
-    let weight: f64 = points.iter().map(|p| p.2).sum();
-    let centre = points.iter().map(|p| p.2 * p.0).sum::<f64>() / weight.max(f64::MIN_POSITIVE);
-    let (mut sxy, mut sxx) = (0.0, 0.0);
-    for &(row, offset, w) in points {
-        sxy += w * (row - centre) * offset;
-        sxx += w * (row - centre) * (row - centre);
-    }
-    (if sxx > 0.0 { sxy / sxx } else { 0.0 }, centre)
 }
 
 /// The sample's mean region row.

@@ -46,15 +46,9 @@ pub struct Solution {
     pub free: Vec<usize>,
 }
 
-/// Minimises the sum of squared residuals from `start`; an accepted step that lowers the cost
-/// by less than `tolerance` (or by a relative 1e-12) ends the search.
-pub fn minimise(
-    problem: &impl Residuals,
-    start: &[f64],
-    freedom: &Freedom,
-    tolerance: f64,
-) -> Solution {
-    minimise_within(problem, start, freedom, MAX_ITERATIONS, tolerance)
+/// Minimises the sum of squared residuals from `start`.
+pub fn minimise(problem: &impl Residuals, start: &[f64], freedom: &Freedom) -> Solution {
+    minimise_within(problem, start, freedom, MAX_ITERATIONS)
 }
 
 /// [`minimise`] with at most `iterations` accepted steps.
@@ -63,7 +57,6 @@ pub fn minimise_within(
     start: &[f64],
     freedom: &Freedom,
     iterations: usize,
-    tolerance: f64,
 ) -> Solution {
     let free: Vec<usize> = (0..start.len())
         .filter(|&k| freedom.free.get(k).copied().unwrap_or(false))
@@ -106,7 +99,7 @@ pub fn minimise_within(
             problem.residuals(&candidate, &mut trial);
             let trial_cost = sum_of_squares(&trial);
             if trial_cost < cost {
-                converged = cost - trial_cost <= tolerance.max(MIN_RELATIVE_DECREASE * cost);
+                converged = cost - trial_cost <= MIN_RELATIVE_DECREASE * cost;
                 params = candidate;
                 std::mem::swap(&mut residual, &mut trial);
                 cost = trial_cost;
@@ -146,12 +139,8 @@ fn jacobian(
         shifted[k] = params[k] + DIFFERENCE_STEP;
         problem.residuals(&shifted, &mut out);
         shifted[k] = params[k];
-        for (j, (x, r)) in jacobian
-            .column_mut(a)
-            .iter_mut()
-            .zip(out.iter().zip(residual))
-        {
-            *j = (x - r) / DIFFERENCE_STEP;
+        for (row, (x, r)) in out.iter().zip(residual).enumerate() {
+            jacobian[(row, a)] = (x - r) / DIFFERENCE_STEP;
         }
     }
     jacobian
@@ -193,7 +182,7 @@ mod tests {
             free: vec![true, true],
             bounds: vec![(0.0, 10.0), (0.0, 10.0)],
         };
-        let solution = minimise(&problem, &[1.0, 0.2], &free, 0.0);
+        let solution = minimise(&problem, &[1.0, 0.2], &free);
         assert!((solution.params[0] - 2.5).abs() < 1e-6, "{solution:?}");
         assert!((solution.params[1] - 0.7).abs() < 1e-6, "{solution:?}");
         assert_eq!(solution.information.nrows(), 2);
@@ -201,7 +190,7 @@ mod tests {
             free: vec![true, false],
             bounds: vec![(0.0, 2.0), (0.0, 10.0)],
         };
-        let solution = minimise(&problem, &[1.0, 0.7], &fixed, 0.0);
+        let solution = minimise(&problem, &[1.0, 0.7], &fixed);
         assert_eq!(solution.params[1], 0.7);
         assert!(
             solution.params[0] <= 2.0 && solution.params[0] > 1.9,

@@ -35,10 +35,7 @@
 //!    instead reads each LED's template off the window as the leading eigenvector of its
 //!    block of the signal space's coordinates in the LEDs' chip templates ([`template`]),
 //!    which gives Δ_i in closed form — exact at ρ = 1, a seed the refinement must correct
-//!    away from it; beyond half a chip of phase drift over the window, or for an LED whose
-//!    block is not close to rank 1, it falls back to the grid. Grid stays the default: on
-//!    the randomised sweep the rank-1 seeds lose captures with a rolling shutter or a drift
-//!    near a chip, and they save nothing on the fit's sequential path.
+//!    away from it.
 //! 4. [`fit`]: those seeds start a least-squares refinement of (ρ, e, Δ_i) on the sample
 //!    (variable projection), which pins the templates' amplitude — and with it each LED's
 //!    gain — to the physics of the integration; a rolling shutter is detected when row bands

@@ -12,15 +12,11 @@
 //! the LEDs' best scores at full exposure sum highest; the exposure e is scanned at that rate
 //! with each LED's Δ_i refined per exposure. The local maxima of that scan (and a few spread
 //! exposures, because at ρ ≈ 1 the exposure barely changes the templates) start the
-//! least-squares refinement ([`super::fit`]). With [`SeedMethod::RankOne`] an LED's shift
-//! comes in closed form from its rank-1 template ([`super::template`]) instead of the grid,
-//! as long as the template's assumption holds: the phase drifts by at most
-//! [`MAX_RANK_ONE_DRIFT`] over the window and the LED's block is close to rank 1
-//! ([`MIN_RANK_ONE_SHARE`]); otherwise that LED falls back to the grid.
+//! least-squares refinement ([`super::fit`]).
 
 use super::config::{FitLimits, SeedMethod};
 use super::spectrum::SignalSpace;
-use super::template::{LedTemplate, rank_one_templates};
+use super::template::rank_one_templates;
 use super::waveform::{ReceivedWaveform, Timing};
 use nalgebra::DMatrixView;
 use rayon::prelude::*;
@@ -29,8 +25,6 @@ use rayon::prelude::*;
 const RATE_STEP: f64 = 0.5;
 /// Shift grid step, chips, while scanning the rate.
 const RATE_SCAN_SHIFT_STEP: f64 = 0.5;
-/// Half-width, chips, of each LED's shift re-search while the rate is refined.
-const RATE_REFINE_REACH: f64 = 1.0;
 /// Shift grid step, chips, while scanning the exposure.
 const SHIFT_STEP: f64 = 0.25;
 /// Golden-section iterations of a rate or shift refinement.
@@ -50,16 +44,6 @@ pub struct Start {
     /// Δ_i per LED, chips.
     pub shifts: Vec<f64>,
 }
-
-/// A rank-1 template seeds its LED only when its leading eigenvalue holds at least this share
-/// of the LED's block ([`super::template`]); below it (a rate mismatch drifting the phase by
-/// chips over the window, or an LED without signal) that LED's shift comes from the grid.
-const MIN_RANK_ONE_SHARE: f64 = 0.9;
-
-/// Largest phase drift |ρ − 1|·F over the window, chips, at which rank-1 templates seed the
-/// fit: they assume each LED's on-fraction stays within one pair of adjacent chips
-/// ([`super::template`]); beyond it every LED's shift comes from the grid.
-const MAX_RANK_ONE_DRIFT: f64 = 0.5;
 
 /// Scores templates against the signal space.
 struct Scorer<'a> {
@@ -99,25 +83,11 @@ impl Scorer<'_> {
     /// SPEC §2, which leaves the score unchanged), optionally refined by golden section.
     fn best_shift(&self, led: usize, timing: Timing, step: f64, refine: bool) -> (f64, f64) {
         let period = self.waves.get(led).map_or(4, ReceivedWaveform::period) as f64;
-        let count = (period / 2.0 / step).round() as usize;
-        self.best_on_grid(led, timing, 0.0, count, step, refine)
-    }
-
-    /// Best (score, shift) of one LED among the `count` shifts `first + k·step`, optionally
-    /// refined by golden section.
-    fn best_on_grid(
-        &self,
-        led: usize,
-        timing: Timing,
-        first: f64,
-        count: usize,
-        step: f64,
-        refine: bool,
-    ) -> (f64, f64) {
         let mut template = vec![0.0; self.frames];
-        let mut best = (f64::NEG_INFINITY, first);
-        for k in 0..count {
-            let shift = first + k as f64 * step;
+        let steps = (period / 2.0 / step).round() as usize;
+        let mut best = (f64::NEG_INFINITY, 0.0);
+        for k in 0..steps {
+            let shift = k as f64 * step;
             let s = self.score(led, timing, shift, &mut template);
             if s > best.0 {
                 best = (s, shift);
@@ -132,20 +102,6 @@ impl Scorer<'_> {
             }
         }
         best
-    }
-
-    /// Sum over LEDs of their best scores on a grid of `step` within `reach` chips of
-    /// `around`'s shifts.
-    fn total_near(&self, timing: Timing, around: &[f64], reach: f64, step: f64) -> f64 {
-        let count = (2.0 * reach / step).round() as usize + 1;
-        around
-            .iter()
-            .enumerate()
-            .map(|(led, &centre)| {
-                self.best_on_grid(led, timing, centre - reach, count, step, false)
-                    .0
-            })
-            .sum()
     }
 
     /// Sum over LEDs of their best scores, and the shifts.
@@ -209,19 +165,9 @@ pub fn starts(
         Some(e) => vec![e],
         None => EXPOSURE_TENTHS.rev().map(|k| f64::from(k) / 10.0).collect(),
     };
-    // Per LED, its rank-1 template when the window shows one (its block is close to rank 1),
-    // else `None`: that LED's shift comes from the grid.
-    let templates: Vec<Option<LedTemplate>> = match limits.seeds {
-        SeedMethod::RankOne if (rate - 1.0).abs() * frames as f64 <= MAX_RANK_ONE_DRIFT => {
-            rank_one_templates(space, waves, rate, frames)
-                .map(|all| {
-                    all.into_iter()
-                        .map(|t| (t.rank_one_share >= MIN_RANK_ONE_SHARE).then_some(t))
-                        .collect()
-                })
-                .unwrap_or_default()
-        }
-        SeedMethod::RankOne | SeedMethod::Grid => Vec::new(),
+    let templates = match limits.seeds {
+        SeedMethod::RankOne => rank_one_templates(space, waves, rate, frames),
+        SeedMethod::Grid => None,
     };
     let scored: Vec<(f64, f64, Vec<f64>)> = exposures
         .par_iter()
@@ -230,21 +176,21 @@ pub fn starts(
                 rate_ratio: rate,
                 exposure,
             };
-            let mut column = vec![0.0; frames];
-            let mut total = 0.0;
-            let mut shifts = Vec::with_capacity(waves.len());
-            for led in 0..waves.len() {
-                let (score, shift) = match templates.get(led) {
-                    Some(Some(template)) => {
-                        let shift = template.shift(rate, exposure);
-                        (scorer.score(led, timing, shift, &mut column), shift)
-                    }
-                    _ => scorer.best_shift(led, timing, SHIFT_STEP, true),
-                };
-                total += score;
-                shifts.push(shift);
-            }
-            (total, exposure, shifts)
+            let (score, shifts) = match &templates {
+                Some(templates) => {
+                    let mut column = vec![0.0; frames];
+                    let shifts: Vec<f64> =
+                        templates.iter().map(|t| t.shift(rate, exposure)).collect();
+                    let score = shifts
+                        .iter()
+                        .enumerate()
+                        .map(|(led, &shift)| scorer.score(led, timing, shift, &mut column))
+                        .sum();
+                    (score, shifts)
+                }
+                None => scorer.total(timing, SHIFT_STEP, true),
+            };
+            (score, exposure, shifts)
         })
         .collect();
     let mut peaks: Vec<&(f64, f64, Vec<f64>)> = scored
@@ -279,26 +225,25 @@ pub fn starts(
         .collect()
 }
 
-/// The rate ratio whose templates at full exposure the signal space holds best: the grid's
-/// best rate, then a golden-section refinement that re-searches each LED's shift only within
-/// [`RATE_REFINE_REACH`] chips of its shift at that grid rate (a rate within one grid step
-/// moves the best shift by at most a quarter chip).
+/// The rate ratio whose templates at full exposure the signal space holds best.
 fn scan_rate(scorer: &Scorer<'_>, frames: usize, max_mismatch: f64) -> f64 {
     let step = RATE_STEP / frames.max(1) as f64;
     let reach = (max_mismatch / step).floor() as i64;
-    let timing = |rate_ratio: f64| Timing {
-        rate_ratio,
-        exposure: 1.0,
+    let at = |rate: f64, shift_step: f64| {
+        let timing = Timing {
+            rate_ratio: rate,
+            exposure: 1.0,
+        };
+        scorer.total(timing, shift_step, false).0
     };
     let best = (-reach..=reach)
         .into_par_iter()
         .map(|k| {
             let rate = 1.0 + k as f64 * step;
-            let (score, shifts) = scorer.total(timing(rate), RATE_SCAN_SHIFT_STEP, false);
-            (score, rate, shifts)
+            (at(rate, RATE_SCAN_SHIFT_STEP), rate)
         })
         .reduce(
-            || (f64::NEG_INFINITY, 1.0, Vec::new()),
+            || (f64::NEG_INFINITY, 1.0),
             |a, b| {
                 if b.0 > a.0 || (b.0 == a.0 && b.1 < a.1) {
                     b
@@ -307,9 +252,5 @@ fn scan_rate(scorer: &Scorer<'_>, frames: usize, max_mismatch: f64) -> f64 {
                 }
             },
         );
-    let (_, rate, shifts) = best;
-    golden_max(rate - step, rate + step, |r| {
-        scorer.total_near(timing(r), &shifts, RATE_REFINE_REACH, SHIFT_STEP)
-    })
-    .0
+    golden_max(best.1 - step, best.1 + step, |rate| at(rate, SHIFT_STEP)).0
 }
