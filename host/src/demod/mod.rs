@@ -85,6 +85,7 @@ pub use error::DemodError;
 pub use matched::WindowAmplitudes;
 pub use quality::{FitQuality, LedQuality, Verdict, VerdictStatus};
 pub use report::{DecodeReport, LedReport};
+pub use window::CodeMap;
 
 use crate::capture::{FrameFormat, FrameSource, Samples};
 use crate::types::LedImages;
@@ -98,7 +99,7 @@ use sample::PixelSample;
 use spectrum::{SignalSpace, Spectrum};
 use stats::PixelStats;
 use waveform::ReceivedWaveform;
-use window::{CodeMap, Region, read_window};
+use window::{Region, read_window};
 
 /// Largest LED count.
 pub const MAX_LEDS: usize = 8;

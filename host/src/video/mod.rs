@@ -18,6 +18,7 @@
 pub mod carry;
 pub mod decode;
 pub mod encode;
+pub mod judge;
 pub mod motion;
 pub mod output;
 pub mod render;
@@ -26,13 +27,14 @@ pub mod stream;
 pub mod truth;
 
 pub use carry::{TimingCarry, TimingSource};
-pub use motion::{MotionConfig, MotionEstimate, MotionPolicy, detect_motion};
+pub use judge::WindowVerdict;
+pub use motion::{MotionConfig, MotionEstimate, MotionPolicy, PeriodFrames, detect_motion};
 pub use schedule::{ScheduleError, WindowSchedule};
 pub use stream::{FrameStream, StreamEnd};
 pub use truth::{TruthDepth, TruthSource};
 
 use crate::capture::{CaptureError, FrameSource};
-use crate::demod::{DecodeConfig, Decoded, DemodError};
+use crate::demod::{CodeMap, DecodeConfig, Decoded, DemodError, OnImplausible, VerdictStatus};
 use crate::metrics::{MetricsError, compare_depth};
 use crate::reconstruct::{ReconstructConfig, Reconstruction, from_decoded};
 use crate::rig::Rig;
@@ -47,7 +49,9 @@ use thiserror::Error;
 pub struct VideoConfig {
     /// How camera frames are cut into 3-D frames.
     pub schedule: WindowSchedule,
-    /// Decoder settings (`start` frames are skipped once; `frames` is ignored).
+    /// Decoder settings (`start` frames are skipped once; `frames` is ignored). An implausible
+    /// window is judged with its motion ([`judge`]): put down to motion, or refused unless
+    /// `on_implausible` is [`OnImplausible::Keep`].
     pub decode: DecodeConfig,
     /// Reconstruction settings.
     pub reconstruct: ReconstructConfig,
@@ -259,6 +263,10 @@ pub struct FrameRecord {
     pub reason: Option<String>,
     /// Frames the window was moved to find the object still ([`MotionPolicy::Place`]).
     pub placed_by: usize,
+    /// What the decoder's verdict came to with the window's motion ([`judge`]; `None` when
+    /// decoding failed).
+    #[serde(default)]
+    pub verdict: Option<WindowVerdict>,
     /// Where the decoder's waveform timing came from.
     pub timing_source: TimingSource,
     /// Motion in the decoded frames.
@@ -331,14 +339,13 @@ struct Try {
     decoded: Result<Decoded, DemodError>,
     timing_source: TimingSource,
     motion: Option<MotionEstimate>,
+    verdict: Option<WindowVerdict>,
 }
 
 impl Try {
     /// Whether the try decoded and the decoder's verdict calls it plausible.
     fn is_plausible(&self) -> bool {
-        self.decoded
-            .as_ref()
-            .is_ok_and(|d| d.report.verdict.is_plausible())
+        self.verdict == Some(WindowVerdict::Plausible)
     }
 }
 
@@ -374,6 +381,13 @@ pub fn process(
     let mut stream = FrameStream::new(source, read_ahead, config.max_frames)?;
     let base = config.decode.start;
     let decoded_len = schedule.decoded();
+    // The verdict is applied here, with the window's motion ([`judge`]).
+    let force = config.decode.on_implausible == OnImplausible::Keep;
+    let decode_config = DecodeConfig {
+        on_implausible: OnImplausible::Keep,
+        ..config.decode.clone()
+    };
+    let code_map = CodeMap::new(&format, config.decode.linearize).map_err(VideoError::Decode)?;
     let place_step = config.motion.place_step.max(1);
     let mut summary = VideoSummary {
         camera_frames: 0,
@@ -396,7 +410,8 @@ pub fn process(
         let mut offset = 0;
         loop {
             let start = scheduled + offset;
-            let needed = start + schedule.drop..start + schedule.window;
+            // The whole window: the dropped frames serve the period-difference motion test.
+            let needed = start..start + schedule.window;
             let Some(window) = stream.window(needed)? else {
                 if k == 0 && best.is_none() {
                     return Err(too_short(&mut stream, base, schedule));
@@ -407,10 +422,10 @@ pub fn process(
                 break;
             };
             let time = Instant::now();
+            let decoded_frames = schedule.drop..schedule.drop + decoded_len;
             let (decoded, timing_source) =
-                carry.decode(&window.samples[..decoded_len], &format, &config.decode);
+                carry.decode(&window.samples[decoded_frames], &format, &decode_config);
             timing.decode_ms += time.elapsed().as_secs_f64() * 1e3;
-            timing.read_ms += stream.take_waited().as_secs_f64() * 1e3;
             // A setting wrong for the stream fails every window alike: stop at once.
             let decoded = match decoded {
                 Err(error @ (DemodError::InvalidConfig(_) | DemodError::Capture(_))) => {
@@ -419,16 +434,28 @@ pub fn process(
                 other => other,
             };
             let time = Instant::now();
-            let motion = decoded
+            let motion = decoded.as_ref().ok().map(|d| {
+                let frames = PeriodFrames {
+                    frames: window.samples,
+                    map: &code_map,
+                    width: format.width,
+                    roi: config.decode.roi,
+                    period: 1usize << (d.report.leds + 1),
+                };
+                detect_motion(d, Some(&frames), &config.motion)
+            });
+            let verdict = decoded
                 .as_ref()
                 .ok()
-                .map(|d| detect_motion(d, &config.motion));
+                .map(|d| judge::judge(d, motion.as_ref(), force));
             timing.motion_ms += time.elapsed().as_secs_f64() * 1e3;
+            timing.read_ms += stream.take_waited().as_secs_f64() * 1e3;
             let attempt = Try {
                 start,
                 decoded,
                 timing_source,
                 motion,
+                verdict,
             };
             // A window cut across a sudden change of pose raises every pixel's residual alike,
             // so its relative motion score can look still: only a plausible decode counts.
@@ -549,6 +576,7 @@ fn reconstruct_window(
         status: FrameStatus::Failed,
         reason: None,
         placed_by: chosen.start - scheduled,
+        verdict: chosen.verdict,
         timing_source: chosen.timing_source,
         motion: chosen.motion,
         decode: None,
@@ -568,7 +596,14 @@ fn reconstruct_window(
             });
         }
     };
-    record.decode = Some(DecodeQuality::of(&decoded));
+    let mut quality = DecodeQuality::of(&decoded);
+    // The decoder kept every decode for the judgement; record what it came to.
+    quality.verdict.status = match chosen.verdict {
+        Some(WindowVerdict::Plausible) => VerdictStatus::Plausible,
+        Some(WindowVerdict::Forced) => VerdictStatus::Overridden,
+        _ => VerdictStatus::Implausible,
+    };
+    record.decode = Some(quality);
     let shape = decoded.leds.shape().unwrap_or((0, 0));
     if shape != (rig.camera.height, rig.camera.width) {
         return Err(VideoError::Rig(format!(
@@ -577,9 +612,37 @@ fn reconstruct_window(
             rig.camera.width, rig.camera.height, shape.1, shape.0
         )));
     }
-    if config.motion.policy == MotionPolicy::Skip && chosen.motion.is_some_and(|m| m.moving) {
+    if chosen.verdict == Some(WindowVerdict::Refused) {
+        let verdict = &decoded.report.verdict;
+        record.reason = Some(format!(
+            "the decode is implausible and the window's motion does not explain it: {} (try: \
+             {}; --force keeps such windows)",
+            verdict.problems.join("; "),
+            verdict.advice.join("; ")
+        ));
+        record.timing = timing;
+        return Ok(Outcome {
+            record,
+            decoded: Some(decoded),
+            reconstruction: None,
+        });
+    }
+    let moving = chosen.motion.is_some_and(|m| m.moving);
+    record.reason = match (moving, chosen.verdict) {
+        (_, Some(WindowVerdict::Forced)) => Some(format!(
+            "the decode is implausible ({}) and was kept on request (--force)",
+            decoded.report.verdict.problems.join("; ")
+        )),
+        (true, Some(WindowVerdict::Motion)) => Some(
+            "the object moved during the window (the modulation its decode leaves unexplained \
+             is within the motion's energy)"
+                .into(),
+        ),
+        (true, _) => Some("the object moved during the window".into()),
+        (false, _) => None,
+    };
+    if config.motion.policy == MotionPolicy::Skip && moving {
         record.status = FrameStatus::Skipped;
-        record.reason = Some("the object moved during the window".into());
         record.timing = timing;
         return Ok(Outcome {
             record,
