@@ -37,8 +37,8 @@ const EARLY_PASS_REWEIGHTINGS: usize = 8;
 
 /// Bilateral stiffness k of reconstructions. Stiffer than the paper's 2: on Suzanne (out-of-plane
 /// rig, through `meb reconstruct`) k = 2, 5, 8, 10, 13, 20 gave a depth RMSE of 6.72, 6.12,
-/// 5.68, 5.11, 5.51, 5.33 mm before two-LED pixels used the albedo; with it k = 10 gives 4.86 /
-/// 3.86 / 4.44 / 3.65 mm on simulator seeds 1–4 (other k not re-measured). Plain normal
+/// 5.68, 5.11, 5.51, 5.33 mm before two-LED pixels used the albedo; with it k = 10 gives 3.97 /
+/// 4.02 / 4.78 / 3.46 mm on simulator seeds 1–4 (other k not re-measured). Plain normal
 /// integration keeps the paper's k, which leans less on smooth curved surfaces (Quéau's vase:
 /// NRMSE 0.35 % at k = 2, 0.67 % at k = 10).
 const BILATERAL_STIFFNESS: f64 = 10.0;

@@ -14,9 +14,14 @@
 //! lets integrability pick the side: after each depth solve a two-LED pixel takes the normal of
 //! its circle with that albedo on the side of the point that fits the depth
 //! ([`NormalPlane::with_albedo`]; Hernández, Vogiatzis & Cipolla, "Shadows in three-source
-//! photometric stereo", ECCV 2008). On Suzanne (out-of-plane rig, bilateral integrator) this took
-//! the depth RMSE of simulator seeds 1–4 from 5.24 / 4.53 / 5.69 / 5.23 mm to 4.86 / 3.86 /
-//! 4.44 / 3.65 mm.
+//! photometric stereo", ECCV 2008). The albedo step starts only once the alternation without it
+//! has settled (or used half its passes): a flat face fits either mirror image equally well, so a
+//! side picked from slopes filled in from the neighbouring faces would never change. On the ToF
+//! hybrid scene's cube, whose third face is 43 % two-LED, picking the side at the start left
+//! 41–57 % of that face's two-LED pixels on the wrong side (placed RMSE 16.5 / 22.1 mm on the
+//! two test seeds); from the settled depth 5–8 % are (6.5 / 4.2 mm; 6.7 / 7.5 mm without the
+//! albedo). On Suzanne (out-of-plane rig, bilateral integrator) the albedo takes the depth RMSE
+//! of simulator seeds 1–4 from 5.24 / 4.53 / 5.69 / 5.23 mm to 3.97 / 4.02 / 4.78 / 3.46 mm.
 //!
 //! Holes (pixels lit by fewer than two LEDs that the object surrounds) get slopes interpolated
 //! from their surroundings by push–pull ([`inpaint`]) and a low weight, so the integrator bridges

@@ -567,7 +567,7 @@ fn solve_window(
     };
     for (k, plane) in &planes {
         if let Some(s) = on_circle(plane, slopes[*k]) {
-            slopes[*k] = with_albedo(plane, s);
+            slopes[*k] = s;
         }
     }
     let confidence: Vec<f64> = topology
@@ -609,6 +609,7 @@ fn solve_window(
     let mut previous_energy: Option<f64> = None;
     // Reweighting passes need solves only as exact as the weights are settled (inexact IRLS).
     let mut solve_tolerance = config.tolerance;
+    let mut use_albedo = false;
     for pass in 0..passes_allowed {
         passes = pass + 1;
         let sides = if bilateral && (pass > 0 || warm.is_some()) {
@@ -622,7 +623,7 @@ fn solve_window(
             if let Some(s) = coverage::slopes_on_line(&topology, &x, *k, &sides[*k], step, line)
                 .and_then(|s| on_circle(plane, s))
             {
-                slopes[*k] = with_albedo(plane, s);
+                slopes[*k] = if use_albedo { with_albedo(plane, s) } else { s };
             }
         }
         if passes_allowed == 1 {
@@ -639,7 +640,19 @@ fn solve_window(
         } else {
             config.coverage.tolerance
         };
-        if relative.is_some_and(|r| r < tolerance) {
+        let settled = relative.is_some_and(|r| r < tolerance);
+        // The albedo's side is taken from the depth once the free alternation has settled
+        // (or used half its passes): a flat face fits either mirror image, so a side picked
+        // from the slopes filled in from other faces would stay.
+        if !use_albedo && (settled || 2 * passes >= passes_allowed) {
+            use_albedo = true;
+            previous_energy = None;
+            for (k, plane) in &planes {
+                slopes[*k] = with_albedo(plane, slopes[*k]);
+            }
+            continue;
+        }
+        if settled {
             break;
         }
     }
