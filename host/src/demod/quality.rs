@@ -52,6 +52,14 @@ pub struct LedQuality {
     pub gain_uncertainty: f64,
 }
 
+impl LedQuality {
+    /// Whether the fit leaves more of this LED's modulation unexplained than the verdict
+    /// accepts (above [`MAX_UNEXPLAINED`] noise levels and [`MAX_UNEXPLAINED_FRACTION`]).
+    pub fn leaves_modulation_unexplained(&self) -> bool {
+        self.unexplained > MAX_UNEXPLAINED && self.unexplained_fraction > MAX_UNEXPLAINED_FRACTION
+    }
+}
+
 /// Whether a decode can be trusted.
 #[derive(Debug, Clone, Copy, Default, PartialEq, Eq, Serialize, Deserialize)]
 #[serde(rename_all = "lowercase")]
@@ -319,7 +327,7 @@ pub fn judge(quality: &[LedQuality], fit: &TimingFit) -> Verdict {
             advise("check that every LED is on and lights the scene, or decode fewer LEDs");
             continue;
         }
-        if q.unexplained > MAX_UNEXPLAINED && q.unexplained_fraction > MAX_UNEXPLAINED_FRACTION {
+        if q.leaves_modulation_unexplained() {
             problems.push(format!(
                 "the fitted waveform leaves {:.2} % of LED {led}'s modulation unexplained \
                  ({:.1} noise levels)",

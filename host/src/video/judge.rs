@@ -22,7 +22,6 @@
 
 use super::motion::MotionEstimate;
 use crate::demod::Decoded;
-use crate::demod::quality::{MAX_UNEXPLAINED, MAX_UNEXPLAINED_FRACTION};
 use serde::{Deserialize, Serialize};
 
 /// What a window's decode verdict comes to in a video.
@@ -64,9 +63,7 @@ pub fn judge(decoded: &Decoded, motion: Option<&MotionEstimate>, force: bool) ->
         .per_led
         .iter()
         .map(|led| &led.quality)
-        .filter(|q| {
-            q.unexplained > MAX_UNEXPLAINED && q.unexplained_fraction > MAX_UNEXPLAINED_FRACTION
-        })
+        .filter(|q| q.leaves_modulation_unexplained())
         .map(|q| q.unexplained)
         .collect();
     let only_unexplained =
@@ -81,7 +78,7 @@ pub fn judge(decoded: &Decoded, motion: Option<&MotionEstimate>, force: bool) ->
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::demod::quality::Verdict;
+    use crate::demod::quality::{MAX_UNEXPLAINED, Verdict};
     use crate::demod::{LedQuality, LedReport};
     use crate::types::LedImages;
     use ndarray::Array2;
