@@ -39,7 +39,7 @@ use criterion::{BatchSize, Criterion, criterion_group, criterion_main};
 use meb::capture::memory::MemorySource;
 use meb::capture::{Frame, FrameFormat, FrameSource, Samples};
 use meb::demod::DecodeConfig;
-use meb::reconstruct::from_decoded;
+use meb::reconstruct::{WarmStart, from_decoded, from_decoded_warm};
 use meb::rig::Rig;
 use meb::simulate::{Scene, SceneObject, SimConfig, SimulatedCapture, Spin};
 use meb::video::decode::decode_frames;
@@ -47,7 +47,7 @@ use meb::video::{VideoConfig, process};
 use nalgebra::Vector3;
 use std::hint::black_box;
 
-/// 40 frames of the turning ellipsoid on the thesis-dynamic rig.
+/// 80 frames (two thesis windows) of the turning ellipsoid on the thesis-dynamic rig.
 fn clip() -> Option<(Rig, FrameFormat, Vec<Frame>)> {
     let rig = Rig::preset("thesis-dynamic")?;
     let mut object = SceneObject::ellipsoid([100.0, 60.0, 60.0]);
@@ -56,7 +56,7 @@ fn clip() -> Option<(Rig, FrameFormat, Vec<Frame>)> {
         rpm: 7.5,
     });
     let config = SimConfig {
-        frames: 40,
+        frames: 80,
         ..SimConfig::default()
     };
     let mut capture = SimulatedCapture::new(rig.clone(), Scene::single(object), config).ok()?;
@@ -84,10 +84,50 @@ fn bench(c: &mut Criterion) {
         exposure: Some(decoded.report.exposure),
         ..config.decode.clone()
     };
-    // The per-stage profile of one reconstruction, printed once (criterion times the whole).
-    if let Ok(reconstruction) = from_decoded(&decoded, &rig, None, &config.reconstruct) {
+    let second_frames: Vec<Samples> = frames[44..76].iter().map(|f| f.samples.clone()).collect();
+    let Ok(second) = decode_frames(&second_frames, &format, &carried) else {
+        eprintln!("the second window does not decode");
+        return;
+    };
+    // The per-stage profile of one reconstruction, cold and warm, printed once (criterion times
+    // the whole).
+    let Ok(first) = from_decoded(&decoded, &rig, None, &config.reconstruct) else {
+        eprintln!("the first window does not reconstruct");
+        return;
+    };
+    let warm = WarmStart::of(&first);
+    let profile = |name: &str, reconstruction: &meb::reconstruct::Reconstruction| {
+        eprintln!("{name}: {:?}", reconstruction.start);
         for stage in &reconstruction.timings {
             eprintln!("stage {:>8.1} ms  {}", stage.ms, stage.stage);
+        }
+    };
+    profile("first window, cold", &first);
+    let warm_second = from_decoded_warm(&second, &rig, None, &config.reconstruct, Some(&warm));
+    let cold_second = from_decoded(&second, &rig, None, &config.reconstruct);
+    if let (Ok(warm_second), Ok(cold_second)) = (&warm_second, &cold_second) {
+        profile("second window, warm", warm_second);
+        profile("second window, cold", cold_second);
+        // How far the warm result lies from the cold one (the accuracy is 0.5–1 mm).
+        let (a, b) = (
+            &warm_second.integration.depth.depth_mm,
+            &cold_second.integration.depth.depth_mm,
+        );
+        let mut diff: Vec<f32> = a
+            .iter()
+            .zip(b)
+            .filter(|(x, y)| x.is_finite() && y.is_finite())
+            .map(|(x, y)| (x - y).abs())
+            .collect();
+        diff.sort_by(f32::total_cmp);
+        if !diff.is_empty() {
+            let rms = (diff.iter().map(|d| d * d).sum::<f32>() / diff.len() as f32).sqrt();
+            eprintln!(
+                "warm vs cold, second window: median {:.3} mm, 90 % {:.3} mm, RMS {rms:.3} mm over {} pixels",
+                diff[diff.len() / 2],
+                diff[diff.len() * 9 / 10],
+                diff.len()
+            );
         }
     }
     let mut group = c.benchmark_group("video_1280x720");
@@ -95,7 +135,9 @@ fn bench(c: &mut Criterion) {
     group.bench_function("window", |b| {
         b.iter_batched(
             || -> Box<dyn FrameSource> {
-                Box::new(MemorySource::new(format.clone(), frames.clone()).expect("frames fit"))
+                Box::new(
+                    MemorySource::new(format.clone(), frames[..40].to_vec()).expect("frames fit"),
+                )
             },
             |source| black_box(process(source, &rig, &config, None, &mut |_| Ok(())).ok()),
             BatchSize::PerIteration,
@@ -109,6 +151,11 @@ fn bench(c: &mut Criterion) {
     });
     group.bench_function("reconstruct", |b| {
         b.iter(|| black_box(from_decoded(&decoded, &rig, None, &config.reconstruct).ok()))
+    });
+    group.bench_function("window_warm", |b| {
+        b.iter(|| {
+            black_box(from_decoded_warm(&second, &rig, None, &config.reconstruct, Some(&warm)).ok())
+        })
     });
     group.finish();
 }
