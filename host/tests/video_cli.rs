@@ -190,8 +190,15 @@ fn the_turning_ellipsoid_is_scored_frame_by_frame_within_the_thesis_accuracy() {
     ]);
     let cold_json = video_json(&cold);
     for (k, (warm, cold)) in records.iter().zip(frames(&cold_json)).enumerate() {
-        let start = &warm["reconstruction"]["start"]["kind"];
-        assert_eq!(*start, if k == 0 { "cold" } else { "warm" }, "{warm}");
+        // The first window has nothing to start from; a later one is warm-started, or redone
+        // cold when its offset left the warm start's bracket (it does in one window of five:
+        // the offset the misfit picks jitters by millimetres from window to window).
+        let start = &warm["reconstruction"]["start"];
+        match (k, start["kind"].as_str().unwrap()) {
+            (0, "cold") | (1.., "warm") => {}
+            (1.., "redone") => assert!(start["reason"].as_str().unwrap().contains("mm")),
+            _ => panic!("3-D frame {k} started {start}"),
+        }
         assert_eq!(cold["reconstruction"]["start"]["kind"], "cold", "{cold}");
         let rmse = |r: &serde_json::Value| r["accuracy"]["rmse_mm"].as_f64().unwrap();
         eprintln!(
