@@ -20,7 +20,15 @@
 //! offset search 45–93 ms per pass: the ±4 mm bracket and 5 000 pixels instead of the 13-sample
 //! scan of ±60 mm over 20 000). The RMS never settled below 0.05 mm because the steep rim's
 //! depths swing by millimetres from pass to pass; the passes now stop on the median change.
-//! Criterion figures with the final code were not taken (no quiet machine in this session).
+//! That does not settle either: on the 320×180 ellipsoid of `video_cli` the warm windows still
+//! ran 4, 4 and 3 passes, because each pass's offset search moves the whole part by a few
+//! tenths of a mm, and successive windows' offsets differ by a median 3.2–3.9 mm (one window in
+//! five left the ±4 mm bracket and was redone cold). Per pass the warm offset search is about
+//! half the cold one's (5.6–11 ms against 10–26 ms there); photometric stereo and integration
+//! cost the same warm or cold, so a warm window is not faster yet. Next: stop on the change of
+//! shape (the median change after removing the median offset) and keep the offset per part
+//! from window to window unless the misfit clearly prefers another. Criterion figures with the
+//! final code were not taken (no quiet machine in this session).
 //!
 //! Measured on the shared 2-core machine while other helpers were building (criterion, 10
 //! samples; medians with the low–high estimates), far from the 40 ms target:
