@@ -608,7 +608,10 @@ fn y4m_and_raw_frames_are_read_into_the_same_storage() {
     )
     .unwrap();
     let (got, reused) = read_reusing(&mut Y4mSource::open(&path, None).unwrap());
-    assert!(reused, "every 8-bit frame read into the first frame's storage");
+    assert!(
+        reused,
+        "every 8-bit frame read into the first frame's storage"
+    );
     let expected: Vec<Samples> = (0..5).map(|f| Samples::U8(pattern8(f))).collect();
     assert_eq!(got, expected);
     let path = tmp.path().join("c420p10.y4m");
@@ -625,12 +628,17 @@ fn y4m_and_raw_frames_are_read_into_the_same_storage() {
     )
     .unwrap();
     let (got, reused) = read_reusing(&mut Y4mSource::open(&path, None).unwrap());
-    assert!(reused, "every 10-bit frame read into the first frame's storage");
+    assert!(
+        reused,
+        "every 10-bit frame read into the first frame's storage"
+    );
     let expected: Vec<Samples> = (0..4).map(|f| Samples::U16(pattern16(f, 1023))).collect();
     assert_eq!(got, expected);
     // Raw 16-bit frames from a file.
     let path = tmp.path().join("frames.raw");
-    let raw: Vec<u8> = (0..3).flat_map(|f| le_bytes(&pattern16(f, 65535))).collect();
+    let raw: Vec<u8> = (0..3)
+        .flat_map(|f| le_bytes(&pattern16(f, 65535)))
+        .collect();
     std::fs::write(&path, raw).unwrap();
     let layout = RawLayout {
         width: W,
@@ -646,7 +654,10 @@ fn y4m_and_raw_frames_are_read_into_the_same_storage() {
     )
     .unwrap();
     let (got, reused) = read_reusing(source.as_mut());
-    assert!(reused, "every raw frame read into the first frame's storage");
+    assert!(
+        reused,
+        "every raw frame read into the first frame's storage"
+    );
     let expected: Vec<Samples> = (0..3).map(|f| Samples::U16(pattern16(f, 65535))).collect();
     assert_eq!(got, expected);
 }

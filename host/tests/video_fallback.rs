@@ -94,7 +94,10 @@ fn without_ffmpeg_the_videos_are_animated_pngs_and_video_json_says_why() {
     assert_eq!(json["summary"]["reconstructed"], 3, "{:#}", json["frames"]);
     for name in ["depth.png", "shaded.png"] {
         let (frames, size) = apng_frames(&out.join(name));
-        assert_eq!(frames as usize, windows, "{name}: one picture per 3-D frame");
+        assert_eq!(
+            frames as usize, windows,
+            "{name}: one picture per 3-D frame"
+        );
         assert_eq!(size, (160, 90), "{name}");
     }
     let names: Vec<String> = std::fs::read_dir(&out)
@@ -102,7 +105,9 @@ fn without_ffmpeg_the_videos_are_animated_pngs_and_video_json_says_why() {
         .map(|e| e.unwrap().file_name().to_string_lossy().into_owned())
         .collect();
     assert!(
-        !names.iter().any(|n| n.ends_with(".mp4") || n.starts_with('.')),
+        !names
+            .iter()
+            .any(|n| n.ends_with(".mp4") || n.starts_with('.')),
         "no MP4 and no leftover picture folders: {names:?}"
     );
 }

@@ -260,12 +260,12 @@ fn fill(
         return Ok(got);
     }
     buf.clear();
-    std::io::Read::read_to_end(&mut std::io::Read::take(reader, len as u64), buf).map_err(|source| {
-        CaptureError::Io {
+    std::io::Read::read_to_end(&mut std::io::Read::take(reader, len as u64), buf).map_err(
+        |source| CaptureError::Io {
             path: path.to_path_buf(),
             source,
-        }
-    })
+        },
+    )
 }
 
 pub mod ffmpeg;

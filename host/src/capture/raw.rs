@@ -108,7 +108,6 @@ impl<R: Read> RawSource<R> {
             scratch: Vec::new(),
         })
     }
-
 }
 
 impl<R: Read + Send> FrameSource for RawSource<R> {

@@ -285,6 +285,72 @@ mod tests {
         assert_eq!(stream.received(), 100);
     }
 
+    /// Frames of two samples that count how often a frame needed new storage.
+    struct CountingSource {
+        format: FrameFormat,
+        next: usize,
+        frames: usize,
+        allocations: std::sync::Arc<std::sync::atomic::AtomicUsize>,
+    }
+
+    impl FrameSource for CountingSource {
+        fn format(&self) -> &FrameFormat {
+            &self.format
+        }
+
+        fn next_frame(&mut self) -> Result<Option<Frame>, CaptureError> {
+            let mut samples = Samples::U8(Vec::new());
+            Ok(self
+                .read_frame_into(&mut samples)?
+                .map(|index| Frame { index, samples }))
+        }
+
+        fn read_frame_into(
+            &mut self,
+            samples: &mut Samples,
+        ) -> Result<Option<usize>, CaptureError> {
+            if self.next == self.frames {
+                return Ok(None);
+            }
+            match samples {
+                Samples::U8(v) if v.capacity() >= 2 => {
+                    v.clear();
+                    v.extend([self.next as u8, 0]);
+                }
+                _ => {
+                    self.allocations
+                        .fetch_add(1, std::sync::atomic::Ordering::Relaxed);
+                    *samples = Samples::U8(vec![self.next as u8, 0]);
+                }
+            }
+            self.next += 1;
+            Ok(Some(self.next - 1))
+        }
+    }
+
+    #[test]
+    fn dropped_frames_lend_their_storage_to_the_next() {
+        let allocations = std::sync::Arc::new(std::sync::atomic::AtomicUsize::new(0));
+        let source = CountingSource {
+            format: FrameFormat::full_range(2, 1, 8, 100.0),
+            next: 0,
+            frames: 200,
+            allocations: allocations.clone(),
+        };
+        let mut stream = FrameStream::new(Box::new(source), 4, None).unwrap();
+        for k in 0..24 {
+            let range = 8 * k..8 * k + 8;
+            let window = stream.window(range.clone()).unwrap().unwrap();
+            assert_eq!(
+                first_samples(&window),
+                range.map(|i| i as u8).collect::<Vec<_>>()
+            );
+        }
+        let made = allocations.load(std::sync::atomic::Ordering::Relaxed);
+        // One window in the ring, the read-ahead in the channel, one being read.
+        assert!(made <= 8 + 4 + 2, "{made} frames allocated for 192 read");
+    }
+
     #[test]
     fn a_limit_stops_the_stream() {
         let mut stream = FrameStream::new(source(100), 2, Some(10)).unwrap();
