@@ -11,20 +11,7 @@
 use std::path::Path;
 
 mod common;
-use common::{OUT_OF_PLANE_LEDS, run_ok};
-
-/// The thesis' dynamic rig (1000 fps, out-of-plane LEDs, 43° at 420 mm) at 640×360.
-fn rig(dir: &Path) -> String {
-    let mut toml = "[camera]\nwidth = 640\nheight = 360\nfps = 1000.0\ndistance_mm = 420.0\n\
-                    fov_deg = 43.0\n"
-        .to_string();
-    for [x, y, z] in OUT_OF_PLANE_LEDS {
-        toml.push_str(&format!("[[led]]\nposition_mm = [{x:?}, {y:?}, {z:?}]\n"));
-    }
-    let path = dir.join("dynamic.toml");
-    std::fs::write(&path, toml).unwrap();
-    path.display().to_string()
-}
+use common::{dynamic_rig, run_ok};
 
 /// Surface fraction reconstructed and depth RMSE (mm) of the ellipsoid simulated with read
 /// noise `noise` (fraction of full scale).
@@ -71,7 +58,7 @@ fn ellipsoid_accuracy(dir: &Path, rig: &str, noise: &str) -> (f64, f64) {
 #[test]
 fn a_noise_free_capture_reconstructs_at_least_as_well_as_a_noisy_one() {
     let tmp = tempfile::tempdir().unwrap();
-    let rig = rig(tmp.path());
+    let rig = dynamic_rig(tmp.path(), 640, 360);
     let (clean_fraction, clean_rmse) = ellipsoid_accuracy(tmp.path(), &rig, "0");
     let (noisy_fraction, noisy_rmse) = ellipsoid_accuracy(tmp.path(), &rig, "0.005");
     let summary = format!(

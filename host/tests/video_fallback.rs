@@ -8,20 +8,7 @@ use std::path::Path;
 use std::process::Command;
 
 mod common;
-use common::{OUT_OF_PLANE_LEDS, run_ok, stderr_of};
-
-/// The thesis' dynamic rig (1000 fps, 43° at 420 mm) with a 160×90 camera.
-fn small_dynamic_rig(dir: &Path) -> String {
-    let mut toml = "[camera]\nwidth = 160\nheight = 90\nfps = 1000.0\ndistance_mm = 420.0\n\
-                    fov_deg = 43.0\n"
-        .to_string();
-    for [x, y, z] in OUT_OF_PLANE_LEDS {
-        toml.push_str(&format!("[[led]]\nposition_mm = [{x:?}, {y:?}, {z:?}]\n"));
-    }
-    let path = dir.join("dynamic.toml");
-    std::fs::write(&path, toml).unwrap();
-    path.display().to_string()
-}
+use common::{dynamic_rig, run_ok, stderr_of};
 
 /// Frames in an APNG and the size of its pictures.
 fn apng_frames(path: &Path) -> (u32, (u32, u32)) {
@@ -37,7 +24,7 @@ fn apng_frames(path: &Path) -> (u32, (u32, u32)) {
 #[test]
 fn without_ffmpeg_the_videos_are_animated_pngs_and_video_json_says_why() {
     let tmp = tempfile::tempdir().unwrap();
-    let rig = small_dynamic_rig(tmp.path());
+    let rig = dynamic_rig(tmp.path(), 160, 90);
     let clip = tmp.path().join("clip");
     let clip_arg = clip.display().to_string();
     run_ok(&[
