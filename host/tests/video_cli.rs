@@ -15,25 +15,11 @@ use std::path::{Path, PathBuf};
 use std::process::{Command, Stdio};
 
 mod common;
-use common::{OUT_OF_PLANE_LEDS, meb, run_ok};
+use common::{dynamic_rig, meb, run_ok};
 
 /// The thesis' dynamic rig at 160×90 pixels.
 fn small_dynamic_rig(dir: &Path) -> String {
     dynamic_rig(dir, 160, 90)
-}
-
-/// The thesis' dynamic rig with a `width` × `height` camera.
-fn dynamic_rig(dir: &Path, width: usize, height: usize) -> String {
-    let mut toml = format!(
-        "[camera]\nwidth = {width}\nheight = {height}\nfps = 1000.0\ndistance_mm = 420.0\n\
-         fov_deg = 43.0\n"
-    );
-    for [x, y, z] in OUT_OF_PLANE_LEDS {
-        toml.push_str(&format!("[[led]]\nposition_mm = [{x:?}, {y:?}, {z:?}]\n"));
-    }
-    let path = dir.join(format!("dynamic-{width}x{height}.toml"));
-    std::fs::write(&path, toml).unwrap();
-    path.display().to_string()
 }
 
 fn s(path: &Path) -> String {

@@ -215,6 +215,9 @@ pub fn run(args: &VideoArgs) -> Result<()> {
     {
         println!("video: {}", out.join(video).display());
     }
+    if let Some(reason) = &written.video_fallback {
+        eprintln!("note: {reason} (install FFmpeg for MP4 videos)");
+    }
     println!("wrote {}", out.join("video.json").display());
     if summary.end == EndKind::Cut {
         bail!(
