@@ -9,9 +9,13 @@ mod tof_common;
 use common::{arg as path, refused, run_ok};
 use meb::export::files::{read_float, read_mask, write_npy};
 use meb::rig::Rig;
+use meb::simulate::geometry::SurfaceMap;
+use meb::simulate::lighting::{default_gain, led_images};
 use meb::simulate::tof::camera_labels;
 use meb::tof::Calibration;
 use ndarray::{Array1, Array2, Array3, Ix2};
+use rand::SeedableRng;
+use rand_distr::{Distribution, Normal};
 use std::path::Path;
 use tof_common::{BOARD_HEIGHTS, board, board_images, board_range, hybrid_capture, rig};
 
@@ -120,7 +124,18 @@ fn range_calibrate_and_segment_the_hybrid_scene() {
         assert!(plane.rms_px <= 0.5, "{}", plane.rms_px);
     }
 
-    // Masks: one per object, against the objects' true camera pixels.
+    // Masks: one per object, against the objects' true camera pixels, their edges snapped to
+    // the camera's total intensity (the LED images' sum, 1 % noise).
+    let map = SurfaceMap::render(&hybrid.scene, &rig.camera, 0.0);
+    let total = led_images(&map, &rig, default_gain(&rig, 0.8))
+        .into_iter()
+        .reduce(|a, b| a + b)
+        .unwrap();
+    let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(4);
+    let noise = Normal::new(0.0, 0.01).unwrap();
+    let total = total.mapv(|v| v + noise.sample(&mut rng) as f32);
+    let image = dir.path().join("total.npy");
+    write_npy(&image, &total).unwrap();
     let mask_dir = dir.path().join("masks");
     run_ok(&[
         "tof",
@@ -129,9 +144,31 @@ fn range_calibrate_and_segment_the_hybrid_scene() {
         "--calibration",
         path(&cal_dir),
         "--segment",
+        "--image",
+        path(&image),
         "--out",
         path(&mask_dir),
     ]);
+    // An image of another size is refused and writes nothing.
+    let small = dir.path().join("small_total.npy");
+    write_npy(&small, &Array2::<f32>::zeros((108, 192))).unwrap();
+    let refused_dir = dir.path().join("masks_small");
+    refused(
+        &[
+            "tof",
+            "mask",
+            path(&range_dir),
+            "--calibration",
+            path(&cal_dir),
+            "--segment",
+            "--image",
+            path(&small),
+            "--out",
+            path(&refused_dir),
+        ],
+        &refused_dir,
+        "is 192x108 but the calibration is for 384x216",
+    );
     let truth = camera_labels(&hybrid.scene, &hybrid.groups, &rig.camera);
     let objects = hybrid.names.len();
     for k in 0..objects {
@@ -162,7 +199,8 @@ fn range_calibrate_and_segment_the_hybrid_scene() {
             100.0 * coverage
         );
         assert_eq!(foreign, 0, "{}", hybrid.names[k]);
-        assert!(coverage >= 0.9, "{}: {coverage}", hybrid.names[k]);
+        // The aim: at least 98 % of each object's pixels.
+        assert!(coverage >= 0.98, "{}: {coverage}", hybrid.names[k]);
     }
     assert!(!mask_dir.join(format!("mask_{}.png", objects + 1)).exists());
     let labels =
@@ -288,13 +326,13 @@ fn range_calibrate_and_segment_the_hybrid_scene() {
     );
 }
 
-/// Absolute depth bounds per object of the hybrid chain, mm (no offset removed). Measured
-/// fused through the binary: sphere 0.43, head 0.54, cube 0.90 mm (the library test
-/// `tof_hybrid`, on LED images with 1 % noise: 0.44, 0.54, 0.94 mm, and 0.58, 0.78, 0.85 mm on
-/// other seeds), with the pooled per-pixel reference board `meb simulate --tof` writes. The
-/// sphere's bound is the aim (thesis 2.06 mm / 4); the cube's aim (3.6 mm / 4 = 0.9 mm) is met
-/// here but not on every seed, so its bound is 1.0 mm.
-const FUSED_BOUND_MM: [f64; 3] = [0.52, 0.65, 1.0];
+/// Absolute depth bounds per object of the hybrid chain, mm (no offset removed): the aims
+/// (thesis 2.06 mm / 4 for the sphere, 3.6 mm / 4 for the cube; the head no worse than before
+/// its offset came from the ToF pixels' own ranges). Measured fused through the binary: sphere
+/// 0.42, head 0.32, cube 0.84 mm (the library test `tof_hybrid`, on LED images with 1 % noise:
+/// 0.43, 0.31, 0.85 mm and 0.41, 0.73, 0.82 mm on another seed), with the pooled per-pixel
+/// reference board `meb simulate --tof` writes.
+const FUSED_BOUND_MM: [f64; 3] = [0.52, 0.6, 0.9];
 
 /// Share of each object's true pixels with a fused depth. Photometric stereo needs three lit
 /// LEDs; the LEDs, 150–350 mm above the objects, light 70 % of the sphere's pixels, 74 % of the

@@ -79,6 +79,8 @@ struct ObjectRow {
     fused_to_tof_rms_mm: f64,
     /// Conjugate-gradient iterations of the fusion.
     fusion_iterations: usize,
+    /// Offset moved onto the ToF pixels' own ranges after the fusion, and their tilt.
+    rigid: meb::tof::rigid::RigidCorrection,
     /// Absolute depth error against the ground truth (no offset removed).
     #[serde(skip_serializing_if = "Option::is_none")]
     truth: Option<TruthRow>,
@@ -168,6 +170,7 @@ pub fn run(dir: &Path, tof: &TofInputs, report: &ObjectReport) -> Result<Vec<Str
             position_pixels: object.fused.prior_pixels,
             fused_to_tof_rms_mm: object.fused.rms_to_prior_mm,
             fusion_iterations: object.fused.iterations,
+            rigid: object.rigid,
             truth: truth_row,
         });
     }

@@ -4,6 +4,7 @@
 
 use anyhow::{Context, Result, ensure};
 use clap::{Args, Subcommand};
+use meb::demod::output::read_decode_dir;
 use meb::export::files::{FilesError, preview, read_float, write_mask, write_npy};
 use meb::tof::calibration::{BoardView, Calibration};
 use meb::tof::chequerboard::{BoardSize, find_corners, require_corner_detector};
@@ -12,6 +13,7 @@ use meb::tof::mask::{Layer, MaskConfig, interval_mask};
 use meb::tof::{
     Histograms, RangeConfig, Reference, TimingMode, estimate_range, write_range_folder,
 };
+use meb::types::LedImages;
 use ndarray::{Array2, Ix2};
 use std::path::{Path, PathBuf};
 
@@ -43,7 +45,8 @@ pub struct RangeArgs {
     #[arg(long)]
     reference: PathBuf,
     /// Output folder (range.npy, sigma.npy, confidence.npy, signal.npy, background.npy,
-    /// correlation.npy, range.png, range.json), replaced whole and atomically.
+    /// correlation.npy, samples.npy, raw_range.npy, raw_sigma.npy, range.png, range.json),
+    /// replaced whole and atomically.
     #[arg(long)]
     out: PathBuf,
     #[arg(long, help = super::common::FORCE_HELP)]
@@ -122,6 +125,12 @@ pub struct MaskArgs {
     /// With --segment: also keep layers touching the image border (usually the background).
     #[arg(long)]
     include_border: bool,
+    /// With --segment: the camera's images, whose edges the masks' boundaries snap to (within
+    /// ±1 ToF pixel, as `meb reconstruct --tof` does): a `meb decode` folder (every LED
+    /// image) or comma-separated H×W .npy images of the camera's size (e.g. the total
+    /// intensity).
+    #[arg(long, requires = "segment", value_name = "DECODE_DIR|A.npy,B.npy")]
+    image: Option<String>,
     /// Output folder (mask.png, or mask_1.png… and labels.npy with --segment; masks.json),
     /// replaced whole and atomically.
     #[arg(long)]
@@ -315,7 +324,18 @@ fn mask(args: &MaskArgs) -> Result<()> {
                 include_border_layers: args.include_border,
                 ..HybridConfig::default()
             };
-            object_masks(None, calibration.camera_size, &range, &calibration, &config)?
+            let images = args
+                .image
+                .as_deref()
+                .map(|spec| read_edge_images(spec, calibration.camera_size))
+                .transpose()?;
+            object_masks(
+                images.as_ref(),
+                calibration.camera_size,
+                &range,
+                &calibration,
+                &config,
+            )?
         }
     };
     let dir = folder.path();
@@ -354,6 +374,36 @@ fn mask(args: &MaskArgs) -> Result<()> {
     }
     println!("masks → {}", written.display());
     Ok(())
+}
+
+/// The camera images of `--image`: a `meb decode` folder or comma-separated .npy files, each
+/// checked against the calibration's camera size [width, height].
+fn read_edge_images(spec: &str, camera_size: [usize; 2]) -> Result<LedImages> {
+    let [width, height] = camera_size;
+    let folder = Path::new(spec);
+    let images = if folder.is_dir() {
+        read_decode_dir(folder)
+            .with_context(|| format!("--image {spec}: reading the `meb decode` folder"))?
+            .leds
+    } else {
+        let images = spec
+            .split(',')
+            .map(|file| {
+                read_float::<Ix2>(Path::new(file.trim()), &[None, None])
+                    .with_context(|| format!("--image {file}"))
+            })
+            .collect::<Result<Vec<_>>>()?;
+        LedImages { images }
+    };
+    for (k, image) in images.images.iter().enumerate() {
+        let (rows, cols) = image.dim();
+        ensure!(
+            (cols, rows) == (width, height),
+            "--image {spec}: image {} is {cols}x{rows} but the calibration is for {width}x{height} camera images (give the camera images the calibration was made for)",
+            k + 1
+        );
+    }
+    Ok(images)
 }
 
 /// Loads a calibration: a `meb tof calibrate` folder or its calibration.toml.

@@ -2,7 +2,8 @@
 //! SPAD camera → range map ([`range`]), chequerboard calibration between the SPAD and the
 //! photometric-stereo camera ([`chequerboard`], [`calibration`]), per-object masks in the PS
 //! camera's pixels ([`mask`]), range maps on disk ([`range_folder`]), and per-object
-//! reconstruction placed at, and fused with, the absolute ToF range ([`hybrid`]; the fusion is Nehab, Rusinkiewicz, Davis & Ramamoorthi,
+//! reconstruction placed at, and fused with, the absolute ToF range ([`hybrid`], its offset
+//! and tilt from the ToF by [`rigid`]; the fusion is Nehab, Rusinkiewicz, Davis & Ramamoorthi,
 //! "Efficiently combining positions and normals for precise 3D geometry", SIGGRAPH 2005, solved
 //! by [`crate::integrate::fusion`]).
 //!
@@ -18,6 +19,7 @@ pub mod layer_smoothing;
 pub mod mask;
 pub mod range;
 pub mod range_folder;
+pub mod rigid;
 
 pub use calibration::{BoardView, Calibration, CalibrationPlane};
 pub use histogram::{Histograms, Reference};

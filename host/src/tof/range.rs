@@ -236,6 +236,13 @@ pub struct RangeMap {
     /// pixel's share of the information is 1/(samples·σ²), so summing the weights of
     /// neighbouring pixels does not count the same photons twice.
     pub samples: Array2<f32>,
+    /// Each pixel's own range before spatial smoothing, mm (NaN where unreliable): independent
+    /// from pixel to pixel (each from its own photons), so a fit over many pixels can weight
+    /// them by their real covariance (smoothed ranges share photons and their errors are
+    /// spatially correlated; the local plane fit also biases curved surfaces).
+    pub raw_range_mm: Array2<f32>,
+    /// The standard deviation of `raw_range_mm`, mm (Cramér–Rao bound at the fit).
+    pub raw_sigma_mm: Array2<f32>,
     /// Why pixels were left out.
     pub rejected: Rejections,
 }
@@ -366,6 +373,8 @@ pub fn estimate_range(
         background_per_bin: Array2::zeros((rows, cols)),
         correlation: Array2::zeros((rows, cols)),
         samples: Array2::ones((rows, cols)),
+        raw_range_mm: nan(),
+        raw_sigma_mm: nan(),
         rejected: Rejections::default(),
     };
     for (i, outcome) in outcomes.into_iter().enumerate() {
@@ -396,6 +405,8 @@ pub fn estimate_range(
             },
         }
     }
+    map.raw_range_mm = map.range_mm.clone();
+    map.raw_sigma_mm = map.sigma_mm.clone();
     if config.smoothing_radius > 0 {
         let smoothed = smooth_within_layers(&map.range_mm, &map.sigma_mm, config.smoothing_radius);
         let s0 = config.confidence_sigma_mm;

@@ -23,8 +23,13 @@ pub const CORRELATION_FILE: &str = "correlation.npy";
 /// The pixels whose photons entered each pixel's range (spatial smoothing).
 pub const SAMPLES_FILE: &str = "samples.npy";
 
+/// Each pixel's own range before smoothing, mm.
+pub const RAW_RANGE_FILE: &str = "raw_range.npy";
+/// Its standard deviation, mm.
+pub const RAW_SIGMA_FILE: &str = "raw_sigma.npy";
+
 /// Every file of a range folder, in [`RangeMap`] field order.
-pub const FILES: [&str; 7] = [
+pub const FILES: [&str; 9] = [
     RANGE_FILE,
     SIGMA_FILE,
     CONFIDENCE_FILE,
@@ -32,6 +37,8 @@ pub const FILES: [&str; 7] = [
     BACKGROUND_FILE,
     CORRELATION_FILE,
     SAMPLES_FILE,
+    RAW_RANGE_FILE,
+    RAW_SIGMA_FILE,
 ];
 
 /// Writes `map`'s fields into the existing folder `dir`.
@@ -44,6 +51,8 @@ pub fn write_range_folder(dir: &Path, map: &RangeMap) -> Result<(), TofError> {
         &map.background_per_bin,
         &map.correlation,
         &map.samples,
+        &map.raw_range_mm,
+        &map.raw_sigma_mm,
     ];
     for (file, field) in FILES.into_iter().zip(fields) {
         write_npy(&dir.join(file), field)?;
@@ -83,6 +92,8 @@ pub fn read_range_folder(dir: &Path) -> Result<RangeMap, TofError> {
         background_per_bin: read(BACKGROUND_FILE)?,
         correlation: read(CORRELATION_FILE)?,
         samples: read(SAMPLES_FILE)?,
+        raw_range_mm: read(RAW_RANGE_FILE)?,
+        raw_sigma_mm: read(RAW_SIGMA_FILE)?,
         range_mm,
         rejected: Rejections::default(),
     })
@@ -104,6 +115,8 @@ mod tests {
             background_per_bin: field(0.01),
             correlation: field(0.9),
             samples: field(1.0),
+            raw_range_mm: field(601.0),
+            raw_sigma_mm: field(5.0),
             rejected: Rejections::default(),
         }
     }
@@ -124,6 +137,8 @@ mod tests {
         assert!(same(&read.background_per_bin, &written.background_per_bin));
         assert!(same(&read.correlation, &written.correlation));
         assert!(same(&read.samples, &written.samples));
+        assert!(same(&read.raw_range_mm, &written.raw_range_mm));
+        assert!(same(&read.raw_sigma_mm, &written.raw_sigma_mm));
     }
 
     #[test]
