@@ -18,7 +18,15 @@
 //! shifts' trend across the bands seeds λ, and a band-wise refinement (several exposures, then
 //! a grid re-search of each LED's shift, then again least squares) decides whether the rows
 //! disagree: when λ explains significantly more than noise would, (3) the fit is redone row by
-//! row. Finally each carrier's sign is chosen so that the sample's on-levels are positive (a
+//! row. λ must earn its place twice: in (2) its cost reduction is measured against the
+//! band-wise optimum without it refitted from λ's own solution (so that λ takes no credit for
+//! a better exposure, rate or shift it happened to find on the way) and must beat what one
+//! extra parameter per band would gain from noise (a χ² threshold); in (3) the fitted λ must
+//! lie [`MIN_LINE_DELAY_Z`] standard errors from zero, its standard error taken from the
+//! Gauss–Newton covariance σ²·(JᵀJ)⁻¹ at the optimum. Otherwise the rows agree and the
+//! global-shutter fit stands. The same covariance gives the exposure's standard error, which
+//! the report carries: at ρ ≈ 1 the exposure trades against the shifts' fractional parts
+//! along a nearly flat direction and is not determined by the data. Finally each carrier's sign is chosen so that the sample's on-levels are positive (a
 //! half-period shift negates a carrier, SPEC §2).
 
 use super::basis::TemplateBasis;
@@ -48,8 +56,15 @@ const TEST_BANDS: usize = 8;
 const ROWS_PER_TEST_BAND: usize = 8;
 /// Smallest phase ramp over the region, chips, that counts as a rolling shutter.
 const MIN_RAMP_CHIPS: f64 = 0.01;
-/// A line delay is kept when it lowers the band-wise cost by this many noise variances.
+/// A line delay is kept when it lowers the band-wise cost by this many noise variances (and
+/// by more than one extra parameter per band would by noise, see [`ramp_threshold`]).
 const RAMP_SIGNIFICANCE: f64 = 25.0;
+/// A fitted line delay is kept only this many standard errors away from zero (5σ: the same
+/// evidence as [`RAMP_SIGNIFICANCE`] noise variances for one parameter).
+pub const MIN_LINE_DELAY_Z: f64 = 5.0;
+/// A standard error is reported as at most this (exposure in frame periods, line delay in
+/// frame periods per row): a direction the data do not constrain at all.
+const UNDETERMINED_STD: f64 = 1.0;
 /// The rows agree (no rolling-shutter search) when letting each band's shifts move lowers
 /// the band-wise cost by less than this many noise variances per shift and the bands' shift
 /// trend stays below [`MIN_RAMP_CHIPS`].
@@ -143,6 +158,21 @@ pub struct TimingFit {
     pub rate_at_limit: bool,
     /// The fitted line delay sits at the largest one searched.
     pub line_delay_at_limit: bool,
+    /// 1σ standard error of the exposure (frame periods) from the fit's covariance; 0 when
+    /// given, [`UNDETERMINED_STD`] when the data do not constrain it.
+    pub exposure_std: f64,
+    /// 1σ standard error of the line delay (frame periods per row); 0 when given or not fitted.
+    pub line_delay_std: f64,
+}
+
+impl TimingFit {
+    /// Whether the fitted line delay lies fewer than [`MIN_LINE_DELAY_Z`] standard errors
+    /// from zero (never for a given or absent line delay).
+    pub fn line_delay_undetermined(&self) -> bool {
+        self.rolling
+            && self.line_delay_std > 0.0
+            && self.model.line_delay.abs() < MIN_LINE_DELAY_Z * self.line_delay_std
+    }
 }
 
 /// A compressed block of sample data sharing one set of templates.
@@ -214,7 +244,16 @@ pub fn fit_timing(
         }
         Some(_) => (global, false),
         None => match fitter.band_fit(sample, &global, pixel_noise) {
-            Some(banded) => (fitter.rows(sample, pixel_noise, &banded.params, true), true),
+            Some(banded) => {
+                let rows = fitter.rows(sample, pixel_noise, &banded.params, true);
+                let delay = rows.params[LINE_DELAY];
+                if delay.abs() >= MIN_LINE_DELAY_Z * standard_error(&rows, LINE_DELAY, pixel_noise)
+                {
+                    (rows, true)
+                } else {
+                    (global, false)
+                }
+            }
             None => (global, false),
         },
     };
@@ -303,6 +342,8 @@ impl Fitter<'_> {
             pixel_noise,
             rate_at_limit,
             line_delay_at_limit,
+            exposure_std: standard_error(&solution, EXPOSURE, pixel_noise),
+            line_delay_std: standard_error(&solution, LINE_DELAY, pixel_noise),
         }
     }
 
@@ -476,8 +517,19 @@ impl Fitter<'_> {
         let ramp = TimingModel::from_params(&best.params)
             .ramp_chips(height)
             .abs();
-        (ramp >= MIN_RAMP_CHIPS && base - best.cost > RAMP_SIGNIFICANCE * pixel_noise)
-            .then_some(best)
+        if ramp < MIN_RAMP_CHIPS {
+            return None;
+        }
+        // The same fit without λ, started from λ's solution: what λ itself explains.
+        let flat = self
+            .solve(
+                &groups,
+                &self.pivot(&best.params, 0.0, centre),
+                &self.freedom(false),
+            )
+            .cost;
+        let base = base.min(flat);
+        (base - best.cost > ramp_threshold(groups.len()) * pixel_noise).then_some(best)
     }
 
     /// The exposures to start a refinement from: `fitted` and `spread` (only the known
@@ -546,6 +598,39 @@ impl Fitter<'_> {
         }
         best.unwrap_or_else(|| self.solve(&groups, start, &freedom))
     }
+}
+
+/// Noise variances a line delay must explain on `bands` row bands: [`RAMP_SIGNIFICANCE`], and
+/// at least the mean plus five standard deviations of the χ² with one degree of freedom per
+/// band (what one extra parameter per band would gain from noise alone).
+fn ramp_threshold(bands: usize) -> f64 {
+    let b = bands as f64;
+    RAMP_SIGNIFICANCE.max(b + 5.0 * (2.0 * b).sqrt())
+}
+
+/// 1σ standard error of parameter `k` from the Gauss–Newton covariance σ²·(JᵀJ)⁻¹ of
+/// `solution` (0 when `k` was held; [`UNDETERMINED_STD`] at most, and when `k` loads on a
+/// direction the data leave flat: an eigenvalue below 1e-12 of the largest).
+fn standard_error(solution: &Solution, k: usize, pixel_noise: f64) -> f64 {
+    let Some(a) = solution.free.iter().position(|&f| f == k) else {
+        return 0.0;
+    };
+    let n = solution.free.len();
+    if solution.information.shape() != (n, n) {
+        return UNDETERMINED_STD;
+    }
+    let eigen = solution.information.clone().symmetric_eigen();
+    let largest = eigen.eigenvalues.iter().fold(0.0f64, |m, &v| m.max(v));
+    let mut variance = 0.0;
+    for (m, &value) in eigen.eigenvalues.iter().enumerate() {
+        let loading = eigen.eigenvectors[(a, m)];
+        if value > 1e-12 * largest {
+            variance += loading * loading / value;
+        } else if loading.abs() > 1e-6 {
+            return UNDETERMINED_STD;
+        }
+    }
+    (variance * pixel_noise).sqrt().min(UNDETERMINED_STD)
 }
 
 /// The sample's mean region row.

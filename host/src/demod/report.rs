@@ -46,6 +46,10 @@ pub struct DecodeReport {
     /// Estimated exposure as a fraction of the frame period (at a rate ratio of exactly 1 any
     /// exposure up to one frame gives the same waveforms, so it is not identifiable there).
     pub exposure: f64,
+    /// 1σ standard error of `exposure` from the timing fit's covariance (largest over
+    /// windows; 0 when given, 1 when the data do not determine it, as at a rate ratio of 1).
+    #[serde(default)]
+    pub exposure_std: f64,
     /// Rolling-shutter line time in microseconds (fitted or given; 0 for a global shutter or
     /// when the frame rate is unknown: see `line_delay_frames`).
     #[serde(default)]
@@ -53,6 +57,10 @@ pub struct DecodeReport {
     /// Rolling-shutter line delay in frame periods per row (0 for a global shutter).
     #[serde(default)]
     pub line_delay_frames: f64,
+    /// 1σ standard error of `line_delay_frames` from the fit (largest over windows; 0 when
+    /// given or when the rows agree and no line delay was fitted).
+    #[serde(default)]
+    pub line_delay_std_frames: f64,
     /// Row bands with their own waveforms in the per-pixel fit (1 for a global shutter).
     #[serde(default)]
     pub row_bands: usize,
