@@ -21,12 +21,15 @@
 //! row. λ must earn its place twice: in (2) its cost reduction is measured against the
 //! band-wise optimum without it refitted from λ's own solution (so that λ takes no credit for
 //! a better exposure, rate or shift it happened to find on the way) and must beat what one
-//! extra parameter per band would gain from noise (a χ² threshold); in (3) the fitted λ must
-//! lie [`MIN_LINE_DELAY_Z`] standard errors from zero, its standard error taken from the
-//! Gauss–Newton covariance σ²·(JᵀJ)⁻¹ at the optimum. Otherwise the rows agree and the
-//! global-shutter fit stands. The same covariance gives the exposure's standard error, which
-//! the report carries: at ρ ≈ 1 the exposure trades against the shifts' fractional parts
-//! along a nearly flat direction and is not determined by the data. Finally each carrier's sign is chosen so that the sample's on-levels are positive (a
+//! extra parameter per band would gain from noise (a χ² threshold); in (3) the row-wise fit is
+//! refitted once more without λ from λ's solution, and λ must lower the cost by
+//! [`RAMP_SIGNIFICANCE`] noise variances (a likelihood-ratio test: 5σ for one parameter).
+//! Otherwise the rows agree and the global-shutter fit stands. The Gauss–Newton covariance
+//! σ²·(JᵀJ)⁻¹ at the optimum gives the exposure's and λ's standard errors, which the report
+//! carries: at ρ ≈ 1 the exposure trades against the shifts' fractional parts along a nearly
+//! flat direction and is not determined by the data. (λ's standard error is not the test:
+//! its correlation with that flat direction inflates it, and the likelihood ratio is the
+//! sharper question.) Finally each carrier's sign is chosen so that the sample's on-levels are positive (a
 //! half-period shift negates a carrier, SPEC §2).
 
 use super::basis::TemplateBasis;
@@ -57,11 +60,9 @@ const ROWS_PER_TEST_BAND: usize = 8;
 /// Smallest phase ramp over the region, chips, that counts as a rolling shutter.
 const MIN_RAMP_CHIPS: f64 = 0.01;
 /// A line delay is kept when it lowers the band-wise cost by this many noise variances (and
-/// by more than one extra parameter per band would by noise, see [`ramp_threshold`]).
-const RAMP_SIGNIFICANCE: f64 = 25.0;
-/// A fitted line delay is kept only this many standard errors away from zero (5σ: the same
-/// evidence as [`RAMP_SIGNIFICANCE`] noise variances for one parameter).
-pub const MIN_LINE_DELAY_Z: f64 = 5.0;
+/// by more than one extra parameter per band would by noise, see [`ramp_threshold`]), and
+/// the row-wise cost by as many.
+pub const RAMP_SIGNIFICANCE: f64 = 25.0;
 /// A standard error is reported as at most this (exposure in frame periods, line delay in
 /// frame periods per row): a direction the data do not constrain at all.
 const UNDETERMINED_STD: f64 = 1.0;
@@ -163,16 +164,27 @@ pub struct TimingFit {
     pub exposure_std: f64,
     /// 1σ standard error of the line delay (frame periods per row); 0 when given or not fitted.
     pub line_delay_std: f64,
+    /// How much the fitted line delay lowers the row-wise cost against the best fit without
+    /// one, noise variances (0 when the line delay was given or not fitted).
+    pub line_delay_evidence: f64,
+    /// Whether the line delay was fitted (not given, not absent).
+    pub line_delay_fitted: bool,
 }
 
 impl TimingFit {
-    /// Whether the fitted line delay lies fewer than [`MIN_LINE_DELAY_Z`] standard errors
-    /// from zero (never for a given or absent line delay).
+    /// Whether a fitted line delay lowers the cost by less than [`RAMP_SIGNIFICANCE`] noise
+    /// variances: the data do not show it (never for a given or absent line delay).
     pub fn line_delay_undetermined(&self) -> bool {
-        self.rolling
-            && self.line_delay_std > 0.0
-            && self.model.line_delay.abs() < MIN_LINE_DELAY_Z * self.line_delay_std
+        self.rolling && self.line_delay_fitted && self.line_delay_evidence < RAMP_SIGNIFICANCE
     }
+}
+
+/// The row-wise fit and the evidence for its line delay.
+struct RowFit {
+    solution: Solution,
+    /// Cost reduction of the line delay against the fit without it, noise variances (0 when
+    /// the line delay was held).
+    evidence: f64,
 }
 
 /// A compressed block of sample data sharing one set of templates.
@@ -237,27 +249,29 @@ pub fn fit_timing(
         limits,
     };
     let global = fitter.global(space);
-    let (solution, rolling) = match limits.line_delay {
+    let held = RowFit {
+        solution: global,
+        evidence: 0.0,
+    };
+    let (fit, rolling) = match limits.line_delay {
         Some(delay) if delay != 0.0 => {
-            let start = fitter.pivot(&global.params, delay, mean_row(sample));
+            let start = fitter.pivot(&held.solution.params, delay, mean_row(sample));
             (fitter.rows(sample, pixel_noise, &start, false), true)
         }
-        Some(_) => (global, false),
-        None => match fitter.band_fit(sample, &global, pixel_noise) {
+        Some(_) => (held, false),
+        None => match fitter.band_fit(sample, &held.solution, pixel_noise) {
             Some(banded) => {
                 let rows = fitter.rows(sample, pixel_noise, &banded.params, true);
-                let delay = rows.params[LINE_DELAY];
-                if delay.abs() >= MIN_LINE_DELAY_Z * standard_error(&rows, LINE_DELAY, pixel_noise)
-                {
+                if rows.evidence >= RAMP_SIGNIFICANCE {
                     (rows, true)
                 } else {
-                    (global, false)
+                    (held, false)
                 }
             }
-            None => (global, false),
+            None => (held, false),
         },
     };
-    fitter.finish(sample, solution, rolling, pixel_noise)
+    fitter.finish(sample, fit, rolling, pixel_noise)
 }
 
 /// Refines an earlier fit of more LEDs (the LED-count check's) for the first `leds` of them,
@@ -281,16 +295,19 @@ pub fn refit_timing(
     };
     let mut start = previous.model.params();
     start.truncate(SHIFTS + leds);
-    let solution = if previous.rolling {
+    let fit = if previous.rolling {
         fitter.rows(sample, pixel_noise, &start, limits.line_delay.is_none())
     } else {
-        fitter.solve(
-            &global_groups(space, frames),
-            &start,
-            &fitter.freedom(false),
-        )
+        RowFit {
+            solution: fitter.solve(
+                &global_groups(space, frames),
+                &start,
+                &fitter.freedom(false),
+            ),
+            evidence: 0.0,
+        }
     };
-    fitter.finish(sample, solution, previous.rolling, pixel_noise)
+    fitter.finish(sample, fit, previous.rolling, pixel_noise)
 }
 
 /// The global-shutter data: the signal eigenvectors scaled by √eigenvalue.
@@ -315,10 +332,13 @@ impl Fitter<'_> {
     fn finish(
         &self,
         sample: &PixelSample,
-        solution: Solution,
+        fit: RowFit,
         rolling: bool,
         pixel_noise: f64,
     ) -> TimingFit {
+        let RowFit { solution, evidence } = fit;
+        let line_delay_fitted =
+            rolling && self.limits.line_delay.is_none() && solution.free.contains(&LINE_DELAY);
         let mut model = TimingModel::from_params(&solution.params);
         orient(sample, self.waves, &mut model);
         let reference = if rolling { mean_row(sample) } else { 0.0 };
@@ -344,6 +364,8 @@ impl Fitter<'_> {
             line_delay_at_limit,
             exposure_std: standard_error(&solution, EXPOSURE, pixel_noise),
             line_delay_std: standard_error(&solution, LINE_DELAY, pixel_noise),
+            line_delay_evidence: evidence,
+            line_delay_fitted,
         }
     }
 
@@ -576,15 +598,15 @@ impl Fitter<'_> {
         params
     }
 
-    /// Phase (3): the row-by-row fit from `start` (several exposures unless `spread` is off
-    /// or the exposure is given).
+    /// Phase (3): the row-by-row fit from `start` (several exposures unless the exposure is
+    /// given), with the evidence for its line delay when `fit_delay` (module docs).
     fn rows(
         &self,
         sample: &PixelSample,
         pixel_noise: f64,
         start: &[f64],
         fit_delay: bool,
-    ) -> Solution {
+    ) -> RowFit {
         let groups = row_groups(sample, self.waves.len(), pixel_noise);
         let freedom = self.freedom(fit_delay);
         let mut best: Option<Solution> = None;
@@ -596,7 +618,15 @@ impl Fitter<'_> {
                 best = Some(solution);
             }
         }
-        best.unwrap_or_else(|| self.solve(&groups, start, &freedom))
+        let solution = best.unwrap_or_else(|| self.solve(&groups, start, &freedom));
+        let evidence = if fit_delay {
+            let flat = self.pivot(&solution.params, 0.0, mean_row(sample));
+            let without = self.solve(&groups, &flat, &self.freedom(false)).cost;
+            (without - solution.cost) / pixel_noise.max(f64::MIN_POSITIVE)
+        } else {
+            0.0
+        };
+        RowFit { solution, evidence }
     }
 }
 

@@ -739,6 +739,12 @@ fn finish(
         },
         line_delay_frames: line_delay,
         line_delay_std_frames: largest(&|(fit, _, _)| fit.line_delay_std),
+        line_delay_evidence: state
+            .fits
+            .iter()
+            .map(|(fit, _, _)| fit.line_delay_evidence)
+            .reduce(f64::min)
+            .unwrap_or(0.0),
         row_bands: state.fits.iter().map(|(_, _, b)| *b).max().unwrap_or(1),
         fit_residual: mean(&|(_, quality, _)| quality.residual_rms),
         median_noise,

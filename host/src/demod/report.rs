@@ -61,6 +61,10 @@ pub struct DecodeReport {
     /// given or when the rows agree and no line delay was fitted).
     #[serde(default)]
     pub line_delay_std_frames: f64,
+    /// Cost reduction of the fitted line delay against the best fit without one, noise
+    /// variances (smallest over windows; 0 when given or not fitted).
+    #[serde(default)]
+    pub line_delay_evidence: f64,
     /// Row bands with their own waveforms in the per-pixel fit (1 for a global shutter).
     #[serde(default)]
     pub row_bands: usize,

@@ -313,6 +313,7 @@ pub(super) mod tests {
                 line_time_us: 0.0,
                 line_delay_frames: 0.0,
                 line_delay_std_frames: 0.0,
+                line_delay_evidence: 0.0,
                 row_bands: 1,
                 fit_residual: 0.0,
                 median_noise: 0.0,
