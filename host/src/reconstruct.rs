@@ -13,7 +13,13 @@
 //!
 //! [`from_decoded`] is the one path from a decoded capture to a reconstruction: `meb
 //! reconstruct`, `meb demo` and the hardware-in-the-loop tests all call it, with the
-//! decoded-capture settings of [`ReconstructConfig::decoded_capture`].
+//! decoded-capture settings of [`ReconstructConfig::decoded_capture`]. `meb video` calls the
+//! same path with a [`WarmStart`] from the previous window ([`from_decoded_warm`]): the first
+//! pass's light vectors come from the previous depth instead of z = 0, each part's offset is
+//! carried over in closed form (the median offset that puts the integrated depth on the previous
+//! one) and refined by golden-section search in a bracket of a few mm, the integrator starts
+//! from the previous depth with the early passes' loose settings, and the passes stop once the
+//! depth settles. A warm result that strays from its start is redone cold.
 
 use crate::demod::Decoded;
 use crate::integrate::{
@@ -46,6 +52,27 @@ const BILATERAL_STIFFNESS: f64 = 10.0;
 /// Width in mm of the bracket at which the golden-section search for a part's depth offset
 /// stops (far below the depth accuracy; each step costs one misfit evaluation).
 const OFFSET_TOLERANCE_MM: f64 = 0.01;
+
+/// Pixels whose misfit places a part (cold start; evenly spread over the part).
+const MISFIT_PIXELS: usize = 20_000;
+
+/// Pixels whose misfit places a part from a warm start, where the bracket is narrow.
+const WARM_MISFIT_PIXELS: usize = 5_000;
+
+/// Half-width in mm of a warm start's offset bracket around the carried offset. The turning
+/// ellipsoid (7.5 rpm, 40 ms windows) moves its surface by at most ~2 mm between windows.
+pub const WARM_OFFSET_BRACKET_MM: f64 = 4.0;
+
+/// Median absolute depth change in mm between two passes below which a warm start's passes
+/// stop (well below the near-field reconstructions' accuracy of 0.1–1 mm).
+pub const WARM_SETTLED_MM: f64 = 0.05;
+
+/// Median absolute difference in mm from the warm start beyond which a warm result is redone
+/// cold.
+pub const WARM_MAX_MOVE_MM: f64 = 5.0;
+
+/// Share of a warm result's pixels whose depth the warm start must know.
+const WARM_MIN_OVERLAP: f64 = 0.9;
 
 /// Relative residual at which conjugate gradients stops in the passes before the last: their
 /// depth only places the next pass's light vectors, which a 10⁻⁵ residual leaves unchanged.
@@ -134,6 +161,46 @@ pub struct Reconstruction {
     pub integration: Integration,
     /// Per-stage timings in order.
     pub timings: Vec<StageTiming>,
+    /// Whether it started from a warm start.
+    pub start: Start,
+}
+
+/// How a reconstruction started.
+#[derive(Debug, Clone, PartialEq, serde::Serialize, serde::Deserialize)]
+#[serde(rename_all = "kebab-case", tag = "kind")]
+pub enum Start {
+    /// From the plane z = 0 (no warm start).
+    Cold,
+    /// From a warm start, accepted.
+    Warm {
+        /// Passes run.
+        passes: usize,
+        /// Median absolute depth difference from the warm start, mm.
+        moved_mm: f64,
+    },
+    /// A warm start was rejected and the reconstruction redone cold.
+    Redone {
+        /// Why the warm result was not trusted.
+        reason: String,
+    },
+}
+
+/// Where a video's previous 3-D frame left the object, to start the next window from (in 40 ms
+/// the object moves a few mm at most): light vectors at its depth, each part's offset carried
+/// from it, integration warm-started from it.
+#[derive(Debug, Clone)]
+pub struct WarmStart {
+    /// Depth in mm (NaN where it was not reconstructed).
+    pub depth_mm: Array2<f32>,
+}
+
+impl WarmStart {
+    /// The warm start a reconstruction leaves for the next window.
+    pub fn of(reconstruction: &Reconstruction) -> Self {
+        Self {
+            depth_mm: reconstruction.integration.depth.depth_mm.clone(),
+        }
+    }
 }
 
 impl Reconstruction {
@@ -172,6 +239,25 @@ pub fn reconstruct(
     noise: Option<&Array2<f32>>,
     config: &ReconstructConfig,
 ) -> Result<Reconstruction, ReconstructError> {
+    reconstruct_warm(images, rig, mask, noise, config, None)
+}
+
+/// [`reconstruct`], started from `warm` when it is given and the near-field model is used
+/// ([`WarmStart`]): light vectors at the previous depth, each part's offset searched within
+/// ±[`WARM_OFFSET_BRACKET_MM`] of the offset carried from it, integration warm-started with the
+/// early passes' loose settings, and passes stopped once the depth moves less than
+/// [`WARM_SETTLED_MM`] (median). A warm result that moved more than [`WARM_MAX_MOVE_MM`]
+/// (median) from the start,
+/// found an offset at the bracket's edge, covers pixels the start did not know, or failed, is
+/// redone cold ([`Start::Redone`]).
+pub fn reconstruct_warm(
+    images: &LedImages,
+    rig: &Rig,
+    mask: Option<&Array2<bool>>,
+    noise: Option<&Array2<f32>>,
+    config: &ReconstructConfig,
+    warm: Option<&WarmStart>,
+) -> Result<Reconstruction, ReconstructError> {
     if rig.leds.len() < 3 {
         return Err(ReconstructError::Rig(format!(
             "photometric stereo needs at least 3 LEDs, the rig has {}",
@@ -186,13 +272,54 @@ pub fn reconstruct(
         )));
     }
     config.integrate.validate()?;
-    let projection = rig.camera.projection();
     let mut timings = Vec::new();
-    let mut time = |stage: String, start: Instant| {
-        timings.push(StageTiming {
-            stage,
-            ms: start.elapsed().as_secs_f64() * 1e3,
-        })
+    let shape = (rig.camera.height, rig.camera.width);
+    let near_field = matches!(config.light_model, LightModel::NearField { .. });
+    let mut start = Start::Cold;
+    if let Some(warm) = warm.filter(|w| near_field && w.depth_mm.dim() == shape) {
+        let reason = match passes(images, rig, mask, noise, config, Some(warm), &mut timings) {
+            Ok((photometric, integration, Ok(passes))) => {
+                let moved_mm = depth_change(&integration.depth.depth_mm, &warm.depth_mm).median_mm;
+                return Ok(Reconstruction {
+                    photometric,
+                    integration,
+                    timings,
+                    start: Start::Warm { passes, moved_mm },
+                });
+            }
+            Ok((_, _, Err(reason))) => reason,
+            Err(error) => format!("the warm-started reconstruction failed: {error}"),
+        };
+        start = Start::Redone { reason };
+    }
+    let (photometric, integration, _) =
+        passes(images, rig, mask, noise, config, None, &mut timings)?;
+    Ok(Reconstruction {
+        photometric,
+        integration,
+        timings,
+        start,
+    })
+}
+
+/// The photometric stereo ↔ integration passes (module docs), cold or from `warm`; with a warm
+/// start, also the number of passes run or why the result cannot be trusted.
+fn passes(
+    images: &LedImages,
+    rig: &Rig,
+    mask: Option<&Array2<bool>>,
+    noise: Option<&Array2<f32>>,
+    config: &ReconstructConfig,
+    warm: Option<&WarmStart>,
+    timings: &mut Vec<StageTiming>,
+) -> Result<(PhotometricResult, Integration, Result<usize, String>), ReconstructError> {
+    let projection = rig.camera.projection();
+    let label = if warm.is_some() { ", warm" } else { "" };
+    let mut time = |stage: &str, pass: usize, start: Instant| {
+        timings.push(StageTiming::since(
+            format!("{stage}{label} (pass {})", pass + 1),
+            start,
+        ))
     };
     let passes = match config.light_model {
         LightModel::Distant => 1,
@@ -206,9 +333,13 @@ pub fn reconstruct(
     );
     let mut object_mask = mask.cloned();
     let mut previous: Option<(PhotometricResult, Integration)> = None;
+    let mut verdict = Ok(0);
     for pass in 0..passes {
         let start = Instant::now();
-        let depth = previous.as_ref().map(|(_, i)| &i.depth.depth_mm);
+        let depth = previous
+            .as_ref()
+            .map(|(_, i)| &i.depth.depth_mm)
+            .or(warm.map(|w| &w.depth_mm));
         let lights = match config.light_model {
             LightModel::Distant => distant.clone(),
             LightModel::NearField { .. } => Lights::near_field(rig, depth),
@@ -220,7 +351,7 @@ pub fn reconstruct(
             noise,
             &config.photometric,
         )?;
-        time(format!("photometric stereo (pass {})", pass + 1), start);
+        time("photometric stereo", pass, start);
         object_mask.get_or_insert_with(|| ps.object_mask.clone());
         let start = Instant::now();
         let evidence = SurfaceEvidence {
@@ -229,9 +360,10 @@ pub fn reconstruct(
             fill: Some(&ps.fill),
         };
         // Early passes only feed the light vectors of the next: a few reweightings (or
-        // two-LED alternations) and a looser solve suffice.
+        // two-LED alternations) and a looser solve suffice. A warm start begins next to the
+        // answer, so its passes take the same settings.
         let mut integrate_config = config.integrate.clone();
-        if pass + 1 < passes {
+        if pass + 1 < passes || warm.is_some() {
             integrate_config.bilateral.max_iterations = integrate_config
                 .bilateral
                 .max_iterations
@@ -243,23 +375,84 @@ pub fn reconstruct(
             integrate_config.tolerance = integrate_config.tolerance.max(EARLY_PASS_TOLERANCE);
         }
         let mut integration = integrate_surface(&evidence, &projection, &integrate_config, depth)?;
-        time(format!("integration (pass {})", pass + 1), start);
+        time("integration", pass, start);
         if matches!(config.light_model, LightModel::NearField { .. })
             && config.offset_search_mm > 0.0
         {
             let start = Instant::now();
-            place_parts(images, rig, noise, &ps, &mut integration, config);
-            time(format!("depth offset search (pass {})", pass + 1), start);
+            let carried = warm.and(depth);
+            if let Err(reason) =
+                place_parts(images, rig, noise, &ps, &mut integration, config, carried)
+            {
+                verdict = Err(reason);
+            }
+            time("depth offset search", pass, start);
         }
+        let settled = match (warm, depth) {
+            (Some(_), Some(before)) => {
+                depth_change(&integration.depth.depth_mm, before).median_mm < WARM_SETTLED_MM
+            }
+            _ => false,
+        };
         previous = Some((ps, integration));
+        if verdict.is_err() {
+            break;
+        }
+        verdict = Ok(pass + 1);
+        if settled {
+            break;
+        }
     }
     let (photometric, integration) = previous
         .ok_or_else(|| ReconstructError::Rig("no reconstruction pass was run".to_string()))?;
-    Ok(Reconstruction {
-        photometric,
-        integration,
-        timings,
-    })
+    if let (Some(warm), Ok(_)) = (warm, &verdict) {
+        let moved = depth_change(&integration.depth.depth_mm, &warm.depth_mm);
+        let kept = integration.kept.iter().filter(|&&k| k).count();
+        if moved.median_mm > WARM_MAX_MOVE_MM {
+            verdict = Err(format!(
+                "the depth moved {:.2} mm (median) from the warm start (more than {WARM_MAX_MOVE_MM} mm)",
+                moved.median_mm
+            ));
+        } else if (moved.pixels as f64) < WARM_MIN_OVERLAP * kept as f64 {
+            verdict = Err(format!(
+                "the warm start knew the depth of only {} of {kept} reconstructed pixels",
+                moved.pixels
+            ));
+        }
+    }
+    Ok((photometric, integration, verdict))
+}
+
+/// How far one depth map lies from another over the pixels where both are finite.
+#[derive(Debug, Clone, Copy, PartialEq)]
+struct DepthChange {
+    /// Median absolute difference, mm (infinite without shared pixels). The median, because
+    /// the steep rims' depths swing by millimetres from pass to pass while the surface stays.
+    median_mm: f64,
+    /// Pixels with both depths.
+    pixels: usize,
+}
+
+/// The [`DepthChange`] from `before` to `after`.
+fn depth_change(after: &Array2<f32>, before: &Array2<f32>) -> DepthChange {
+    let mut changes: Vec<f32> = after
+        .iter()
+        .zip(before)
+        .filter(|(a, b)| a.is_finite() && b.is_finite())
+        .map(|(a, b)| (a - b).abs())
+        .collect();
+    let pixels = changes.len();
+    if pixels == 0 {
+        return DepthChange {
+            median_mm: f64::INFINITY,
+            pixels,
+        };
+    }
+    let (_, median, _) = changes.select_nth_unstable_by(pixels / 2, f32::total_cmp);
+    DepthChange {
+        median_mm: f64::from(*median),
+        pixels,
+    }
 }
 
 /// `depth` with the pixels of `part` moved by `offset` mm towards the camera
@@ -282,7 +475,9 @@ fn moved_part(
 
 /// Moves every part of the integrated depth to the offset that minimises the Lambertian
 /// misfit of its pixels lit by more than three LEDs (module docs); parts with too few such
-/// pixels stay where the integrator put them.
+/// pixels stay where the integrator put them. With a `carried` depth (a warm start) each part's
+/// offset is searched only near the one that puts it back on that depth; an offset at the edge
+/// of that bracket is an error (the object moved further than a warm start can follow).
 fn place_parts(
     images: &LedImages,
     rig: &Rig,
@@ -290,39 +485,81 @@ fn place_parts(
     ps: &PhotometricResult,
     integration: &mut Integration,
     config: &ReconstructConfig,
-) {
+    carried: Option<&Array2<f32>>,
+) -> Result<(), String> {
     let projection = rig.camera.projection();
+    let cap = if carried.is_some() {
+        WARM_MISFIT_PIXELS
+    } else {
+        MISFIT_PIXELS
+    };
     for part in 0..integration.parts as u32 {
-        let pixels = constraining_pixels(ps, &integration.depth.depth_mm, |p| {
-            integration.part[p] == part
-        });
-        let offset = best_offset(
-            images,
-            rig,
-            noise,
-            &integration.depth.depth_mm,
-            &pixels,
-            ps,
-            config,
-            config.offset_search_mm,
-        );
+        let depth = &integration.depth.depth_mm;
+        let pixels = constraining_pixels(ps, depth, cap, |p| integration.part[p] == part);
+        let bracket = match carried {
+            None => Bracket::Scan(config.offset_search_mm),
+            Some(before) => match carried_offset(depth, before, &pixels, &projection) {
+                Some(centre) => Bracket::Around(centre, WARM_OFFSET_BRACKET_MM),
+                None => return Err(format!("part {part} has no depth in the warm start")),
+            },
+        };
+        let Some((offset, at_edge)) =
+            best_offset(images, rig, noise, depth, &pixels, ps, config, bracket)
+        else {
+            continue;
+        };
+        if at_edge {
+            return Err(format!(
+                "part {part}'s depth offset lies at the edge of the warm start's ±{WARM_OFFSET_BRACKET_MM} mm bracket"
+            ));
+        }
         if offset != 0.0 {
-            integration.depth.depth_mm = moved_part(
-                &integration.depth.depth_mm,
-                &integration.part,
-                part,
-                offset,
-                &projection,
-            );
+            integration.depth.depth_mm =
+                moved_part(depth, &integration.part, part, offset, &projection);
         }
     }
+    Ok(())
+}
+
+/// The offset (mm towards the camera, [`moved_depth`]) that best puts the integrated `depth`
+/// of `pixels` on the `carried` depth: the median of the per-pixel offsets (closed form of
+/// [`moved_depth`] solved for the offset); `None` when no pixel has both.
+fn carried_offset(
+    depth: &Array2<f32>,
+    carried: &Array2<f32>,
+    pixels: &[(usize, usize)],
+    projection: &Projection,
+) -> Option<f64> {
+    let mut offsets: Vec<f64> = pixels
+        .iter()
+        .filter_map(|&p| {
+            let (z, target) = (f64::from(depth[p]), f64::from(carried[p]));
+            if !(z.is_finite() && target.is_finite()) {
+                return None;
+            }
+            match projection {
+                Projection::Orthographic { .. } => Some(target - z),
+                Projection::Perspective { distance_mm, .. } => {
+                    let d = *distance_mm;
+                    (d - z > 0.0).then(|| d * (1.0 - (d - target) / (d - z)))
+                }
+            }
+        })
+        .collect();
+    if offsets.is_empty() {
+        return None;
+    }
+    let middle = offsets.len() / 2;
+    let (_, median, _) = offsets.select_nth_unstable_by(middle, f64::total_cmp);
+    Some(*median)
 }
 
 /// The pixels chosen by `inside` that constrain absolute depth: lit by more than three LEDs,
-/// with a depth; at most about 20 000, evenly spread.
+/// with a depth; at most about `cap`, evenly spread.
 fn constraining_pixels(
     ps: &PhotometricResult,
     depth: &Array2<f32>,
+    cap: usize,
     inside: impl Fn((usize, usize)) -> bool,
 ) -> Vec<(usize, usize)> {
     let pixels: Vec<(usize, usize)> = ps
@@ -331,12 +568,22 @@ fn constraining_pixels(
         .filter(|(p, n)| **n > 3 && depth[*p].is_finite() && inside(*p))
         .map(|(p, _)| p)
         .collect();
-    let step = pixels.len().div_ceil(20_000).max(1);
+    let step = pixels.len().div_ceil(cap).max(1);
     pixels.into_iter().step_by(step).collect()
 }
 
-/// The offset (mm towards the camera, within ±`half_range`) of the depth of `pixels` that
-/// minimises their Lambertian misfit (module docs); 0 with fewer than 16 pixels.
+/// Where [`best_offset`] looks.
+#[derive(Debug, Clone, Copy)]
+enum Bracket {
+    /// A coarse scan of ±this many mm, then golden-section refinement around its best sample.
+    Scan(f64),
+    /// Golden-section search of (centre ± half-width) mm.
+    Around(f64, f64),
+}
+
+/// The offset (mm towards the camera, within the `bracket`) of the depth of `pixels` that
+/// minimises their Lambertian misfit (module docs), and whether it lies at the bracket's edge;
+/// `None` with fewer than 16 pixels.
 #[allow(clippy::too_many_arguments)]
 fn best_offset(
     images: &LedImages,
@@ -346,10 +593,10 @@ fn best_offset(
     pixels: &[(usize, usize)],
     ps: &PhotometricResult,
     config: &ReconstructConfig,
-    half_range: f64,
-) -> f64 {
+    bracket: Bracket,
+) -> Option<(f64, bool)> {
     if pixels.len() < 16 {
-        return 0.0;
+        return None;
     }
     let lights = Lights::near_field(rig, Some(depth));
     let model = ModelMisfit::new(
@@ -361,40 +608,52 @@ fn best_offset(
         &config.photometric,
     );
     let misfit = |offset: f64| model.at(offset);
-    // Coarse scan, then golden-section refinement around the best sample.
-    let half = half_range;
-    let samples = 13;
-    let step = 2.0 * half / (samples - 1) as f64;
-    let (mut best, mut best_value) = (0.0, misfit(0.0));
-    for i in 0..samples {
-        let o = -half + step * i as f64;
-        let v = misfit(o);
-        if v < best_value {
-            (best, best_value) = (o, v);
+    let (best, best_value, a, b) = match bracket {
+        Bracket::Scan(half) => {
+            // Coarse scan, then golden-section refinement around the best sample.
+            let samples = 13;
+            let step = 2.0 * half / (samples - 1) as f64;
+            let (mut best, mut best_value) = (0.0, misfit(0.0));
+            for i in 0..samples {
+                let o = -half + step * i as f64;
+                let v = misfit(o);
+                if v < best_value {
+                    (best, best_value) = (o, v);
+                }
+            }
+            (best, best_value, best - step, best + step)
         }
-    }
-    let (mut a, mut b) = (best - step, best + step);
+        Bracket::Around(centre, half) => (centre, misfit(centre), centre - half, centre + half),
+    };
+    let refined = golden_section(&misfit, a, b);
+    let offset = if misfit(refined) <= best_value {
+        refined
+    } else {
+        best
+    };
+    let at_edge = matches!(bracket, Bracket::Around(..))
+        && (offset - a).min(b - offset) < 2.0 * OFFSET_TOLERANCE_MM;
+    Some((offset, at_edge))
+}
+
+/// The minimum of `f` on [a, b] by golden-section search, to [`OFFSET_TOLERANCE_MM`].
+fn golden_section(f: &impl Fn(f64) -> f64, mut a: f64, mut b: f64) -> f64 {
     let ratio = 0.5 * (5f64.sqrt() - 1.0);
     let mut c = b - ratio * (b - a);
     let mut d = a + ratio * (b - a);
-    let (mut fc, mut fd) = (misfit(c), misfit(d));
+    let (mut fc, mut fd) = (f(c), f(d));
     while b - a > OFFSET_TOLERANCE_MM {
         if fc < fd {
             (b, d, fd) = (d, c, fc);
             c = b - ratio * (b - a);
-            fc = misfit(c);
+            fc = f(c);
         } else {
             (a, c, fc) = (c, d, fd);
             d = a + ratio * (b - a);
-            fd = misfit(d);
+            fd = f(d);
         }
     }
-    let refined = 0.5 * (a + b);
-    if misfit(refined) <= best_value {
-        refined
-    } else {
-        best
-    }
+    0.5 * (a + b)
 }
 
 /// Reconstructs a decoded capture taken with `rig`: the pixels the decoder flagged as
@@ -407,12 +666,25 @@ pub fn from_decoded(
     mask: Option<&Array2<bool>>,
     config: &ReconstructConfig,
 ) -> Result<Reconstruction, ReconstructError> {
-    reconstruct(
+    from_decoded_warm(decoded, rig, mask, config, None)
+}
+
+/// [`from_decoded`] started from `warm` ([`reconstruct_warm`]): the path of `meb video`, which
+/// passes the previous window's result; `None` is exactly [`from_decoded`].
+pub fn from_decoded_warm(
+    decoded: &Decoded,
+    rig: &Rig,
+    mask: Option<&Array2<bool>>,
+    config: &ReconstructConfig,
+    warm: Option<&WarmStart>,
+) -> Result<Reconstruction, ReconstructError> {
+    reconstruct_warm(
         &usable_led_images(decoded),
         rig,
         mask,
         Some(&level_noise(decoded)),
         config,
+        warm,
     )
 }
 
@@ -439,4 +711,46 @@ pub fn usable_led_images(decoded: &Decoded) -> LedImages {
 pub fn level_noise(decoded: &Decoded) -> Array2<f32> {
     let frames = decoded.report.frames_used.max(2) as f32;
     decoded.noise.mapv(|s| s * (2.0 / frames).sqrt())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn the_carried_offset_undoes_a_move_for_either_camera() {
+        let rig = Rig::preset("thesis-dynamic").expect("preset");
+        let perspective = rig.camera.projection();
+        let orthographic = Projection::Orthographic {
+            pitch_mm: 0.5,
+            size: (8, 6),
+        };
+        let depth = Array2::from_shape_fn((6, 8), |(r, c)| (r as f32 - 2.5) * (c as f32 + 1.0));
+        let pixels: Vec<(usize, usize)> = depth.indexed_iter().map(|(p, _)| p).collect();
+        for projection in [&perspective, &orthographic] {
+            for offset in [-3.25, 0.0, 7.5] {
+                let moved = depth.mapv(|z| moved_depth(f64::from(z), offset, projection) as f32);
+                let carried = carried_offset(&depth, &moved, &pixels, projection).expect("pixels");
+                assert!((carried - offset).abs() < 1e-3, "{carried} vs {offset}");
+            }
+        }
+        let unknown = Array2::from_elem((6, 8), f32::NAN);
+        assert_eq!(
+            carried_offset(&depth, &unknown, &pixels, &perspective),
+            None
+        );
+    }
+
+    #[test]
+    fn the_depth_change_is_the_median_over_shared_pixels() {
+        let before = Array2::from_shape_vec((1, 5), vec![0.0, 0.0, 0.0, 0.0, f32::NAN]).unwrap();
+        // One rim pixel swings by 40 mm; the others move by 0.1–0.3 mm.
+        let after = Array2::from_shape_vec((1, 5), vec![0.1, 0.2, 0.3, 40.0, 1.0]).unwrap();
+        let change = depth_change(&after, &before);
+        assert_eq!(change.pixels, 4);
+        assert!((change.median_mm - 0.3).abs() < 1e-6, "{change:?}");
+        let nothing = depth_change(&after, &Array2::from_elem((1, 5), f32::NAN));
+        assert_eq!(nothing.pixels, 0);
+        assert!(nothing.median_mm.is_infinite());
+    }
 }

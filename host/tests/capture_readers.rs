@@ -468,6 +468,38 @@ fn le_bytes(samples: &[u16]) -> Vec<u8> {
     samples.iter().flat_map(|v| v.to_le_bytes()).collect()
 }
 
+/// Writes `count` frames of 8-bit 4:2:0 y4m (the test pattern, chroma 200) to `path`.
+fn write_c420(path: &Path, count: usize) {
+    let frames: Vec<Vec<u8>> = (0..count)
+        .map(|f| {
+            let mut bytes = pattern8(f);
+            bytes.extend(std::iter::repeat_n(200u8, 2 * (W / 2) * (H / 2)));
+            bytes
+        })
+        .collect();
+    std::fs::write(
+        path,
+        y4m_file(&format!("YUV4MPEG2 W{W} H{H} F25:1 C420jpeg"), &frames),
+    )
+    .unwrap();
+}
+
+/// Writes `count` frames of 10-bit 4:2:0 y4m (the test pattern, chroma 512) to `path`.
+fn write_c420p10(path: &Path, count: usize) {
+    let frames: Vec<Vec<u8>> = (0..count)
+        .map(|f| {
+            let mut samples = pattern16(f, 1023);
+            samples.extend(std::iter::repeat_n(512u16, 2 * (W / 2) * (H / 2)));
+            le_bytes(&samples)
+        })
+        .collect();
+    std::fs::write(
+        path,
+        y4m_file(&format!("YUV4MPEG2 W{W} H{H} F25:1 C420p10"), &frames),
+    )
+    .unwrap();
+}
+
 #[test]
 fn y4m_8_bit_mono_round_trips_with_header_rate() {
     let tmp = tempfile::tempdir().unwrap();
@@ -530,18 +562,7 @@ fn y4m_with_chroma_skips_it_between_frames() {
     let tmp = tempfile::tempdir().unwrap();
     // 8-bit 4:2:0: luma then two quarter-size chroma planes per frame.
     let path = tmp.path().join("c420.y4m");
-    let frames: Vec<Vec<u8>> = (0..3)
-        .map(|f| {
-            let mut bytes = pattern8(f);
-            bytes.extend(std::iter::repeat_n(200u8, 2 * (W / 2) * (H / 2)));
-            bytes
-        })
-        .collect();
-    std::fs::write(
-        &path,
-        y4m_file(&format!("YUV4MPEG2 W{W} H{H} F25:1 C420jpeg"), &frames),
-    )
-    .unwrap();
+    write_c420(&path, 3);
     let got = read_all(open(&path, &options()).unwrap().as_mut()).unwrap();
     assert_eq!(got.len(), 3);
     for (f, frame) in got.iter().enumerate() {
@@ -549,18 +570,7 @@ fn y4m_with_chroma_skips_it_between_frames() {
     }
     // 10-bit 4:2:0, two bytes per sample.
     let path = tmp.path().join("c420p10.y4m");
-    let frames: Vec<Vec<u8>> = (0..2)
-        .map(|f| {
-            let mut samples = pattern16(f, 1023);
-            samples.extend(std::iter::repeat_n(512u16, 2 * (W / 2) * (H / 2)));
-            le_bytes(&samples)
-        })
-        .collect();
-    std::fs::write(
-        &path,
-        y4m_file(&format!("YUV4MPEG2 W{W} H{H} F25:1 C420p10"), &frames),
-    )
-    .unwrap();
+    write_c420p10(&path, 2);
     let mut source = open(&path, &options()).unwrap();
     assert_eq!(source.format().bit_depth, 10);
     assert_eq!(source.format().white_level, 1023.0);
@@ -569,6 +579,75 @@ fn y4m_with_chroma_skips_it_between_frames() {
     for (f, frame) in got.iter().enumerate() {
         assert_eq!(u16s(frame), pattern16(f, 1023).as_slice());
     }
+}
+
+/// Reads every frame of `source` into one reused buffer; returns the frames (copies) and
+/// whether every frame landed in the buffer's first storage (no allocation after the first).
+fn read_reusing(source: &mut dyn FrameSource) -> (Vec<Samples>, bool) {
+    let mut samples = Samples::U8(Vec::new());
+    let mut frames = Vec::new();
+    let mut storage: Option<*const u8> = None;
+    let mut reused = true;
+    while let Some(index) = source.read_frame_into(&mut samples).unwrap() {
+        assert_eq!(index, frames.len());
+        let address = match &samples {
+            Samples::U8(v) => v.as_ptr(),
+            Samples::U16(v) => v.as_ptr().cast(),
+        };
+        reused &= *storage.get_or_insert(address) == address;
+        frames.push(samples.clone());
+    }
+    (frames, reused)
+}
+
+#[test]
+fn y4m_and_raw_frames_are_read_into_the_same_storage() {
+    let tmp = tempfile::tempdir().unwrap();
+    // 8-bit 4:2:0 and 10-bit 4:2:0 y4m: luma into the reused frame, chroma skipped.
+    let path = tmp.path().join("c420.y4m");
+    write_c420(&path, 5);
+    let (got, reused) = read_reusing(&mut Y4mSource::open(&path, None).unwrap());
+    assert!(
+        reused,
+        "every 8-bit frame read into the first frame's storage"
+    );
+    let expected: Vec<Samples> = (0..5).map(|f| Samples::U8(pattern8(f))).collect();
+    assert_eq!(got, expected);
+    let path = tmp.path().join("c420p10.y4m");
+    write_c420p10(&path, 4);
+    let (got, reused) = read_reusing(&mut Y4mSource::open(&path, None).unwrap());
+    assert!(
+        reused,
+        "every 10-bit frame read into the first frame's storage"
+    );
+    let expected: Vec<Samples> = (0..4).map(|f| Samples::U16(pattern16(f, 1023))).collect();
+    assert_eq!(got, expected);
+    // Raw 16-bit frames from a file.
+    let path = tmp.path().join("frames.raw");
+    let raw: Vec<u8> = (0..3)
+        .flat_map(|f| le_bytes(&pattern16(f, 65535)))
+        .collect();
+    std::fs::write(&path, raw).unwrap();
+    let layout = RawLayout {
+        width: W,
+        height: H,
+        bit_depth: 16,
+    };
+    let mut source = open(
+        &path,
+        &OpenOptions {
+            fps: None,
+            raw: Some(layout),
+        },
+    )
+    .unwrap();
+    let (got, reused) = read_reusing(source.as_mut());
+    assert!(
+        reused,
+        "every raw frame read into the first frame's storage"
+    );
+    let expected: Vec<Samples> = (0..3).map(|f| Samples::U16(pattern16(f, 65535))).collect();
+    assert_eq!(got, expected);
 }
 
 #[test]

@@ -192,6 +192,80 @@ pub trait FrameSource: Send {
     fn frame_count_hint(&self) -> Option<usize> {
         None
     }
+    /// Reads the next frame into `samples`, reusing its storage where the source can (a y4m
+    /// or raw stream reads the luma plane straight into it), and returns the frame's index, or
+    /// `None` at the end of the stream (`samples` is then unchanged).
+    fn read_frame_into(&mut self, samples: &mut Samples) -> Result<Option<usize>, CaptureError> {
+        Ok(self.next_frame()?.map(|frame| {
+            *samples = frame.samples;
+            frame.index
+        }))
+    }
+}
+
+/// Fills `samples` with one plane of `count` little-endian `bit_depth`-bit samples from
+/// `reader`, reusing the storage of `samples` and of `scratch` (the bytes of a 16-bit plane),
+/// and returns how many bytes arrived: fewer than a plane only at the end of the stream. A
+/// plane larger than the storage already held is grown as data arrives, so a bad header's size
+/// cannot allocate more than the stream holds.
+pub(crate) fn read_plane(
+    reader: &mut impl std::io::Read,
+    samples: &mut Samples,
+    scratch: &mut Vec<u8>,
+    count: usize,
+    bit_depth: u8,
+    path: &std::path::Path,
+) -> Result<usize, CaptureError> {
+    let bytes = Samples::bytes_per_sample(bit_depth) * count;
+    if bit_depth <= 8 {
+        if !matches!(samples, Samples::U8(_)) {
+            *samples = Samples::U8(Vec::new());
+        }
+        let Samples::U8(plane) = samples else {
+            unreachable!("set to 8-bit samples above")
+        };
+        fill(reader, plane, bytes, path)
+    } else {
+        let got = fill(reader, scratch, bytes, path)?;
+        if got == bytes {
+            if !matches!(samples, Samples::U16(_)) {
+                *samples = Samples::U16(Vec::new());
+            }
+            let Samples::U16(plane) = samples else {
+                unreachable!("set to 16-bit samples above")
+            };
+            plane.clear();
+            plane.extend(
+                scratch
+                    .chunks_exact(2)
+                    .map(|b| u16::from_le_bytes([b[0], b[1]])),
+            );
+        }
+        Ok(got)
+    }
+}
+
+/// Reads `len` bytes into `buf` (its storage reused; grown as data arrives when it is
+/// smaller); returns the bytes that arrived.
+fn fill(
+    reader: &mut impl std::io::Read,
+    buf: &mut Vec<u8>,
+    len: usize,
+    path: &std::path::Path,
+) -> Result<usize, CaptureError> {
+    if buf.capacity() >= len {
+        buf.resize(len, 0);
+        let got = read_up_to(reader, buf, path)?;
+        buf.truncate(got);
+        return Ok(got);
+    }
+    buf.clear();
+    std::io::Read::read_to_end(&mut std::io::Read::take(reader, len as u64), buf).map_err(
+        |source| CaptureError::Io {
+            path: path.to_path_buf(),
+            source,
+        },
+    )
 }
 
 pub mod ffmpeg;

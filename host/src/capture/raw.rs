@@ -33,6 +33,8 @@ pub struct RawSource<R = BufReader<std::fs::File>> {
     /// Frames in the file; `None` for a stream of unknown length.
     frames: Option<usize>,
     index: usize,
+    /// Bytes of the last 16-bit frame (storage reused).
+    scratch: Vec<u8>,
 }
 
 /// Bytes of one frame of `layout`, after checking the layout.
@@ -83,6 +85,7 @@ impl RawSource {
             reader: BufReader::with_capacity(1 << 20, file),
             frames: Some(size / frame_bytes),
             index: 0,
+            scratch: Vec::new(),
         })
     }
 }
@@ -102,12 +105,8 @@ impl<R: Read> RawSource<R> {
             reader,
             frames: None,
             index: 0,
+            scratch: Vec::new(),
         })
-    }
-
-    /// Fills `buf` from the stream; returns the bytes read before its end.
-    fn fill(&mut self, buf: &mut [u8]) -> Result<usize, CaptureError> {
-        super::read_up_to(&mut self.reader, buf, &self.path)
     }
 }
 
@@ -117,33 +116,42 @@ impl<R: Read + Send> FrameSource for RawSource<R> {
     }
 
     fn next_frame(&mut self) -> Result<Option<Frame>, CaptureError> {
+        let mut samples = Samples::U8(Vec::new());
+        Ok(self
+            .read_frame_into(&mut samples)?
+            .map(|index| Frame { index, samples }))
+    }
+
+    fn read_frame_into(&mut self, samples: &mut Samples) -> Result<Option<usize>, CaptureError> {
         if self.frames.is_some_and(|frames| self.index >= frames) {
             return Ok(None);
         }
         let pixels = self.format.pixels();
-        let mut bytes = vec![0u8; Samples::bytes_per_sample(self.format.bit_depth) * pixels];
-        let got = self.fill(&mut bytes)?;
+        let bytes = Samples::bytes_per_sample(self.format.bit_depth) * pixels;
+        let got = super::read_plane(
+            &mut self.reader,
+            samples,
+            &mut self.scratch,
+            pixels,
+            self.format.bit_depth,
+            &self.path,
+        )?;
         if got == 0 && self.frames.is_none() {
             return Ok(None);
         }
-        if got < bytes.len() {
+        if got < bytes {
             let index = self.index;
             return Err(CaptureError::Format {
                 path: self.path.clone(),
                 reason: format!(
-                    "stream is truncated inside frame {index}: {got} of its {} bytes arrived \
-                     (the {index} frames before it are whole)",
-                    bytes.len()
+                    "stream is truncated inside frame {index}: {got} of its {bytes} bytes \
+                     arrived (the {index} frames before it are whole)"
                 ),
             });
         }
-        let samples = Samples::from_le_bytes(bytes, self.format.bit_depth);
-        let frame = Frame {
-            index: self.index,
-            samples,
-        };
+        let index = self.index;
         self.index += 1;
-        Ok(Some(frame))
+        Ok(Some(index))
     }
 
     fn frame_count_hint(&self) -> Option<usize> {

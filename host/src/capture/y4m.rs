@@ -20,6 +20,10 @@ pub struct Y4mSource<R = BufReader<std::fs::File>> {
     /// Bytes of chroma after the luma plane of each frame.
     chroma_bytes: usize,
     index: usize,
+    /// The last frame-marker line (storage reused).
+    line: Vec<u8>,
+    /// Bytes of the last 16-bit luma plane (storage reused).
+    scratch: Vec<u8>,
 }
 
 impl Y4mSource {
@@ -117,6 +121,8 @@ impl<R: BufRead> Y4mSource<R> {
             reader,
             chroma_bytes: chroma_pixels * sample_bytes,
             index: 0,
+            line: Vec::new(),
+            scratch: Vec::new(),
         })
     }
 }
@@ -140,64 +146,95 @@ impl<R> Y4mSource<R> {
     }
 }
 
+impl<R: BufRead> Y4mSource<R> {
+    /// Skips `count` bytes (a frame's chroma planes) straight out of the reader's buffer,
+    /// without copying them; returns the bytes skipped (fewer only at the end of the stream).
+    fn skip(&mut self, count: usize) -> Result<usize, CaptureError> {
+        let mut skipped = 0;
+        while skipped < count {
+            let available = match self.reader.fill_buf() {
+                Ok(buf) => buf.len(),
+                Err(e) if e.kind() == std::io::ErrorKind::Interrupted => continue,
+                Err(source) => {
+                    return Err(CaptureError::Io {
+                        path: self.path.clone(),
+                        source,
+                    });
+                }
+            };
+            if available == 0 {
+                break;
+            }
+            let n = available.min(count - skipped);
+            self.reader.consume(n);
+            skipped += n;
+        }
+        Ok(skipped)
+    }
+}
+
 impl<R: BufRead + Send> FrameSource for Y4mSource<R> {
     fn format(&self) -> &FrameFormat {
         &self.format
     }
 
     fn next_frame(&mut self) -> Result<Option<Frame>, CaptureError> {
-        let path = self.path.clone();
-        let io = |source| CaptureError::Io {
-            path: path.clone(),
-            source,
-        };
-        let mut line = Vec::new();
-        let n = (&mut self.reader)
+        let mut samples = Samples::U8(Vec::new());
+        Ok(self
+            .read_frame_into(&mut samples)?
+            .map(|index| Frame { index, samples }))
+    }
+
+    fn read_frame_into(&mut self, samples: &mut Samples) -> Result<Option<usize>, CaptureError> {
+        let mut line = std::mem::take(&mut self.line);
+        line.clear();
+        let marker = (&mut self.reader)
             .take(MAX_LINE)
             .read_until(b'\n', &mut line)
-            .map_err(io)?;
-        if n == 0 {
+            .map_err(|source| CaptureError::Io {
+                path: self.path.clone(),
+                source,
+            });
+        let marker_len = line.len();
+        let complete = line.ends_with(b"\n");
+        let is_frame = line.starts_with(b"FRAME");
+        let partial_marker = b"FRAME".iter().zip(&line).all(|(a, b)| a == b);
+        self.line = line;
+        if marker? == 0 {
             return Ok(None);
         }
-        if !line.ends_with(b"\n") && b"FRAME".iter().zip(&line).all(|(a, b)| a == b) {
-            return Err(self.truncated(line.len()));
+        if !complete && partial_marker {
+            return Err(self.truncated(marker_len));
         }
-        if !line.starts_with(b"FRAME") {
+        if !is_frame {
             return Err(CaptureError::Format {
-                path,
+                path: self.path.clone(),
                 reason: format!("frame {}: missing FRAME marker", self.index),
             });
         }
+        // The luma plane goes straight into the caller's storage (read_plane grows it only
+        // as data arrives, so a bad header's size cannot allocate more than the stream holds).
         let pixels = self.format.pixels();
-        let sample_bytes = Samples::bytes_per_sample(self.format.bit_depth);
-        // Read up to one luma plane into a buffer reserved for at most 64 MiB and grown as
-        // data arrives beyond that, so a bad header's size cannot allocate more than the
-        // stream holds.
-        let luma_bytes = sample_bytes * pixels;
-        let mut bytes = Vec::with_capacity(luma_bytes.min(1 << 26));
-        let luma = (&mut self.reader)
-            .take(luma_bytes as u64)
-            .read_to_end(&mut bytes);
-        if luma.is_err() || bytes.len() != luma_bytes {
-            return Err(self.truncated(line.len() + bytes.len()));
-        }
-        let samples = Samples::from_le_bytes(bytes, self.format.bit_depth);
-        let skipped = std::io::copy(
-            &mut (&mut self.reader).take(self.chroma_bytes as u64),
-            &mut std::io::sink(),
-        )
-        .map_err(|source| CaptureError::Io {
-            path: self.path.clone(),
-            source,
-        })?;
-        if skipped != self.chroma_bytes as u64 {
-            return Err(self.truncated(line.len() + luma_bytes + skipped as usize));
-        }
-        let frame = Frame {
-            index: self.index,
+        let luma_bytes = Samples::bytes_per_sample(self.format.bit_depth) * pixels;
+        let got = super::read_plane(
+            &mut self.reader,
             samples,
-        };
+            &mut self.scratch,
+            pixels,
+            self.format.bit_depth,
+            &self.path,
+        );
+        match got {
+            Ok(got) if got == luma_bytes => {}
+            Ok(got) => return Err(self.truncated(marker_len + got)),
+            Err(_) => return Err(self.truncated(marker_len)),
+        }
+        let skipped = self.skip(self.chroma_bytes)?;
+        if skipped != self.chroma_bytes {
+            return Err(self.truncated(marker_len + luma_bytes + skipped));
+        }
+        let index = self.index;
         self.index += 1;
-        Ok(Some(frame))
+        Ok(Some(index))
     }
 }

@@ -77,6 +77,10 @@ pub struct VideoArgs {
     /// carrying the best fit so far from window to window.
     #[arg(long)]
     fit_every_window: bool,
+    /// Reconstruct every window from scratch instead of starting from the previous window's
+    /// depth (slower; each 3-D frame is then independent of the ones before it).
+    #[arg(long)]
+    cold_start: bool,
     /// Use distant light vectors L_i(0) (the thesis' model) instead of near-field refinement.
     #[arg(long)]
     no_near_field: bool,
@@ -211,6 +215,9 @@ pub fn run(args: &VideoArgs) -> Result<()> {
     {
         println!("video: {}", out.join(video).display());
     }
+    if let Some(reason) = &written.video_fallback {
+        eprintln!("note: {reason} (install FFmpeg for MP4 videos)");
+    }
     println!("wrote {}", out.join("video.json").display());
     if summary.end == EndKind::Cut {
         bail!(
@@ -255,6 +262,7 @@ fn video_config(args: &VideoArgs, rig: &Rig) -> Result<VideoConfig> {
     config.decode = decode;
     config.max_frames = max_frames;
     config.carry_timing = !args.fit_every_window;
+    config.warm_start = !args.cold_start;
     config.schedule = WindowSchedule::new(
         args.window,
         args.drop,

@@ -52,6 +52,8 @@ pub enum VideoEncoder {
         size: (u32, u32),
         /// Display rate, pictures per second.
         fps: f64,
+        /// Why MP4 was not written, when it was asked for (FFmpeg missing).
+        fallback: Option<String>,
     },
 }
 
@@ -84,7 +86,7 @@ impl VideoEncoder {
                 .stdout(Stdio::null())
                 .stderr(Stdio::piped())
                 .spawn();
-            match spawned {
+            let fallback = match spawned {
                 Ok(mut child) => {
                     let stdin = child.stdin.take().map(BufWriter::new);
                     let stderr = child.stderr.take().map(|mut pipe| {
@@ -102,10 +104,24 @@ impl VideoEncoder {
                         size: (width, height),
                     });
                 }
-                Err(e) if e.kind() == std::io::ErrorKind::NotFound => {}
+                Err(e) if e.kind() == std::io::ErrorKind::NotFound => {
+                    Some("ffmpeg was not found on PATH: animated PNG instead of MP4".to_string())
+                }
                 Err(e) => return Err(VideoError::Encode(format!("cannot run ffmpeg: {e}"))),
-            }
+            };
+            return Self::apng(stem, width, height, fps, fallback);
         }
+        Self::apng(stem, width, height, fps, None)
+    }
+
+    /// Starts an APNG `stem.png`; `fallback` says why it replaces an MP4.
+    fn apng(
+        stem: &Path,
+        width: u32,
+        height: u32,
+        fps: f64,
+        fallback: Option<String>,
+    ) -> Result<Self, VideoError> {
         let name = stem
             .file_name()
             .map(|n| n.to_string_lossy().into_owned())
@@ -119,7 +135,24 @@ impl VideoEncoder {
             count: 0,
             size: (width, height),
             fps,
+            fallback,
         })
+    }
+
+    /// The container being written: `"mp4"` or `"apng"`.
+    pub fn container(&self) -> &'static str {
+        match self {
+            Self::Mp4 { .. } => "mp4",
+            Self::Apng { .. } => "apng",
+        }
+    }
+
+    /// Why an MP4 that was asked for is written as APNG instead (`None` when it is not).
+    pub fn fallback(&self) -> Option<&str> {
+        match self {
+            Self::Mp4 { .. } => None,
+            Self::Apng { fallback, .. } => fallback.as_deref(),
+        }
     }
 
     /// The video file being written.
@@ -195,6 +228,7 @@ impl VideoEncoder {
                 count,
                 size,
                 fps,
+                ..
             } => {
                 let result = if count == 0 {
                     Ok(None)

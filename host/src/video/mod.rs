@@ -5,8 +5,9 @@
 //! a live stream is cut into windows ([`schedule`]: thesis windows, or sliding ones), read on
 //! its own thread with memory bounded by the window whatever its length ([`stream`]), each
 //! window decoded by the demodulator ([`decode`]), checked for motion ([`motion`]) and
-//! reconstructed by the one decoded → reconstruction path ([`crate::reconstruct::from_decoded`]);
-//! with ground truth ([`truth`]) each 3-D frame is scored. The caller gets every window's
+//! reconstructed by the one decoded → reconstruction path ([`crate::reconstruct::from_decoded`]),
+//! warm-started from the previous reconstructed window ([`crate::reconstruct::WarmStart`]: the
+//! object moves little in 40 ms; a warm result that strays is redone cold); with ground truth ([`truth`]) each 3-D frame is scored. The caller gets every window's
 //! [`VideoFrame`] as soon as it is done (the CLI writes it with [`output`]: per-frame arrays,
 //! a colour-mapped depth video and a shaded-render video, `video.json`).
 //!
@@ -36,7 +37,7 @@ pub use truth::{TruthDepth, TruthSource};
 use crate::capture::{CaptureError, FrameSource};
 use crate::demod::{CodeMap, DecodeConfig, Decoded, DemodError, OnImplausible, VerdictStatus};
 use crate::metrics::{MetricsError, compare_depth};
-use crate::reconstruct::{ReconstructConfig, Reconstruction, from_decoded};
+use crate::reconstruct::{ReconstructConfig, Reconstruction, Start, WarmStart, from_decoded_warm};
 use crate::rig::Rig;
 use crate::timing::StageTiming;
 use serde::{Deserialize, Serialize};
@@ -65,6 +66,9 @@ pub struct VideoConfig {
     /// Decode windows with the exposure and rate ratio of the best fit so far ([`carry`]);
     /// `false` fits every window on its own.
     pub carry_timing: bool,
+    /// Start each window's reconstruction from the previous reconstructed window's depth
+    /// ([`crate::reconstruct::WarmStart`]); `false` reconstructs every window cold.
+    pub warm_start: bool,
 }
 
 impl VideoConfig {
@@ -82,6 +86,7 @@ impl VideoConfig {
             read_ahead: None,
             max_frames: None,
             carry_timing: true,
+            warm_start: true,
         }
     }
 }
@@ -193,6 +198,8 @@ pub struct ReconstructionQuality {
     pub kept_fraction: f64,
     /// Integration iterations of the last pass.
     pub iterations: usize,
+    /// Whether the reconstruction started from the previous window's (warm) or from scratch.
+    pub start: Start,
 }
 
 impl ReconstructionQuality {
@@ -208,6 +215,7 @@ impl ReconstructionQuality {
                 .count(),
             kept_fraction: reconstruction.integration.kept_fraction,
             iterations: reconstruction.integration.iterations,
+            start: reconstruction.start.clone(),
         }
     }
 }
@@ -403,6 +411,7 @@ pub fn process(
     };
     let mut first_failure: Option<String> = None;
     let mut carry = TimingCarry::new(config.carry_timing);
+    let mut warm: Option<WarmStart> = None;
     'windows: for k in 0.. {
         let scheduled = base + k * schedule.hop;
         let mut timing = FrameTiming::default();
@@ -487,7 +496,11 @@ pub fn process(
             config,
             truth.as_deref_mut(),
             timing,
+            warm.as_ref().filter(|_| config.warm_start),
         )?;
+        if let Some(reconstruction) = &outcome.reconstruction {
+            warm = Some(WarmStart::of(reconstruction));
+        }
         summary.windows += 1;
         match outcome.record.status {
             FrameStatus::Reconstructed => summary.reconstructed += 1,
@@ -563,6 +576,7 @@ fn reconstruct_window(
     config: &VideoConfig,
     truth: Option<&mut (dyn TruthSource + '_)>,
     mut timing: FrameTiming,
+    warm: Option<&WarmStart>,
 ) -> Result<Outcome, VideoError> {
     let decoded_range =
         chosen.start + schedule.drop..chosen.start + schedule.window - schedule.drop;
@@ -651,7 +665,7 @@ fn reconstruct_window(
         });
     }
     let time = Instant::now();
-    let reconstruction = from_decoded(&decoded, rig, None, &config.reconstruct);
+    let reconstruction = from_decoded_warm(&decoded, rig, None, &config.reconstruct, warm);
     timing.reconstruct_ms = time.elapsed().as_secs_f64() * 1e3;
     let reconstruction = match reconstruction {
         Ok(r) => r,

@@ -4,7 +4,9 @@
 //! Per window k: `depth_kkkkk.npy` (H×W mm, NaN off the surface) and, when asked,
 //! `normals_kkkkk.npy` (H×W×3) and `albedo_kkkkk.npy`; windows without a reconstruction get
 //! no arrays and a blank picture in the videos, so the videos keep the 3-D frame rate.
-//! `video.json` holds the settings, the summary, the mean stage timings and one record per
+//! The videos are MP4 through FFmpeg, or animated PNGs when FFmpeg is not installed
+//! ([`super::encode`]); `video.json`'s `outputs` names the container and, for the fallback,
+//! why. `video.json` holds the settings, the summary, the mean stage timings and one record per
 //! window ([`FrameRecord`]): which frames it used, what became of it and why, its motion,
 //! decoder and reconstruction figures, accuracy against the truth and timing. Records are
 //! appended to a hidden file as they come (memory does not grow with the clip) and copied
@@ -66,6 +68,11 @@ pub struct WrittenVideo {
     pub depth_range_mm: Option<(f32, f32)>,
     /// 3-D frames with arrays.
     pub frames_written: usize,
+    /// Container of both videos: `"mp4"` (FFmpeg) or `"apng"` (animated PNG).
+    pub video_container: String,
+    /// Why the videos are APNG when MP4 was asked for (FFmpeg missing); absent otherwise.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub video_fallback: Option<String>,
 }
 
 /// Mean time per window of each stage, ms.
@@ -220,7 +227,11 @@ impl VideoOutput {
         let name = |p: Option<PathBuf>| {
             p.and_then(|p| p.file_name().map(|n| n.to_string_lossy().into_owned()))
         };
+        let video_container = self.depth_video.container().to_string();
+        let video_fallback = self.depth_video.fallback().map(str::to_string);
         let written = WrittenVideo {
+            video_container,
+            video_fallback,
             depth_video: name(self.depth_video.finish()?),
             shaded_video: name(self.shaded_video.finish()?),
             depth_range_mm: self.range,

@@ -6,7 +6,9 @@
 //! decoding and reconstruction; the consumer keeps only the frames of the window it is
 //! decoding (a ring). At most `read_ahead` frames wait in the channel and `window` sit in the
 //! ring: memory is bounded by those two, never by the clip. Frames between windows (a hop
-//! longer than the window) are dropped as they arrive.
+//! longer than the window) are dropped as they arrive. A frame's storage, once dropped, goes
+//! back to the reader thread, which reads the next frame straight into it
+//! ([`FrameSource::read_frame_into`]): after the first window no frame is allocated.
 //!
 //! Requests must move forward in time: [`FrameStream::window`] may not ask for a frame it has
 //! already dropped.
@@ -14,7 +16,7 @@
 use crate::capture::{CaptureError, Frame, FrameFormat, FrameSource, Samples};
 use std::collections::VecDeque;
 use std::ops::Range;
-use std::sync::mpsc::{Receiver, SyncSender, sync_channel};
+use std::sync::mpsc::{Receiver, Sender, SyncSender, channel, sync_channel};
 use std::time::{Duration, Instant};
 
 /// How a stream ended.
@@ -41,6 +43,8 @@ pub struct WindowFrames<'a> {
 pub struct FrameStream {
     format: FrameFormat,
     receiver: Receiver<Result<Frame, CaptureError>>,
+    /// Storage of dropped frames, back to the reader for reuse.
+    recycle: Sender<Samples>,
     ring: VecDeque<Samples>,
     /// Stream index of `ring[0]`.
     ring_start: usize,
@@ -67,13 +71,15 @@ impl FrameStream {
             (None, l) => l,
         };
         let (sender, receiver) = sync_channel(read_ahead.max(1));
+        let (recycle, recycled) = channel();
         std::thread::Builder::new()
             .name("meb-video-reader".into())
-            .spawn(move || read_frames(source, &sender, limit))
+            .spawn(move || read_frames(source, &sender, &recycled, limit))
             .map_err(|e| CaptureError::Other(format!("cannot start the frame reader: {e}")))?;
         Ok(Self {
             format,
             receiver,
+            recycle,
             ring: VecDeque::new(),
             ring_start: 0,
             received: 0,
@@ -134,7 +140,9 @@ impl FrameStream {
         }
         let keep_from = frames.start.min(self.received);
         while self.ring_start < keep_from {
-            self.ring.pop_front();
+            if let Some(samples) = self.ring.pop_front() {
+                self.reuse(samples);
+            }
             self.ring_start += 1;
         }
         if self.ring.is_empty() {
@@ -148,6 +156,7 @@ impl FrameStream {
             self.received += 1;
             if index < frames.start {
                 self.ring_start = self.received;
+                self.reuse(samples);
                 continue;
             }
             self.ring.push_back(samples);
@@ -156,6 +165,11 @@ impl FrameStream {
         let len = frames.end - frames.start;
         let samples = &self.ring.make_contiguous()[offset..offset + len];
         Ok(Some(WindowFrames { frames, samples }))
+    }
+
+    /// Gives a dropped frame's storage back to the reader (lost if the reader has ended).
+    fn reuse(&self, samples: Samples) {
+        let _ = self.recycle.send(samples);
     }
 
     /// The next frame's samples, or `None` at the end of the stream (recorded in `end`).
@@ -197,16 +211,19 @@ impl FrameStream {
 }
 
 /// The reader thread: frames into the channel until the source ends, fails, reaches
-/// `limit`, or the consumer hangs up.
+/// `limit`, or the consumer hangs up; each frame is read into the storage of a dropped one
+/// from `recycled` when there is one.
 fn read_frames(
     mut source: Box<dyn FrameSource>,
     sender: &SyncSender<Result<Frame, CaptureError>>,
+    recycled: &Receiver<Samples>,
     limit: Option<usize>,
 ) {
     let mut read = 0usize;
     while limit.is_none_or(|limit| read < limit) {
-        let message = match source.next_frame() {
-            Ok(Some(frame)) => Ok(frame),
+        let mut samples = recycled.try_recv().unwrap_or(Samples::U8(Vec::new()));
+        let message = match source.read_frame_into(&mut samples) {
+            Ok(Some(index)) => Ok(Frame { index, samples }),
             Ok(None) => return,
             Err(error) => Err(error),
         };
@@ -266,6 +283,72 @@ mod tests {
         assert!(stream.window(98..102).unwrap().is_none());
         assert!(matches!(stream.end(), Some(StreamEnd::Complete)));
         assert_eq!(stream.received(), 100);
+    }
+
+    /// Frames of two samples that count how often a frame needed new storage.
+    struct CountingSource {
+        format: FrameFormat,
+        next: usize,
+        frames: usize,
+        allocations: std::sync::Arc<std::sync::atomic::AtomicUsize>,
+    }
+
+    impl FrameSource for CountingSource {
+        fn format(&self) -> &FrameFormat {
+            &self.format
+        }
+
+        fn next_frame(&mut self) -> Result<Option<Frame>, CaptureError> {
+            let mut samples = Samples::U8(Vec::new());
+            Ok(self
+                .read_frame_into(&mut samples)?
+                .map(|index| Frame { index, samples }))
+        }
+
+        fn read_frame_into(
+            &mut self,
+            samples: &mut Samples,
+        ) -> Result<Option<usize>, CaptureError> {
+            if self.next == self.frames {
+                return Ok(None);
+            }
+            match samples {
+                Samples::U8(v) if v.capacity() >= 2 => {
+                    v.clear();
+                    v.extend([self.next as u8, 0]);
+                }
+                _ => {
+                    self.allocations
+                        .fetch_add(1, std::sync::atomic::Ordering::Relaxed);
+                    *samples = Samples::U8(vec![self.next as u8, 0]);
+                }
+            }
+            self.next += 1;
+            Ok(Some(self.next - 1))
+        }
+    }
+
+    #[test]
+    fn dropped_frames_lend_their_storage_to_the_next() {
+        let allocations = std::sync::Arc::new(std::sync::atomic::AtomicUsize::new(0));
+        let source = CountingSource {
+            format: FrameFormat::full_range(2, 1, 8, 100.0),
+            next: 0,
+            frames: 200,
+            allocations: allocations.clone(),
+        };
+        let mut stream = FrameStream::new(Box::new(source), 4, None).unwrap();
+        for k in 0..24 {
+            let range = 8 * k..8 * k + 8;
+            let window = stream.window(range.clone()).unwrap().unwrap();
+            assert_eq!(
+                first_samples(&window),
+                range.map(|i| i as u8).collect::<Vec<_>>()
+            );
+        }
+        let made = allocations.load(std::sync::atomic::Ordering::Relaxed);
+        // One window in the ring, the read-ahead in the channel, one being read.
+        assert!(made <= 8 + 4 + 2, "{made} frames allocated for 192 read");
     }
 
     #[test]

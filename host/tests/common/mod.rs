@@ -86,6 +86,21 @@ pub fn rig_toml(width: usize, height: usize, pitch_mm: f64, leds: &[[f64; 3]]) -
     toml
 }
 
+/// Writes the thesis' dynamic rig (1000 fps, out-of-plane LEDs, 43° field of view at 420 mm)
+/// with a `width` × `height` camera into `dir`; returns its path.
+pub fn dynamic_rig(dir: &Path, width: usize, height: usize) -> String {
+    let mut toml = format!(
+        "[camera]\nwidth = {width}\nheight = {height}\nfps = 1000.0\ndistance_mm = 420.0\n\
+         fov_deg = 43.0\n"
+    );
+    for [x, y, z] in OUT_OF_PLANE_LEDS {
+        toml.push_str(&format!("[[led]]\nposition_mm = [{x:?}, {y:?}, {z:?}]\n"));
+    }
+    let path = dir.join(format!("dynamic-{width}x{height}.toml"));
+    std::fs::write(&path, toml).expect("the rig file is written");
+    path.display().to_string()
+}
+
 /// Whether FFmpeg (`ffmpeg` and `ffprobe`) can run. Without it, a test that needs it must
 /// return early and say so; under `CI=true` a missing FFmpeg fails the test instead, because
 /// CI installs it (`scripts/setup.sh`) and a quiet skip there would hide a broken setup.
