@@ -80,15 +80,7 @@ fn configured_luminaire_to_depth_map_meets_the_target() {
     };
     let decoded = decode(&mut capture, &decode_config, &mut |_, _| {}).unwrap();
     let report = &decoded.report;
-    eprintln!(
-        "end to end: exposure {:.3} ± {:.3}, line delay {:.3e} ± {:.1e} frames/row (evidence {:.1} noise variances), verdict {:?}",
-        report.exposure,
-        report.exposure_std,
-        report.line_delay_frames,
-        report.line_delay_std_frames,
-        report.line_delay_evidence,
-        report.verdict.status
-    );
+    eprintln!("end to end: {}", report.timing_summary());
     // A global shutter: the rows agree, so no line delay may be fitted (a spurious one once
     // absorbed a wrong exposure's misfit and cost the depth a factor of two).
     assert_eq!(

@@ -83,3 +83,20 @@ pub struct DecodeReport {
     #[serde(default)]
     pub verdict: Verdict,
 }
+
+impl DecodeReport {
+    /// One line with the fitted timing and how well the data determine it: exposure and line
+    /// delay with their standard errors, the line delay's evidence, and the verdict.
+    pub fn timing_summary(&self) -> String {
+        format!(
+            "exposure {:.3} ± {:.3}, line delay {:.3e} ± {:.1e} frames/row (evidence {:.1} noise \
+             variances), verdict {:?}",
+            self.exposure,
+            self.exposure_std,
+            self.line_delay_frames,
+            self.line_delay_std_frames,
+            self.line_delay_evidence,
+            self.verdict.status
+        )
+    }
+}
