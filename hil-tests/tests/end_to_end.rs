@@ -79,6 +79,20 @@ fn configured_luminaire_to_depth_map_meets_the_target() {
         ..DecodeConfig::default()
     };
     let decoded = decode(&mut capture, &decode_config, &mut |_, _| {}).unwrap();
+    let report = &decoded.report;
+    eprintln!("end to end: {}", report.timing_summary());
+    // A global shutter: the rows agree, so no line delay may be fitted (a spurious one once
+    // absorbed a wrong exposure's misfit and cost the depth a factor of two).
+    assert_eq!(
+        report.line_delay_frames, 0.0,
+        "a global shutter with a line delay"
+    );
+    assert!(
+        (report.exposure - 0.8).abs() <= (3.0 * report.exposure_std).max(0.05),
+        "exposure {:.3} ± {:.3} misses 0.8",
+        report.exposure,
+        report.exposure_std
+    );
 
     // 4. Near-field photometric stereo ↔ integration: the path `meb reconstruct` takes.
     assert!(

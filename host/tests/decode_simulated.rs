@@ -2,9 +2,11 @@
 //! `led_true`, less noise than the thesis estimator, rate mismatch, and `meb decode` on the
 //! files `meb simulate` writes.
 
-use meb::demod::{DecodeConfig, Decoded, Estimator, LedCount, decode};
+use meb::demod::{DecodeConfig, Decoded, Estimator, LedCount, Linearize, decode};
 use meb::rig::Rig;
+use meb::simulate::ToneCurve;
 use meb::simulate::capture::{SimConfig, SimulatedCapture};
+use meb::simulate::exposure::expose_without_clipping;
 use meb::simulate::scene::{Scene, SceneObject};
 use meb::simulate::sensor::NoiseModel;
 use std::path::Path;
@@ -443,4 +445,87 @@ fn implausible_decode_is_refused_unless_forced_and_reconstruct_checks_the_verdic
     let text = String::from_utf8_lossy(&forced.stderr);
     assert!(text.contains("using it anyway (--force)"), "{text}");
     assert!(!text.contains("use --force"), "{text}");
+}
+
+/// The hardware-in-the-loop capture's settings (thesis out-of-plane rig at 192×128, 0.5 mm
+/// pixels, Ø48 mm sphere, background at 0 dB SNR, σ = 1 %, gamma 2.2, exposure 0.8, exposed
+/// without clipping, global shutter) with the LEDs' clock `ppm` off the camera's.
+fn hil_like_capture(ppm: f64, phases: Option<[f64; 4]>, seed: u64) -> SimulatedCapture {
+    let mut rig = Rig::preset("thesis-out-of-plane").unwrap();
+    rig.camera.width = 192;
+    rig.camera.height = 128;
+    rig.camera.fov_deg = None;
+    rig.camera.pixel_pitch_mm = Some(0.5);
+    let scene = Scene::single(SceneObject::sphere(48.0));
+    let sim = SimConfig {
+        frames: 128,
+        exposure: 0.8,
+        noise: NoiseModel {
+            sigma: 0.01,
+            full_well_electrons: None,
+        },
+        snr_db: Some(0.0),
+        tone: ToneCurve::Gamma(2.2),
+        phases_chips: phases.map(|p| p.to_vec()),
+        chip_rates_hz: Some(vec![rig.camera.fps * (1.0 + ppm * 1e-6)]),
+        seed,
+        ..SimConfig::default()
+    };
+    let sim = expose_without_clipping(&rig, &scene, sim).unwrap();
+    SimulatedCapture::new(rig, scene, sim).unwrap()
+}
+
+/// A global shutter at rate ratio 1 ± 20 ppm, the case a faster fit once decoded with a
+/// spurious line delay and a wrong exposure that the verdict called plausible: the rows must
+/// agree (no line delay), every gain must be within 1 %, the verdict plausible, and the
+/// exposure within three reported standard errors (or 0.05) of the truth: ρ ≈ 1 leaves the
+/// exposure and the phases' fractional part along one nearly flat direction, which the
+/// reported standard error must show.
+#[test]
+fn hil_settings_decode_without_a_line_delay() {
+    let cases = [
+        (20.0, Some([0.0, 9.0, 17.0, 26.0]), 0),
+        (-20.0, Some([0.0, 9.0, 17.0, 26.0]), 1),
+        (20.0, None, 2),
+        (-20.0, None, 3),
+    ];
+    let mut failures = Vec::new();
+    for (ppm, phases, seed) in cases {
+        let mut cap = hil_like_capture(ppm, phases, seed);
+        let truth = cap.truth_at(0.0).led_true;
+        let config = DecodeConfig {
+            linearize: Linearize::Gamma(2.2),
+            ..DecodeConfig::default()
+        };
+        let decoded = decode(&mut cap, &config, &mut |_, _| {}).unwrap();
+        let report = &decoded.report;
+        let gains: Vec<f64> = (0..4)
+            .map(|i| gain_and_noise(&decoded.leds.images[i], &truth.images[i]).0)
+            .collect();
+        eprintln!(
+            "{ppm:+} ppm, phases {phases:?}, seed {seed}: {}, gains {gains:.4?}",
+            report.timing_summary()
+        );
+        if (report.exposure - 0.8).abs() > (3.0 * report.exposure_std).max(0.05) {
+            failures.push(format!(
+                "{ppm:+} ppm seed {seed}: exposure {:.3} ± {:.3} (1σ) misses 0.8",
+                report.exposure, report.exposure_std
+            ));
+        }
+        if !report.verdict.is_plausible() {
+            failures.push(format!("{ppm:+} ppm seed {seed}: {:?}", report.verdict));
+        }
+        if report.line_delay_frames != 0.0 {
+            failures.push(format!(
+                "{ppm:+} ppm seed {seed}: a global shutter decoded with a line delay of {:.3e} frames/row",
+                report.line_delay_frames
+            ));
+        }
+        for (i, g) in gains.iter().enumerate() {
+            if (g - 1.0).abs() >= 0.01 {
+                failures.push(format!("{ppm:+} ppm seed {seed}: LED {} gain {g}", i + 1));
+            }
+        }
+    }
+    assert!(failures.is_empty(), "{failures:#?}");
 }

@@ -18,7 +18,18 @@
 //! shifts' trend across the bands seeds λ, and a band-wise refinement (several exposures, then
 //! a grid re-search of each LED's shift, then again least squares) decides whether the rows
 //! disagree: when λ explains significantly more than noise would, (3) the fit is redone row by
-//! row. Finally each carrier's sign is chosen so that the sample's on-levels are positive (a
+//! row. λ must earn its place twice: in (2) its cost reduction is measured against the
+//! band-wise optimum without it refitted from λ's own solution (so that λ takes no credit for
+//! a better exposure, rate or shift it happened to find on the way) and must beat what one
+//! extra parameter per band would gain from noise (a χ² threshold); in (3) the row-wise fit is
+//! refitted once more without λ from λ's solution, and λ must lower the cost by
+//! [`RAMP_SIGNIFICANCE`] noise variances (a likelihood-ratio test: 5σ for one parameter).
+//! Otherwise the rows agree and the global-shutter fit stands. The Gauss–Newton covariance
+//! σ²·(JᵀJ)⁻¹ at the optimum gives the exposure's and λ's standard errors, which the report
+//! carries: at ρ ≈ 1 the exposure trades against the shifts' fractional parts along a nearly
+//! flat direction and is not determined by the data. (λ's standard error is not the test:
+//! its correlation with that flat direction inflates it, and the likelihood ratio is the
+//! sharper question.) Finally each carrier's sign is chosen so that the sample's on-levels are positive (a
 //! half-period shift negates a carrier, SPEC §2).
 
 use super::basis::TemplateBasis;
@@ -48,8 +59,13 @@ const TEST_BANDS: usize = 8;
 const ROWS_PER_TEST_BAND: usize = 8;
 /// Smallest phase ramp over the region, chips, that counts as a rolling shutter.
 const MIN_RAMP_CHIPS: f64 = 0.01;
-/// A line delay is kept when it lowers the band-wise cost by this many noise variances.
-const RAMP_SIGNIFICANCE: f64 = 25.0;
+/// A line delay is kept when it lowers the band-wise cost by this many noise variances (and
+/// by more than one extra parameter per band would by noise, see [`ramp_threshold`]), and
+/// the row-wise cost by as many.
+pub const RAMP_SIGNIFICANCE: f64 = 25.0;
+/// A standard error is reported as at most this (exposure in frame periods, line delay in
+/// frame periods per row): a direction the data do not constrain at all.
+const UNDETERMINED_STD: f64 = 1.0;
 /// The rows agree (no rolling-shutter search) when letting each band's shifts move lowers
 /// the band-wise cost by less than this many noise variances per shift and the bands' shift
 /// trend stays below [`MIN_RAMP_CHIPS`].
@@ -143,6 +159,32 @@ pub struct TimingFit {
     pub rate_at_limit: bool,
     /// The fitted line delay sits at the largest one searched.
     pub line_delay_at_limit: bool,
+    /// 1σ standard error of the exposure (frame periods) from the fit's covariance; 0 when
+    /// given, [`UNDETERMINED_STD`] when the data do not constrain it.
+    pub exposure_std: f64,
+    /// 1σ standard error of the line delay (frame periods per row); 0 when given or not fitted.
+    pub line_delay_std: f64,
+    /// How much the fitted line delay lowers the row-wise cost against the best fit without
+    /// one, noise variances (0 when the line delay was given or not fitted).
+    pub line_delay_evidence: f64,
+    /// Whether the line delay was fitted (not given, not absent).
+    pub line_delay_fitted: bool,
+}
+
+impl TimingFit {
+    /// Whether a fitted line delay lowers the cost by less than [`RAMP_SIGNIFICANCE`] noise
+    /// variances: the data do not show it (never for a given or absent line delay).
+    pub fn line_delay_undetermined(&self) -> bool {
+        self.rolling && self.line_delay_fitted && self.line_delay_evidence < RAMP_SIGNIFICANCE
+    }
+}
+
+/// The row-wise fit and the evidence for its line delay.
+struct RowFit {
+    solution: Solution,
+    /// Cost reduction of the line delay against the fit without it, noise variances (0 when
+    /// the line delay was held).
+    evidence: f64,
 }
 
 /// A compressed block of sample data sharing one set of templates.
@@ -207,18 +249,29 @@ pub fn fit_timing(
         limits,
     };
     let global = fitter.global(space);
-    let (solution, rolling) = match limits.line_delay {
+    let held = RowFit {
+        solution: global,
+        evidence: 0.0,
+    };
+    let (fit, rolling) = match limits.line_delay {
         Some(delay) if delay != 0.0 => {
-            let start = fitter.pivot(&global.params, delay, mean_row(sample));
+            let start = fitter.pivot(&held.solution.params, delay, mean_row(sample));
             (fitter.rows(sample, pixel_noise, &start, false), true)
         }
-        Some(_) => (global, false),
-        None => match fitter.band_fit(sample, &global, pixel_noise) {
-            Some(banded) => (fitter.rows(sample, pixel_noise, &banded.params, true), true),
-            None => (global, false),
+        Some(_) => (held, false),
+        None => match fitter.band_fit(sample, &held.solution, pixel_noise) {
+            Some(banded) => {
+                let rows = fitter.rows(sample, pixel_noise, &banded.params, true);
+                if rows.evidence >= RAMP_SIGNIFICANCE {
+                    (rows, true)
+                } else {
+                    (held, false)
+                }
+            }
+            None => (held, false),
         },
     };
-    fitter.finish(sample, solution, rolling, pixel_noise)
+    fitter.finish(sample, fit, rolling, pixel_noise)
 }
 
 /// Refines an earlier fit of more LEDs (the LED-count check's) for the first `leds` of them,
@@ -242,16 +295,19 @@ pub fn refit_timing(
     };
     let mut start = previous.model.params();
     start.truncate(SHIFTS + leds);
-    let solution = if previous.rolling {
+    let fit = if previous.rolling {
         fitter.rows(sample, pixel_noise, &start, limits.line_delay.is_none())
     } else {
-        fitter.solve(
-            &global_groups(space, frames),
-            &start,
-            &fitter.freedom(false),
-        )
+        RowFit {
+            solution: fitter.solve(
+                &global_groups(space, frames),
+                &start,
+                &fitter.freedom(false),
+            ),
+            evidence: 0.0,
+        }
     };
-    fitter.finish(sample, solution, previous.rolling, pixel_noise)
+    fitter.finish(sample, fit, previous.rolling, pixel_noise)
 }
 
 /// The global-shutter data: the signal eigenvectors scaled by √eigenvalue.
@@ -276,10 +332,13 @@ impl Fitter<'_> {
     fn finish(
         &self,
         sample: &PixelSample,
-        solution: Solution,
+        fit: RowFit,
         rolling: bool,
         pixel_noise: f64,
     ) -> TimingFit {
+        let RowFit { solution, evidence } = fit;
+        let line_delay_fitted =
+            rolling && self.limits.line_delay.is_none() && solution.free.contains(&LINE_DELAY);
         let mut model = TimingModel::from_params(&solution.params);
         orient(sample, self.waves, &mut model);
         let reference = if rolling { mean_row(sample) } else { 0.0 };
@@ -303,6 +362,10 @@ impl Fitter<'_> {
             pixel_noise,
             rate_at_limit,
             line_delay_at_limit,
+            exposure_std: standard_error(&solution, EXPOSURE, pixel_noise),
+            line_delay_std: standard_error(&solution, LINE_DELAY, pixel_noise),
+            line_delay_evidence: evidence,
+            line_delay_fitted,
         }
     }
 
@@ -476,8 +539,19 @@ impl Fitter<'_> {
         let ramp = TimingModel::from_params(&best.params)
             .ramp_chips(height)
             .abs();
-        (ramp >= MIN_RAMP_CHIPS && base - best.cost > RAMP_SIGNIFICANCE * pixel_noise)
-            .then_some(best)
+        if ramp < MIN_RAMP_CHIPS {
+            return None;
+        }
+        // The same fit without λ, started from λ's solution: what λ itself explains.
+        let flat = self
+            .solve(
+                &groups,
+                &self.pivot(&best.params, 0.0, centre),
+                &self.freedom(false),
+            )
+            .cost;
+        let base = base.min(flat);
+        (base - best.cost > ramp_threshold(groups.len()) * pixel_noise).then_some(best)
     }
 
     /// The exposures to start a refinement from: `fitted` and `spread` (only the known
@@ -524,15 +598,15 @@ impl Fitter<'_> {
         params
     }
 
-    /// Phase (3): the row-by-row fit from `start` (several exposures unless `spread` is off
-    /// or the exposure is given).
+    /// Phase (3): the row-by-row fit from `start` (several exposures unless the exposure is
+    /// given), with the evidence for its line delay when `fit_delay` (module docs).
     fn rows(
         &self,
         sample: &PixelSample,
         pixel_noise: f64,
         start: &[f64],
         fit_delay: bool,
-    ) -> Solution {
+    ) -> RowFit {
         let groups = row_groups(sample, self.waves.len(), pixel_noise);
         let freedom = self.freedom(fit_delay);
         let mut best: Option<Solution> = None;
@@ -544,8 +618,49 @@ impl Fitter<'_> {
                 best = Some(solution);
             }
         }
-        best.unwrap_or_else(|| self.solve(&groups, start, &freedom))
+        let solution = best.unwrap_or_else(|| self.solve(&groups, start, &freedom));
+        let evidence = if fit_delay {
+            let flat = self.pivot(&solution.params, 0.0, mean_row(sample));
+            let without = self.solve(&groups, &flat, &self.freedom(false)).cost;
+            (without - solution.cost) / pixel_noise.max(f64::MIN_POSITIVE)
+        } else {
+            0.0
+        };
+        RowFit { solution, evidence }
     }
+}
+
+/// Noise variances a line delay must explain on `bands` row bands: [`RAMP_SIGNIFICANCE`], and
+/// at least the mean plus five standard deviations of the χ² with one degree of freedom per
+/// band (what one extra parameter per band would gain from noise alone).
+fn ramp_threshold(bands: usize) -> f64 {
+    let b = bands as f64;
+    RAMP_SIGNIFICANCE.max(b + 5.0 * (2.0 * b).sqrt())
+}
+
+/// 1σ standard error of parameter `k` from the Gauss–Newton covariance σ²·(JᵀJ)⁻¹ of
+/// `solution` (0 when `k` was held; [`UNDETERMINED_STD`] at most, and when `k` loads on a
+/// direction the data leave flat: an eigenvalue below 1e-12 of the largest).
+fn standard_error(solution: &Solution, k: usize, pixel_noise: f64) -> f64 {
+    let Some(a) = solution.free.iter().position(|&f| f == k) else {
+        return 0.0;
+    };
+    let n = solution.free.len();
+    if solution.information.shape() != (n, n) {
+        return UNDETERMINED_STD;
+    }
+    let eigen = solution.information.clone().symmetric_eigen();
+    let largest = eigen.eigenvalues.iter().fold(0.0f64, |m, &v| m.max(v));
+    let mut variance = 0.0;
+    for (m, &value) in eigen.eigenvalues.iter().enumerate() {
+        let loading = eigen.eigenvectors[(a, m)];
+        if value > 1e-12 * largest {
+            variance += loading * loading / value;
+        } else if loading.abs() > 1e-6 {
+            return UNDETERMINED_STD;
+        }
+    }
+    (variance * pixel_noise).sqrt().min(UNDETERMINED_STD)
 }
 
 /// The sample's mean region row.

@@ -714,6 +714,9 @@ fn finish(
     let mean = |f: &dyn Fn(&(TimingFit, FitQuality, usize)) -> f64| {
         state.fits.iter().map(f).sum::<f64>() / windows
     };
+    let largest = |f: &dyn Fn(&(TimingFit, FitQuality, usize)) -> f64| {
+        state.fits.iter().map(f).fold(0.0f64, f64::max)
+    };
     let rate_ratio = mean(&|(fit, _, _)| fit.model.timing.rate_ratio);
     let line_delay = mean(&|(fit, _, _)| fit.model.line_delay);
     let report = DecodeReport {
@@ -728,12 +731,20 @@ fn finish(
         fps: format.fps,
         chip_rate_hz: rate_ratio * format.fps,
         exposure: mean(&|(fit, _, _)| fit.model.timing.exposure),
+        exposure_std: largest(&|(fit, _, _)| fit.exposure_std),
         line_time_us: if format.fps > 0.0 {
             line_delay / format.fps * 1e6
         } else {
             0.0
         },
         line_delay_frames: line_delay,
+        line_delay_std_frames: largest(&|(fit, _, _)| fit.line_delay_std),
+        line_delay_evidence: state
+            .fits
+            .iter()
+            .map(|(fit, _, _)| fit.line_delay_evidence)
+            .reduce(f64::min)
+            .unwrap_or(0.0),
         row_bands: state.fits.iter().map(|(_, _, b)| *b).max().unwrap_or(1),
         fit_residual: mean(&|(_, quality, _)| quality.residual_rms),
         median_noise,

@@ -14,10 +14,12 @@
 //!   ([`super::fit`]).
 //!
 //! A decode is implausible when an LED has no signal above noise, leaves a significant part of
-//! its modulation unexplained, or has a gain uncertain by more than a third of a percent (so
-//! that three standard deviations stay within 1 %).
+//! its modulation unexplained, or has a gain uncertain by more than [`MAX_GAIN_UNCERTAINTY`] (1σ), or when a fitted rolling-shutter line
+//! delay is not supported by the data (it lowers the cost by fewer than [`RAMP_SIGNIFICANCE`]
+//! noise variances against the fit without it: a line delay can absorb a wrong exposure's
+//! misfit, which the unexplained energy alone does not reveal).
 
-use super::fit::TimingFit;
+use super::fit::{RAMP_SIGNIFICANCE, TimingFit};
 use super::sample::PixelSample;
 use super::spectrum::SignalSpace;
 use super::waveform::ReceivedWaveform;
@@ -350,6 +352,14 @@ pub fn judge(quality: &[LedQuality], fit: &TimingFit) -> Verdict {
     if fit.rate_at_limit {
         problems.push("the rate ratio sits at the edge of the searched range".into());
         advise("widen the rate-ratio search or give the chip rate");
+    }
+    if fit.line_delay_undetermined() {
+        problems.push(format!(
+            "the fitted rolling-shutter line delay ({:.3e} frame periods per row) explains \
+             {:.1} noise variances, fewer than {RAMP_SIGNIFICANCE}: the data do not show one",
+            fit.model.line_delay, fit.line_delay_evidence
+        ));
+        advise("give the rolling-shutter line time (0 for a global shutter)");
     }
     if fit.line_delay_at_limit {
         problems.push(

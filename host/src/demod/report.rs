@@ -46,6 +46,10 @@ pub struct DecodeReport {
     /// Estimated exposure as a fraction of the frame period (at a rate ratio of exactly 1 any
     /// exposure up to one frame gives the same waveforms, so it is not identifiable there).
     pub exposure: f64,
+    /// 1σ standard error of `exposure` from the timing fit's covariance (largest over
+    /// windows; 0 when given, 1 when the data do not determine it, as at a rate ratio of 1).
+    #[serde(default)]
+    pub exposure_std: f64,
     /// Rolling-shutter line time in microseconds (fitted or given; 0 for a global shutter or
     /// when the frame rate is unknown: see `line_delay_frames`).
     #[serde(default)]
@@ -53,6 +57,14 @@ pub struct DecodeReport {
     /// Rolling-shutter line delay in frame periods per row (0 for a global shutter).
     #[serde(default)]
     pub line_delay_frames: f64,
+    /// 1σ standard error of `line_delay_frames` from the fit (largest over windows; 0 when
+    /// given or when the rows agree and no line delay was fitted).
+    #[serde(default)]
+    pub line_delay_std_frames: f64,
+    /// Cost reduction of the fitted line delay against the best fit without one, noise
+    /// variances (smallest over windows; 0 when given or not fitted).
+    #[serde(default)]
+    pub line_delay_evidence: f64,
     /// Row bands with their own waveforms in the per-pixel fit (1 for a global shutter).
     #[serde(default)]
     pub row_bands: usize,
@@ -70,4 +82,21 @@ pub struct DecodeReport {
     /// Whether the decode can be trusted, what looks wrong and what to try.
     #[serde(default)]
     pub verdict: Verdict,
+}
+
+impl DecodeReport {
+    /// One line with the fitted timing and how well the data determine it: exposure and line
+    /// delay with their standard errors, the line delay's evidence, and the verdict.
+    pub fn timing_summary(&self) -> String {
+        format!(
+            "exposure {:.3} ± {:.3}, line delay {:.3e} ± {:.1e} frames/row (evidence {:.1} noise \
+             variances), verdict {:?}",
+            self.exposure,
+            self.exposure_std,
+            self.line_delay_frames,
+            self.line_delay_std_frames,
+            self.line_delay_evidence,
+            self.verdict.status
+        )
+    }
 }
