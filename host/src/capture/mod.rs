@@ -203,6 +203,17 @@ pub trait FrameSource: Send {
     }
 }
 
+/// A new [`Frame`] from [`FrameSource::read_frame_into`]: `next_frame` for sources whose
+/// reading goes into caller storage.
+pub fn next_frame_from_storage<S: FrameSource + ?Sized>(
+    source: &mut S,
+) -> Result<Option<Frame>, CaptureError> {
+    let mut samples = Samples::U8(Vec::new());
+    Ok(source
+        .read_frame_into(&mut samples)?
+        .map(|index| Frame { index, samples }))
+}
+
 /// Fills `samples` with one plane of `count` little-endian `bit_depth`-bit samples from
 /// `reader`, reusing the storage of `samples` and of `scratch` (the bytes of a 16-bit plane),
 /// and returns how many bytes arrived: fewer than a plane only at the end of the stream. A

@@ -116,10 +116,7 @@ impl<R: Read + Send> FrameSource for RawSource<R> {
     }
 
     fn next_frame(&mut self) -> Result<Option<Frame>, CaptureError> {
-        let mut samples = Samples::U8(Vec::new());
-        Ok(self
-            .read_frame_into(&mut samples)?
-            .map(|index| Frame { index, samples }))
+        super::next_frame_from_storage(self)
     }
 
     fn read_frame_into(&mut self, samples: &mut Samples) -> Result<Option<usize>, CaptureError> {

@@ -299,10 +299,7 @@ mod tests {
         }
 
         fn next_frame(&mut self) -> Result<Option<Frame>, CaptureError> {
-            let mut samples = Samples::U8(Vec::new());
-            Ok(self
-                .read_frame_into(&mut samples)?
-                .map(|index| Frame { index, samples }))
+            crate::capture::next_frame_from_storage(self)
         }
 
         fn read_frame_into(
