@@ -63,8 +63,11 @@ const WARM_MISFIT_PIXELS: usize = 5_000;
 /// ellipsoid (7.5 rpm, 40 ms windows) moves its surface by at most ~2 mm between windows.
 pub const WARM_OFFSET_BRACKET_MM: f64 = 4.0;
 
-/// Median absolute depth change in mm between two passes below which a warm start's passes
-/// stop (well below the near-field reconstructions' accuracy of 0.1–1 mm).
+/// Change of shape in mm between two passes below which a warm start's passes stop: the median
+/// absolute depth change once the median change is taken out (well below the near-field
+/// reconstructions' accuracy of 0.1–1 mm). The offset is left out because each pass's offset
+/// search moves the whole part by a few tenths of a millimetre, so the plain depth change never
+/// falls below it; the last pass's search places the settled shape.
 pub const WARM_SETTLED_MM: f64 = 0.05;
 
 /// Median absolute difference in mm from the warm start beyond which a warm result is redone
@@ -246,7 +249,7 @@ pub fn reconstruct(
 /// ([`WarmStart`]): light vectors at the previous depth, each part's offset searched within
 /// ±[`WARM_OFFSET_BRACKET_MM`] of the offset carried from it, integration warm-started with the
 /// early passes' loose settings, and passes stopped once the depth moves less than
-/// [`WARM_SETTLED_MM`] (median). A warm result that moved more than [`WARM_MAX_MOVE_MM`]
+/// [`WARM_SETTLED_MM`] (median change of shape). A warm result that moved more than [`WARM_MAX_MOVE_MM`]
 /// (median) from the start,
 /// found an offset at the bracket's edge, covers pixels the start did not know, or failed, is
 /// redone cold ([`Start::Redone`]).
@@ -390,7 +393,7 @@ fn passes(
         }
         let settled = match (warm, depth) {
             (Some(_), Some(before)) => {
-                depth_change(&integration.depth.depth_mm, before).median_mm < WARM_SETTLED_MM
+                depth_change(&integration.depth.depth_mm, before).shape_mm < WARM_SETTLED_MM
             }
             _ => false,
         };
@@ -429,30 +432,43 @@ struct DepthChange {
     /// Median absolute difference, mm (infinite without shared pixels). The median, because
     /// the steep rims' depths swing by millimetres from pass to pass while the surface stays.
     median_mm: f64,
+    /// Median absolute deviation of the signed differences from their median, mm: how much the
+    /// shape changed, a common shift left out (infinite without shared pixels).
+    shape_mm: f64,
     /// Pixels with both depths.
     pixels: usize,
 }
 
 /// The [`DepthChange`] from `before` to `after`.
 fn depth_change(after: &Array2<f32>, before: &Array2<f32>) -> DepthChange {
-    let mut changes: Vec<f32> = after
+    let changes: Vec<f32> = after
         .iter()
         .zip(before)
         .filter(|(a, b)| a.is_finite() && b.is_finite())
-        .map(|(a, b)| (a - b).abs())
+        .map(|(a, b)| a - b)
         .collect();
     let pixels = changes.len();
     if pixels == 0 {
         return DepthChange {
             median_mm: f64::INFINITY,
+            shape_mm: f64::INFINITY,
             pixels,
         };
     }
-    let (_, median, _) = changes.select_nth_unstable_by(pixels / 2, f32::total_cmp);
+    let shift = median(&mut changes.clone());
+    let mut absolute: Vec<f32> = changes.iter().map(|d| d.abs()).collect();
+    let mut deviation: Vec<f32> = changes.iter().map(|d| (d - shift).abs()).collect();
     DepthChange {
-        median_mm: f64::from(*median),
+        median_mm: f64::from(median(&mut absolute)),
+        shape_mm: f64::from(median(&mut deviation)),
         pixels,
     }
+}
+
+/// The median (upper median for an even count) of non-empty `values`, reordering them.
+fn median(values: &mut [f32]) -> f32 {
+    let middle = values.len() / 2;
+    *values.select_nth_unstable_by(middle, f32::total_cmp).1
 }
 
 /// `depth` with the pixels of `part` moved by `offset` mm towards the camera
@@ -742,13 +758,22 @@ mod tests {
     }
 
     #[test]
-    fn the_depth_change_is_the_median_over_shared_pixels() {
+    fn the_depth_change_is_the_median_over_shared_pixels_and_the_shape_change_leaves_out_a_shift() {
         let before = Array2::from_shape_vec((1, 5), vec![0.0, 0.0, 0.0, 0.0, f32::NAN]).unwrap();
         // One rim pixel swings by 40 mm; the others move by 0.1–0.3 mm.
         let after = Array2::from_shape_vec((1, 5), vec![0.1, 0.2, 0.3, 40.0, 1.0]).unwrap();
         let change = depth_change(&after, &before);
         assert_eq!(change.pixels, 4);
         assert!((change.median_mm - 0.3).abs() < 1e-6, "{change:?}");
+        // Signed changes 0.1, 0.2, 0.3, 40: shift 0.3, deviations 0.2, 0.1, 0, 39.7.
+        assert!((change.shape_mm - 0.2).abs() < 1e-6, "{change:?}");
+        // A common shift is no change of shape.
+        let shifted = before.mapv(|z| z + 2.5);
+        let moved = depth_change(&shifted, &before);
+        assert!(
+            (moved.median_mm - 2.5).abs() < 1e-6 && moved.shape_mm < 1e-6,
+            "{moved:?}"
+        );
         let nothing = depth_change(&after, &Array2::from_elem((1, 5), f32::NAN));
         assert_eq!(nothing.pixels, 0);
         assert!(nothing.median_mm.is_infinite());
