@@ -281,13 +281,12 @@ pub fn reconstruct_warm(
     let mut start = Start::Cold;
     if let Some(warm) = warm.filter(|w| near_field && w.depth_mm.dim() == shape) {
         let reason = match passes(images, rig, mask, noise, config, Some(warm), &mut timings) {
-            Ok((photometric, integration, Ok(passes))) => {
-                let moved_mm = depth_change(&integration.depth.depth_mm, &warm.depth_mm).median_mm;
+            Ok((photometric, integration, Ok(start))) => {
                 return Ok(Reconstruction {
                     photometric,
                     integration,
                     timings,
-                    start: Start::Warm { passes, moved_mm },
+                    start,
                 });
             }
             Ok((_, _, Err(reason))) => reason,
@@ -305,8 +304,9 @@ pub fn reconstruct_warm(
     })
 }
 
-/// The photometric stereo ↔ integration passes (module docs), cold or from `warm`; with a warm
-/// start, also the number of passes run or why the result cannot be trusted.
+/// The photometric stereo ↔ integration passes (module docs), cold or from `warm`, with how the
+/// result started ([`Start::Cold`], or [`Start::Warm`] with the passes run and how far it moved)
+/// or why a warm result cannot be trusted.
 fn passes(
     images: &LedImages,
     rig: &Rig,
@@ -315,7 +315,7 @@ fn passes(
     config: &ReconstructConfig,
     warm: Option<&WarmStart>,
     timings: &mut Vec<StageTiming>,
-) -> Result<(PhotometricResult, Integration, Result<usize, String>), ReconstructError> {
+) -> Result<(PhotometricResult, Integration, Result<Start, String>), ReconstructError> {
     let projection = rig.camera.projection();
     let label = if warm.is_some() { ", warm" } else { "" };
     let mut time = |stage: &str, pass: usize, start: Instant| {
@@ -408,22 +408,30 @@ fn passes(
     }
     let (photometric, integration) = previous
         .ok_or_else(|| ReconstructError::Rig("no reconstruction pass was run".to_string()))?;
-    if let (Some(warm), Ok(_)) = (warm, &verdict) {
+    let start = verdict.and_then(|passes| {
+        let Some(warm) = warm else {
+            return Ok(Start::Cold);
+        };
         let moved = depth_change(&integration.depth.depth_mm, &warm.depth_mm);
         let kept = integration.kept.iter().filter(|&&k| k).count();
         if moved.median_mm > WARM_MAX_MOVE_MM {
-            verdict = Err(format!(
+            Err(format!(
                 "the depth moved {:.2} mm (median) from the warm start (more than {WARM_MAX_MOVE_MM} mm)",
                 moved.median_mm
-            ));
+            ))
         } else if (moved.pixels as f64) < WARM_MIN_OVERLAP * kept as f64 {
-            verdict = Err(format!(
+            Err(format!(
                 "the warm start knew the depth of only {} of {kept} reconstructed pixels",
                 moved.pixels
-            ));
+            ))
+        } else {
+            Ok(Start::Warm {
+                passes,
+                moved_mm: moved.median_mm,
+            })
         }
-    }
-    Ok((photometric, integration, verdict))
+    });
+    Ok((photometric, integration, start))
 }
 
 /// How far one depth map lies from another over the pixels where both are finite.
