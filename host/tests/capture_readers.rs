@@ -650,6 +650,54 @@ fn y4m_and_raw_frames_are_read_into_the_same_storage() {
     assert_eq!(got, expected);
 }
 
+/// Frames larger than a file's read buffer: the luma plane goes straight into the frame and the
+/// chroma is seeked over in a file, read and dropped in a stream; both give the same frames, and
+/// a file cut inside a frame's chroma names that frame.
+#[test]
+fn large_y4m_frames_read_the_same_from_a_file_and_a_stream() {
+    const WIDE: usize = 400;
+    const TALL: usize = 300;
+    let luma = |f: usize| -> Vec<u8> {
+        (0..WIDE * TALL)
+            .map(|i| ((i % WIDE) * 3 + (i / WIDE) * 5 + f * 11) as u8)
+            .collect()
+    };
+    let frames: Vec<Vec<u8>> = (0..4)
+        .map(|f| {
+            let mut bytes = luma(f);
+            bytes.extend(std::iter::repeat_n(
+                (90 + f) as u8,
+                2 * (WIDE / 2) * (TALL / 2),
+            ));
+            bytes
+        })
+        .collect();
+    let bytes = y4m_file(
+        &format!("YUV4MPEG2 W{WIDE} H{TALL} F1000:1 C420jpeg"),
+        &frames,
+    );
+    let tmp = tempfile::tempdir().unwrap();
+    let path = tmp.path().join("large.y4m");
+    std::fs::write(&path, &bytes).unwrap();
+    let (from_file, reused) = read_reusing(&mut Y4mSource::open(&path, None).unwrap());
+    assert!(reused, "every frame read into the first frame's storage");
+    let expected: Vec<Samples> = (0..4).map(|f| Samples::U8(luma(f))).collect();
+    assert_eq!(from_file, expected);
+    let stream = std::io::BufReader::new(std::io::Cursor::new(bytes.clone()));
+    let (from_stream, _) = read_reusing(&mut Y4mSource::from_reader(stream, &path, None).unwrap());
+    assert_eq!(from_stream, expected);
+    // Cut inside the chroma of the last frame (3).
+    let mut cut = bytes;
+    cut.truncate(cut.len() - (WIDE / 2) * (TALL / 2) - 7);
+    std::fs::write(&path, &cut).unwrap();
+    let mut source = Y4mSource::open(&path, None).unwrap();
+    assert!(source.next_frame().unwrap().is_some());
+    assert!(source.next_frame().unwrap().is_some());
+    assert!(source.next_frame().unwrap().is_some());
+    let error = source.next_frame().unwrap_err().to_string();
+    assert!(error.contains("truncated inside frame 3"), "{error}");
+}
+
 #[test]
 fn y4m_truncated_inside_chroma_is_an_error() {
     let tmp = tempfile::tempdir().unwrap();

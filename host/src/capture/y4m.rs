@@ -6,11 +6,19 @@
 //! 16·2^(b−8), white 235·2^(b−8), as for video containers.
 
 use super::{CaptureError, Frame, FrameFormat, FrameSource, Samples};
-use std::io::{BufRead, BufReader, Read};
+use std::io::{BufRead, BufReader, Read, Seek};
 use std::path::{Path, PathBuf};
 
 /// Longest header or frame-marker line read, bytes.
 const MAX_LINE: u64 = 4096;
+/// Read buffer of a file, bytes: smaller than a luma plane, so that the plane is read straight
+/// into the frame's storage past it (only the marker line and the plane's first bytes are
+/// copied through it).
+const FILE_BUFFER: usize = 64 << 10;
+
+/// Passes over `count` bytes (a frame's chroma planes) and returns how many there were (fewer
+/// only at the end of the stream).
+type SkipBytes<R> = fn(&mut R, usize) -> std::io::Result<usize>;
 
 /// A y4m stream read one frame at a time from `R` (a file unless said otherwise).
 pub struct Y4mSource<R = BufReader<std::fs::File>> {
@@ -24,17 +32,56 @@ pub struct Y4mSource<R = BufReader<std::fs::File>> {
     line: Vec<u8>,
     /// Bytes of the last 16-bit luma plane (storage reused).
     scratch: Vec<u8>,
+    /// How the chroma planes are passed over: a seek in a file, read and dropped in a stream.
+    skip: SkipBytes<R>,
 }
 
 impl Y4mSource {
-    /// Opens a y4m file; `fps` overrides the header's rate.
+    /// Opens a y4m file; `fps` overrides the header's rate. The chroma planes of a regular
+    /// file are seeked over, never read (a named pipe's are read and dropped).
     pub fn open(path: &Path, fps: Option<f64>) -> Result<Self, CaptureError> {
         let file = std::fs::File::open(path).map_err(|source| CaptureError::Io {
             path: path.to_path_buf(),
             source,
         })?;
-        Self::from_reader(BufReader::with_capacity(1 << 20, file), path, fps)
+        let regular = file.metadata().is_ok_and(|m| m.is_file());
+        let mut source = Self::from_reader(BufReader::with_capacity(FILE_BUFFER, file), path, fps)?;
+        if regular {
+            source.skip = seek_over;
+        }
+        Ok(source)
     }
+}
+
+/// Seeks over `count` bytes of a file, up to its end.
+fn seek_over(reader: &mut BufReader<std::fs::File>, count: usize) -> std::io::Result<usize> {
+    let position = reader.stream_position()?;
+    let len = reader.get_ref().metadata()?.len();
+    let n = u64::try_from(count)
+        .unwrap_or(u64::MAX)
+        .min(len.saturating_sub(position));
+    // n ≤ the file's length, far below i64::MAX.
+    reader.seek_relative(n as i64)?;
+    Ok(n as usize)
+}
+
+/// Reads and drops `count` bytes of a stream straight out of the reader's buffer (no copy).
+fn consume_over<R: BufRead>(reader: &mut R, count: usize) -> std::io::Result<usize> {
+    let mut skipped = 0;
+    while skipped < count {
+        let available = match reader.fill_buf() {
+            Ok(buf) => buf.len(),
+            Err(e) if e.kind() == std::io::ErrorKind::Interrupted => continue,
+            Err(e) => return Err(e),
+        };
+        if available == 0 {
+            break;
+        }
+        let n = available.min(count - skipped);
+        reader.consume(n);
+        skipped += n;
+    }
+    Ok(skipped)
 }
 
 impl<R: BufRead> Y4mSource<R> {
@@ -123,6 +170,7 @@ impl<R: BufRead> Y4mSource<R> {
             index: 0,
             line: Vec::new(),
             scratch: Vec::new(),
+            skip: consume_over::<R>,
         })
     }
 }
@@ -143,33 +191,6 @@ impl<R> Y4mSource<R> {
                  arrived (the {index} frames before it are whole)"
             ),
         }
-    }
-}
-
-impl<R: BufRead> Y4mSource<R> {
-    /// Skips `count` bytes (a frame's chroma planes) straight out of the reader's buffer,
-    /// without copying them; returns the bytes skipped (fewer only at the end of the stream).
-    fn skip(&mut self, count: usize) -> Result<usize, CaptureError> {
-        let mut skipped = 0;
-        while skipped < count {
-            let available = match self.reader.fill_buf() {
-                Ok(buf) => buf.len(),
-                Err(e) if e.kind() == std::io::ErrorKind::Interrupted => continue,
-                Err(source) => {
-                    return Err(CaptureError::Io {
-                        path: self.path.clone(),
-                        source,
-                    });
-                }
-            };
-            if available == 0 {
-                break;
-            }
-            let n = available.min(count - skipped);
-            self.reader.consume(n);
-            skipped += n;
-        }
-        Ok(skipped)
     }
 }
 
@@ -226,7 +247,12 @@ impl<R: BufRead + Send> FrameSource for Y4mSource<R> {
             Ok(got) => return Err(self.truncated(marker_len + got)),
             Err(_) => return Err(self.truncated(marker_len)),
         }
-        let skipped = self.skip(self.chroma_bytes)?;
+        let skipped = (self.skip)(&mut self.reader, self.chroma_bytes).map_err(|source| {
+            CaptureError::Io {
+                path: self.path.clone(),
+                source,
+            }
+        })?;
         if skipped != self.chroma_bytes {
             return Err(self.truncated(marker_len + luma_bytes + skipped));
         }

@@ -8,8 +8,14 @@
 //! reconstructed by the one decoded → reconstruction path ([`crate::reconstruct::from_decoded`]),
 //! warm-started from the previous reconstructed window ([`crate::reconstruct::WarmStart`]: the
 //! object moves little in 40 ms; a warm result that strays is redone cold); with ground truth ([`truth`]) each 3-D frame is scored. The caller gets every window's
-//! [`VideoFrame`] as soon as it is done (the CLI writes it with [`output`]: per-frame arrays,
-//! a colour-mapped depth video and a shaded-render video, `video.json`).
+//! [`VideoFrame`] as soon as it is done (the CLI writes it with [`output`] on its own thread,
+//! [`writer`]: per-frame arrays, a colour-mapped depth video and a shaded-render video,
+//! `video.json`).
+//!
+//! Three threads overlap so that only the reconstruction sets the pace: the reader (frames
+//! into the window ring), the decoding stage (decode, motion, placement of window k + 1) and
+//! the reconstruction of window k on the caller's thread; the CLI's writer is a fourth. Each
+//! hand-over is a bounded queue, so memory stays bounded by a few windows.
 //!
 //! A window that cannot be decoded or reconstructed (the object left the view, a dark moment)
 //! is recorded as failed with the reason and the video goes on; a run in which no window
@@ -26,6 +32,7 @@ pub mod render;
 pub mod schedule;
 pub mod stream;
 pub mod truth;
+pub mod writer;
 
 pub use carry::{TimingCarry, TimingSource};
 pub use judge::WindowVerdict;
@@ -42,6 +49,7 @@ use crate::rig::Rig;
 use crate::timing::StageTiming;
 use serde::{Deserialize, Serialize};
 use std::ops::Range;
+use std::sync::mpsc::{SyncSender, sync_channel};
 use std::time::Instant;
 use thiserror::Error;
 
@@ -237,8 +245,12 @@ pub struct FrameAccuracy {
 /// Wall-clock time of a window's stages, ms.
 #[derive(Debug, Clone, Default, PartialEq, Serialize, Deserialize)]
 pub struct FrameTiming {
-    /// Waiting for the reader (reading, when it is the bottleneck).
+    /// The decoding stage waiting for the reader (reading, when it is the bottleneck).
     pub read_ms: f64,
+    /// The reconstruction waiting for the decoding stage (reading and decoding, when they
+    /// are the bottleneck).
+    #[serde(default)]
+    pub wait_ms: f64,
     /// Decoding (every try, with [`MotionPolicy::Place`]).
     pub decode_ms: f64,
     /// Motion detection.
@@ -359,6 +371,12 @@ impl Try {
 
 /// Runs the video pipeline over `source` (module docs), calling `sink` with every window as
 /// soon as it is done; `truth` scores the 3-D frames.
+///
+/// Two stages overlap: a decoding thread reads each window ([`FrameStream`]), decodes it with
+/// the carried timing ([`carry`]), measures its motion and, with [`MotionPolicy::Place`],
+/// places it; the calling thread reconstructs the chosen windows in order (each warm-started
+/// from the one before), scores them and hands them to `sink`. At most [`DECODED_AHEAD`]
+/// decoded windows wait between the two, so memory stays bounded by a few windows.
 pub fn process(
     source: Box<dyn FrameSource>,
     rig: &Rig,
@@ -386,17 +404,8 @@ pub fn process(
     let read_ahead = config
         .read_ahead
         .unwrap_or(schedule.hop.min(schedule.window));
-    let mut stream = FrameStream::new(source, read_ahead, config.max_frames)?;
-    let base = config.decode.start;
-    let decoded_len = schedule.decoded();
-    // The verdict is applied here, with the window's motion ([`judge`]).
-    let force = config.decode.on_implausible == OnImplausible::Keep;
-    let decode_config = DecodeConfig {
-        on_implausible: OnImplausible::Keep,
-        ..config.decode.clone()
-    };
+    let stream = FrameStream::new(source, read_ahead, config.max_frames)?;
     let code_map = CodeMap::new(&format, config.decode.linearize).map_err(VideoError::Decode)?;
-    let place_step = config.motion.place_step.max(1);
     let mut summary = VideoSummary {
         camera_frames: 0,
         windows: 0,
@@ -410,9 +419,180 @@ pub fn process(
         frames_per_second: 0.0,
     };
     let mut first_failure: Option<String> = None;
-    let mut carry = TimingCarry::new(config.carry_timing);
     let mut warm: Option<WarmStart> = None;
-    'windows: for k in 0.. {
+    let decoding = DecodeStage {
+        schedule,
+        format: &format,
+        code_map: &code_map,
+        config,
+    };
+    let (sender, receiver) = sync_channel::<Result<Chosen, VideoError>>(DECODED_AHEAD);
+    let (stream_end, reconstructed) = std::thread::scope(|scope| {
+        let decoder = std::thread::Builder::new()
+            .name("meb-video-decode".into())
+            .spawn_scoped(scope, move || decoding.run(stream, &sender))
+            .map_err(|e| {
+                VideoError::Capture(CaptureError::Other(format!(
+                    "cannot start the decoding thread: {e}"
+                )))
+            })?;
+        let reconstructed = (|| -> Result<(), VideoError> {
+            loop {
+                let waited = Instant::now();
+                let Ok(chosen) = receiver.recv() else {
+                    return Ok(());
+                };
+                let mut chosen = chosen?;
+                chosen.timing.wait_ms = waited.elapsed().as_secs_f64() * 1e3;
+                let outcome = reconstruct_window(
+                    chosen.attempt,
+                    chosen.scheduled,
+                    chosen.index,
+                    &schedule,
+                    &format,
+                    rig,
+                    config,
+                    truth.as_deref_mut(),
+                    chosen.timing,
+                    warm.as_ref().filter(|_| config.warm_start),
+                )?;
+                if let Some(reconstruction) = &outcome.reconstruction {
+                    warm = Some(WarmStart::of(reconstruction));
+                }
+                summary.windows += 1;
+                match outcome.record.status {
+                    FrameStatus::Reconstructed => summary.reconstructed += 1,
+                    FrameStatus::Skipped => summary.skipped += 1,
+                    FrameStatus::Failed => {
+                        summary.failed += 1;
+                        if first_failure.is_none() {
+                            first_failure = outcome.record.reason.clone();
+                        }
+                    }
+                }
+                if outcome.record.motion.is_some_and(|m| m.moving) {
+                    summary.moving += 1;
+                }
+                sink(&VideoFrame {
+                    record: outcome.record,
+                    decoded: outcome.decoded.as_ref(),
+                    reconstruction: outcome.reconstruction.as_ref(),
+                    camera_frames: chosen.camera_frames,
+                    total_frames: chosen.total_frames,
+                })?;
+            }
+        })();
+        // Hanging up stops the decoding thread at its next window.
+        drop(receiver);
+        let stream_end = decoder.join().map_err(|_| {
+            VideoError::Capture(CaptureError::Other("the decoding thread panicked".into()))
+        })?;
+        Ok::<_, VideoError>((stream_end, reconstructed))
+    })?;
+    reconstructed?;
+    summary.camera_frames = stream_end.received;
+    match stream_end.end {
+        Some(StreamEnd::Cut(error)) => {
+            summary.end = EndKind::Cut;
+            summary.input_error = Some(error.to_string());
+        }
+        Some(StreamEnd::Limit) => summary.end = EndKind::Limit,
+        Some(StreamEnd::Complete) | None => {}
+    }
+    if summary.reconstructed == 0 && summary.failed > 0 {
+        return Err(VideoError::NoFrames {
+            windows: summary.windows,
+            first: first_failure.unwrap_or_default(),
+        });
+    }
+    summary.wall_s = started.elapsed().as_secs_f64();
+    summary.frames_per_second = summary.windows as f64 / summary.wall_s.max(1e-9);
+    Ok(summary)
+}
+
+/// Decoded windows that may wait for the reconstruction (each holds its LED images).
+pub const DECODED_AHEAD: usize = 1;
+
+/// A window chosen by the decoding stage, on its way to the reconstruction.
+struct Chosen {
+    /// 3-D frame number.
+    index: usize,
+    /// First camera frame the schedule gave the window.
+    scheduled: usize,
+    /// The chosen try.
+    attempt: Try,
+    /// Timing so far (reading, decoding, motion).
+    timing: FrameTiming,
+    /// Camera frames read when it was chosen.
+    camera_frames: usize,
+    /// Camera frames in the stream, when known.
+    total_frames: Option<usize>,
+}
+
+/// Where the decoding stage left the stream.
+struct StreamState {
+    /// Camera frames read.
+    received: usize,
+    /// How the stream ended.
+    end: Option<StreamEnd>,
+}
+
+/// The decoding stage: windows read, decoded, checked for motion and placed.
+#[derive(Clone, Copy)]
+struct DecodeStage<'a> {
+    schedule: WindowSchedule,
+    format: &'a crate::capture::FrameFormat,
+    code_map: &'a CodeMap,
+    config: &'a VideoConfig,
+}
+
+impl DecodeStage<'_> {
+    /// Sends every window's chosen try to `sender` until the stream ends, an error (sent too)
+    /// or the reconstruction hangs up; returns where the stream was left.
+    fn run(
+        self,
+        mut stream: FrameStream,
+        sender: &SyncSender<Result<Chosen, VideoError>>,
+    ) -> StreamState {
+        let mut carry = TimingCarry::new(self.config.carry_timing);
+        for k in 0.. {
+            match self.window(&mut stream, &mut carry, k) {
+                Ok(Some(chosen)) => {
+                    if sender.send(Ok(chosen)).is_err() {
+                        break;
+                    }
+                }
+                Ok(None) => break,
+                Err(error) => {
+                    let _ = sender.send(Err(error));
+                    break;
+                }
+            }
+        }
+        StreamState {
+            received: stream.received(),
+            end: stream.take_end(),
+        }
+    }
+
+    /// Window `k`: decoded where the schedule puts it (or, placing, where the object is
+    /// still); `None` when the stream ends first.
+    fn window(
+        &self,
+        stream: &mut FrameStream,
+        carry: &mut TimingCarry,
+        k: usize,
+    ) -> Result<Option<Chosen>, VideoError> {
+        let (config, schedule, format) = (self.config, &self.schedule, self.format);
+        let base = config.decode.start;
+        let decoded_len = schedule.decoded();
+        // The verdict is applied here, with the window's motion ([`judge`]).
+        let force = config.decode.on_implausible == OnImplausible::Keep;
+        let decode_config = DecodeConfig {
+            on_implausible: OnImplausible::Keep,
+            ..config.decode.clone()
+        };
+        let place_step = config.motion.place_step.max(1);
         let scheduled = base + k * schedule.hop;
         let mut timing = FrameTiming::default();
         let mut best: Option<Try> = None;
@@ -423,17 +603,14 @@ pub fn process(
             let needed = start..start + schedule.window;
             let Some(window) = stream.window(needed)? else {
                 if k == 0 && best.is_none() {
-                    return Err(too_short(&mut stream, base, schedule));
-                }
-                if best.is_none() {
-                    break 'windows;
+                    return Err(too_short(stream, base, *schedule));
                 }
                 break;
             };
             let time = Instant::now();
             let decoded_frames = schedule.drop..schedule.drop + decoded_len;
             let (decoded, timing_source) =
-                carry.decode(&window.samples[decoded_frames], &format, &decode_config);
+                carry.decode(&window.samples[decoded_frames], format, &decode_config);
             timing.decode_ms += time.elapsed().as_secs_f64() * 1e3;
             // A setting wrong for the stream fails every window alike: stop at once.
             let decoded = match decoded {
@@ -446,7 +623,7 @@ pub fn process(
             let motion = decoded.as_ref().ok().map(|d| {
                 let frames = PeriodFrames {
                     frames: window.samples,
-                    map: &code_map,
+                    map: self.code_map,
                     width: format.width,
                     roi: config.decode.roi,
                     period: 1usize << (d.report.leds + 1),
@@ -483,64 +660,15 @@ pub fn process(
             }
             offset += place_step;
         }
-        let Some(chosen) = best else {
-            break;
-        };
-        let outcome = reconstruct_window(
-            chosen,
+        Ok(best.map(|attempt| Chosen {
+            index: k,
             scheduled,
-            k,
-            &schedule,
-            &format,
-            rig,
-            config,
-            truth.as_deref_mut(),
+            attempt,
             timing,
-            warm.as_ref().filter(|_| config.warm_start),
-        )?;
-        if let Some(reconstruction) = &outcome.reconstruction {
-            warm = Some(WarmStart::of(reconstruction));
-        }
-        summary.windows += 1;
-        match outcome.record.status {
-            FrameStatus::Reconstructed => summary.reconstructed += 1,
-            FrameStatus::Skipped => summary.skipped += 1,
-            FrameStatus::Failed => {
-                summary.failed += 1;
-                if first_failure.is_none() {
-                    first_failure = outcome.record.reason.clone();
-                }
-            }
-        }
-        if outcome.record.motion.is_some_and(|m| m.moving) {
-            summary.moving += 1;
-        }
-        sink(&VideoFrame {
-            record: outcome.record,
-            decoded: outcome.decoded.as_ref(),
-            reconstruction: outcome.reconstruction.as_ref(),
             camera_frames: stream.received(),
             total_frames: stream.total_hint(),
-        })?;
+        }))
     }
-    summary.camera_frames = stream.received();
-    match stream.take_end() {
-        Some(StreamEnd::Cut(error)) => {
-            summary.end = EndKind::Cut;
-            summary.input_error = Some(error.to_string());
-        }
-        Some(StreamEnd::Limit) => summary.end = EndKind::Limit,
-        Some(StreamEnd::Complete) | None => {}
-    }
-    if summary.reconstructed == 0 && summary.failed > 0 {
-        return Err(VideoError::NoFrames {
-            windows: summary.windows,
-            first: first_failure.unwrap_or_default(),
-        });
-    }
-    summary.wall_s = started.elapsed().as_secs_f64();
-    summary.frames_per_second = summary.windows as f64 / summary.wall_s.max(1e-9);
-    Ok(summary)
 }
 
 /// The error for a stream that ended before its first window.

@@ -13,12 +13,15 @@
 //! into `video.json` at the end.
 //!
 //! The folder is the caller's [`OutputFolder`](crate::export::files::OutputFolder): written
-//! in a temporary place and put in place whole.
+//! in a temporary place and put in place whole. Each array is synced to disk as it is written
+//! (on the writer's thread, [`super::writer`]), so the folder's final sync, which the run
+//! waits for, has only `video.json` and the videos left.
 
 use super::encode::{VideoContainer, VideoEncoder};
 use super::render::{PictureSize, blank_picture, depth_picture, depth_range, shaded_picture};
 use super::{FrameRecord, FrameStatus, FrameTiming, VideoError, VideoFrame, VideoSummary};
 use crate::export::files::{FilesError, write_npy};
+use ndarray::{Array2, Array3};
 use serde::{Deserialize, Serialize};
 use std::io::{BufRead, BufWriter, Write};
 use std::path::{Path, PathBuf};
@@ -92,6 +95,7 @@ impl MeanTiming {
         let m = &mut self.mean;
         for (mean, x) in [
             (&mut m.read_ms, t.read_ms),
+            (&mut m.wait_ms, t.wait_ms),
             (&mut m.decode_ms, t.decode_ms),
             (&mut m.motion_ms, t.motion_ms),
             (&mut m.reconstruct_ms, t.reconstruct_ms),
@@ -102,6 +106,30 @@ impl MeanTiming {
         }
         self.windows += 1;
     }
+}
+
+/// One window's record and arrays, as [`VideoOutput::add_arrays`] writes them.
+#[derive(Debug)]
+pub struct FrameArrays<'a> {
+    /// The window's record.
+    pub record: FrameRecord,
+    /// Depth, mm (a reconstructed window).
+    pub depth: Option<&'a Array2<f32>>,
+    /// Normals (H×W×3), written when the options ask for them.
+    pub normals: Option<&'a Array3<f32>>,
+    /// Albedo, written when the options ask for it.
+    pub albedo: Option<&'a Array2<f32>>,
+}
+
+/// Writes `array` as `.npy` at `path` and waits until it is on disk.
+fn write_synced<D: ndarray::Dimension>(
+    path: &Path,
+    array: &ndarray::Array<f32, D>,
+) -> Result<(), VideoError> {
+    write_npy(path, array)?;
+    std::fs::File::open(path)
+        .and_then(|file| file.sync_data())
+        .map_err(|e| FilesError::write(path, e).into())
 }
 
 /// Writes a run's outputs into `dir` as windows arrive (module docs).
@@ -163,19 +191,36 @@ impl VideoOutput {
 
     /// Writes one window's arrays, pictures and record.
     pub fn add(&mut self, frame: &VideoFrame) -> Result<(), VideoError> {
+        let reconstruction = frame
+            .reconstruction
+            .filter(|_| frame.record.status == FrameStatus::Reconstructed);
+        self.add_arrays(FrameArrays {
+            record: frame.record.clone(),
+            depth: reconstruction.map(|r| &r.integration.depth.depth_mm),
+            normals: reconstruction
+                .filter(|_| self.options.normals)
+                .map(|r| &r.photometric.field.normals),
+            albedo: reconstruction
+                .filter(|_| self.options.albedo)
+                .map(|r| &r.photometric.field.albedo),
+        })
+    }
+
+    /// Writes one window's arrays (those of a reconstructed window; `None` for the others),
+    /// pictures and record. Each array is on disk (`fsync`) when this returns, so the folder's
+    /// final sync has little left to do.
+    pub fn add_arrays(&mut self, frame: FrameArrays<'_>) -> Result<(), VideoError> {
         let started = Instant::now();
-        let k = frame.record.index;
-        match frame.reconstruction {
-            Some(r) if frame.record.status == FrameStatus::Reconstructed => {
-                let depth = &r.integration.depth.depth_mm;
-                write_npy(&self.dir.join(format!("depth_{k:05}.npy")), depth)?;
-                if self.options.normals {
-                    let path = self.dir.join(format!("normals_{k:05}.npy"));
-                    write_npy(&path, &r.photometric.field.normals)?;
+        let mut record = frame.record;
+        let k = record.index;
+        match frame.depth {
+            Some(depth) => {
+                write_synced(&self.dir.join(format!("depth_{k:05}.npy")), depth)?;
+                if let Some(normals) = frame.normals.filter(|_| self.options.normals) {
+                    write_synced(&self.dir.join(format!("normals_{k:05}.npy")), normals)?;
                 }
-                if self.options.albedo {
-                    let path = self.dir.join(format!("albedo_{k:05}.npy"));
-                    write_npy(&path, &r.photometric.field.albedo)?;
+                if let Some(albedo) = frame.albedo.filter(|_| self.options.albedo) {
+                    write_synced(&self.dir.join(format!("albedo_{k:05}.npy")), albedo)?;
                 }
                 if self.range.is_none() {
                     self.range = depth_range(depth);
@@ -187,13 +232,12 @@ impl VideoOutput {
                     .push(&shaded_picture(depth, self.pitch_mm, self.size))?;
                 self.written += 1;
             }
-            _ => {
+            None => {
                 let blank = blank_picture(self.size);
                 self.depth_video.push(&blank)?;
                 self.shaded_video.push(&blank)?;
             }
         }
-        let mut record = frame.record.clone();
         record.timing.write_ms = started.elapsed().as_secs_f64() * 1e3;
         if let Some(rmse) = record.accuracy.as_ref().and_then(|a| a.rmse_mm) {
             self.accuracy.push(rmse);
@@ -206,6 +250,11 @@ impl VideoOutput {
         })?;
         writeln!(self.records, "{line}").map_err(|e| FilesError::write(&path, e))?;
         Ok(())
+    }
+
+    /// What to write besides depth.
+    pub fn options(&self) -> &OutputOptions {
+        &self.options
     }
 
     /// Mean stage timings so far.
