@@ -6,6 +6,16 @@
 //! ~28× slower); 128 frames 30.6–58.9 ms, median of six runs 48.3 ms. Before the kernel and
 //! fit rework: 88 ms and 223 ms. The 128-frame case includes the five-LED count check
 //! (`check_led_count`).
+//!
+//! After the robustness work of issue #12 (global spectral seed, variable-projection fit,
+//! quality verdict, rolling-shutter test) on a quiet machine: 32 frames 20.4 ms (19.4–21.8),
+//! 128 frames 61.9 ms (59.6–64.0). Most of that was the timing fit running on one thread:
+//! callgrind, whole decode, main thread / rayon workers, instructions: 32 frames 65 M / 175 M,
+//! 128 frames 415 M / 604 M (the fit alone 385 M serial). With the seeds' and bands' refinements
+//! run in parallel and an allocation-free residual (same arithmetic, same results bit for
+//! bit): 32 frames 29 M / 192 M, 128 frames 161 M / 717 M (the fit 135 M serial): the serial
+//! part −55 % / −61 %, the total −9 % / −14 %. Wall-clock medians of the shared machine at
+//! load 10–17 (4 helpers on 2 cores) are not comparable; re-measure on a quiet machine.
 
 use criterion::{BatchSize, Criterion, criterion_group, criterion_main};
 use meb::capture::memory::MemorySource;

@@ -13,6 +13,10 @@
 //! square roots of their eigenvalues; a rolling shutter's rows each keep their own N leading
 //! singular directions (one row of the sample has one set of templates).
 //!
+//! The refinements from several starting points (the seeds, the exposures tried) and the
+//! rows-agree screen of each band are independent and run in parallel; the residual is
+//! evaluated in a reused work space (a fit evaluates it hundreds of times).
+//!
 //! Phases ([`fit_timing`]): (1) each seed of [`super::seed`] is refined with λ = 0 and the best
 //! kept; (2) unless the line delay is given, row bands of the sample get their own shifts, the
 //! shifts' trend across the bands seeds λ, and a band-wise refinement (several exposures, then
@@ -25,8 +29,9 @@
 //! refitted once more without λ from λ's solution, and λ must lower the cost by
 //! [`RAMP_SIGNIFICANCE`] noise variances (a likelihood-ratio test: 5σ for one parameter).
 //! Otherwise the rows agree and the global-shutter fit stands. The Gauss–Newton covariance
-//! σ²·(JᵀJ)⁻¹ at the optimum gives the exposure's and λ's standard errors, which the report
-//! carries: at ρ ≈ 1 the exposure trades against the shifts' fractional parts along a nearly
+//! σ²·(JᵀJ)⁻¹ at the optimum (inverted with J's columns scaled to unit norm, because ρ, e, Δ_i
+//! and λ differ in scale by up to four orders of magnitude) gives the exposure's and λ's
+//! standard errors and each LED's gain uncertainty, which the report carries: at ρ ≈ 1 the exposure trades against the shifts' fractional parts along a nearly
 //! flat direction and is not determined by the data. (λ's standard error is not the test:
 //! its correlation with that flat direction inflates it, and the likelihood ratio is the
 //! sharper question.) Finally each carrier's sign is chosen so that the sample's on-levels are positive (a
@@ -40,6 +45,8 @@ use super::seed::{Start, starts};
 use super::spectrum::{SignalSpace, leading_eigenpairs};
 use super::waveform::{ReceivedWaveform, Timing};
 use nalgebra::DMatrix;
+use rayon::prelude::*;
+use std::cell::RefCell;
 
 /// Position of ρ, e and λ in the parameter vector; the shifts follow.
 const RATE: usize = 0;
@@ -201,32 +208,92 @@ struct Projection<'a> {
     waves: &'a [ReceivedWaveform],
     groups: &'a [FitGroup],
     frames: usize,
+    /// Work space of one evaluation: the K × F template rows, orthonormalised in place
+    /// (the residual is evaluated hundreds of times per fit and allocates nothing).
+    basis: RefCell<Vec<f64>>,
+}
+
+impl<'a> Projection<'a> {
+    fn new(waves: &'a [ReceivedWaveform], groups: &'a [FitGroup], frames: usize) -> Self {
+        Self {
+            waves,
+            groups,
+            frames,
+            basis: RefCell::new(Vec::new()),
+        }
+    }
 }
 
 impl Residuals for Projection<'_> {
     fn residuals(&self, params: &[f64], out: &mut Vec<f64>) {
         out.clear();
-        let model = TimingModel::from_params(params);
-        let mut projection = Vec::new();
+        let f = self.frames;
+        let k = self.waves.len() + 1;
+        let mut basis = self.basis.borrow_mut();
+        basis.resize(k * f, 0.0);
+        let mut projection = [0.0f64; MAX_COLUMNS];
+        let mut fitted = vec![0.0f64; f];
         for group in self.groups {
-            let basis = model.basis(self.waves, group.row, self.frames);
-            for column in group.data.column_iter() {
-                projection.clear();
-                projection.extend(
-                    basis
-                        .rows
-                        .iter()
-                        .map(|q| q.iter().zip(column.iter()).map(|(a, b)| a * b).sum::<f64>()),
-                );
-                out.extend(column.iter().enumerate().map(|(j, &d)| {
-                    d - basis
-                        .rows
-                        .iter()
-                        .zip(&projection)
-                        .map(|(q, c)| q[j] * c)
-                        .sum::<f64>()
-                }));
+            fill_columns(params, self.waves, group.row, f, &mut basis);
+            orthonormalise(&mut basis, f);
+            for d in group.data.as_slice().chunks_exact(f.max(1)) {
+                for (c, q) in projection.iter_mut().zip(basis.chunks_exact(f)) {
+                    *c = q.iter().zip(d).map(|(a, b)| a * b).sum::<f64>();
+                }
+                // Σ_l q_l[j]·c_l in the order l = 0, 1, …, frame by frame.
+                fitted.iter_mut().for_each(|x| *x = 0.0);
+                for (q, &c) in basis.chunks_exact(f).zip(&projection) {
+                    fitted.iter_mut().zip(q).for_each(|(x, &v)| *x += v * c);
+                }
+                out.extend(d.iter().zip(&fitted).map(|(&d, &x)| d - x));
             }
+        }
+    }
+}
+
+/// Most template columns K = N + 1.
+const MAX_COLUMNS: usize = super::MAX_LEDS + 1;
+
+/// The K = N+1 template rows `[1, t_0, …]` of parameters [ρ, e, λ, Δ…] at region row `row`,
+/// written row-major (K × F) into `out` (as [`TimingModel::columns`]).
+fn fill_columns(
+    params: &[f64],
+    waves: &[ReceivedWaveform],
+    row: f64,
+    frames: usize,
+    out: &mut [f64],
+) {
+    let timing = Timing {
+        rate_ratio: params[RATE],
+        exposure: params[EXPOSURE],
+    };
+    let offset = params[LINE_DELAY] * row * timing.rate_ratio;
+    let mut rows = out.chunks_exact_mut(frames.max(1));
+    if let Some(ones) = rows.next() {
+        ones.iter_mut().for_each(|v| *v = 1.0);
+    }
+    for ((wave, &shift), column) in waves.iter().zip(&params[SHIFTS..]).zip(rows) {
+        timing.fill_template(wave, shift + offset, column);
+    }
+}
+
+/// Modified Gram–Schmidt on the rows (F values each) of `rows`, in place: the Q of
+/// [`TemplateBasis::new`] with the same operations in the same order, without R.
+fn orthonormalise(rows: &mut [f64], frames: usize) {
+    let f = frames.max(1);
+    for k in 0..rows.len() / f {
+        let (done, rest) = rows.split_at_mut(k * f);
+        let v = &mut rest[..f];
+        let scale = v.iter().map(|x| x * x).sum::<f64>().sqrt().max(1e-300);
+        for q in done.chunks_exact(f) {
+            let d: f64 = q.iter().zip(v.iter()).map(|(a, b)| a * b).sum();
+            v.iter_mut().zip(q).for_each(|(x, &y)| *x -= d * y);
+        }
+        let norm = v.iter().map(|x| x * x).sum::<f64>().sqrt();
+        if norm > 1e-7 * scale {
+            v.iter_mut().for_each(|x| *x /= norm);
+        } else {
+            v.iter_mut().for_each(|x| *x = 0.0);
         }
     }
 }
@@ -342,10 +409,12 @@ impl Fitter<'_> {
         let mut model = TimingModel::from_params(&solution.params);
         orient(sample, self.waves, &mut model);
         let reference = if rolling { mean_row(sample) } else { 0.0 };
+        let information = ScaledInformation::new(&solution);
         let gain_uncertainty = gain_uncertainty(
             self.waves,
             &model,
             &solution,
+            information.as_ref(),
             reference,
             self.frames,
             pixel_noise,
@@ -362,8 +431,13 @@ impl Fitter<'_> {
             pixel_noise,
             rate_at_limit,
             line_delay_at_limit,
-            exposure_std: standard_error(&solution, EXPOSURE, pixel_noise),
-            line_delay_std: standard_error(&solution, LINE_DELAY, pixel_noise),
+            exposure_std: standard_error(&solution, information.as_ref(), EXPOSURE, pixel_noise),
+            line_delay_std: standard_error(
+                &solution,
+                information.as_ref(),
+                LINE_DELAY,
+                pixel_noise,
+            ),
             line_delay_evidence: evidence,
             line_delay_fitted,
         }
@@ -400,12 +474,28 @@ impl Fitter<'_> {
 
     /// Least squares over `groups` from `start`.
     fn solve(&self, groups: &[FitGroup], start: &[f64], freedom: &Freedom) -> Solution {
-        let problem = Projection {
-            waves: self.waves,
-            groups,
-            frames: self.frames,
-        };
+        let problem = Projection::new(self.waves, groups, self.frames);
         minimise(&problem, start, freedom)
+    }
+
+    /// The lowest-cost refinement of `starts` (refined in parallel; the first of equal costs).
+    fn best_of(
+        &self,
+        groups: &[FitGroup],
+        starts: Vec<Vec<f64>>,
+        freedom: &Freedom,
+    ) -> Option<Solution> {
+        let solutions: Vec<Solution> = starts
+            .par_iter()
+            .map(|start| self.solve(groups, start, freedom))
+            .collect();
+        let mut best: Option<Solution> = None;
+        for solution in solutions {
+            if best.as_ref().is_none_or(|b| solution.cost < b.cost) {
+                best = Some(solution);
+            }
+        }
+        best
     }
 
     /// Phase (1): every seed refined with a global shutter; the lowest cost wins.
@@ -413,25 +503,25 @@ impl Fitter<'_> {
         let groups = global_groups(space, self.frames);
         let freedom = self.freedom(false);
         let seeds = starts(space, self.waves, self.frames, self.limits);
-        let mut best: Option<Solution> = None;
-        for Start { timing, shifts } in seeds {
-            let mut params = vec![timing.rate_ratio, timing.exposure, 0.0];
-            params.extend(shifts);
-            let solution = self.solve(&groups, &params, &freedom);
-            if best.as_ref().is_none_or(|b| solution.cost < b.cost) {
-                best = Some(solution);
-            }
-        }
-        best.unwrap_or_else(|| Solution {
-            params: {
-                let mut p = vec![self.limits.rate_ratio.unwrap_or(1.0), 1.0, 0.0];
-                p.extend(std::iter::repeat_n(0.0, self.waves.len()));
-                p
-            },
-            cost: f64::INFINITY,
-            information: DMatrix::zeros(0, 0),
-            free: Vec::new(),
-        })
+        let starts: Vec<Vec<f64>> = seeds
+            .into_iter()
+            .map(|Start { timing, shifts }| {
+                let mut params = vec![timing.rate_ratio, timing.exposure, 0.0];
+                params.extend(shifts);
+                params
+            })
+            .collect();
+        self.best_of(&groups, starts, &freedom)
+            .unwrap_or_else(|| Solution {
+                params: {
+                    let mut p = vec![self.limits.rate_ratio.unwrap_or(1.0), 1.0, 0.0];
+                    p.extend(std::iter::repeat_n(0.0, self.waves.len()));
+                    p
+                },
+                cost: f64::INFINITY,
+                information: DMatrix::zeros(0, 0),
+                free: Vec::new(),
+            })
     }
 
     /// Parameters with line delay `delay` whose shifts equal `params`' at region row `row`.
@@ -475,18 +565,20 @@ impl Fitter<'_> {
         let (mut sxy, mut sxx, mut sw, mut swx) = (0.0, 0.0, 0.0, 0.0);
         let mut trend = Vec::new();
         let mut gained = 0.0;
-        let mut residual = Vec::new();
-        for group in &groups {
-            let single = std::slice::from_ref(group);
-            let problem = Projection {
-                waves: self.waves,
-                groups: single,
-                frames: self.frames,
-            };
-            problem.residuals(&global.params, &mut residual);
-            let before: f64 = residual.iter().map(|r| r * r).sum();
-            let solution =
-                minimise_within(&problem, &global.params, &shifts_only, SCREEN_ITERATIONS);
+        let screened: Vec<(f64, Solution)> = groups
+            .par_iter()
+            .map(|group| {
+                let single = std::slice::from_ref(group);
+                let problem = Projection::new(self.waves, single, self.frames);
+                let mut residual = Vec::new();
+                problem.residuals(&global.params, &mut residual);
+                let before: f64 = residual.iter().map(|r| r * r).sum();
+                let solution =
+                    minimise_within(&problem, &global.params, &shifts_only, SCREEN_ITERATIONS);
+                (before, solution)
+            })
+            .collect();
+        for (group, (before, solution)) in groups.iter().zip(screened) {
             gained += before - solution.cost;
             let weight = group.data.norm_squared();
             for (i, wave) in self.waves.iter().enumerate() {
@@ -519,16 +611,16 @@ impl Fitter<'_> {
             .solve(&groups, &global.params, &self.freedom(false))
             .cost;
         let freedom = self.freedom(true);
-        let mut best: Option<Solution> = None;
-        for exposure in self.exposures(global.params[EXPOSURE], &RAMP_EXPOSURES) {
-            let mut start = self.pivot(&global.params, delay, centre);
-            start[EXPOSURE] = exposure;
-            let solution = self.solve(&groups, &start, &freedom);
-            if best.as_ref().is_none_or(|b| solution.cost < b.cost) {
-                best = Some(solution);
-            }
-        }
-        let first = best?;
+        let starts = self
+            .exposures(global.params[EXPOSURE], &RAMP_EXPOSURES)
+            .into_iter()
+            .map(|exposure| {
+                let mut start = self.pivot(&global.params, delay, centre);
+                start[EXPOSURE] = exposure;
+                start
+            })
+            .collect();
+        let first = self.best_of(&groups, starts, &freedom)?;
         let searched = self.backfit(&groups, first.params.clone());
         let second = self.solve(&groups, &searched, &freedom);
         let best = if second.cost < first.cost {
@@ -572,11 +664,7 @@ impl Fitter<'_> {
     /// Re-searches each LED's shift on a grid with the rest held (escapes a shift caught a
     /// chip away, which the least-squares steps cannot cross).
     fn backfit(&self, groups: &[FitGroup], mut params: Vec<f64>) -> Vec<f64> {
-        let problem = Projection {
-            waves: self.waves,
-            groups,
-            frames: self.frames,
-        };
+        let problem = Projection::new(self.waves, groups, self.frames);
         let mut residual = Vec::new();
         for _ in 0..BACKFIT_SWEEPS {
             for (i, wave) in self.waves.iter().enumerate() {
@@ -609,15 +697,16 @@ impl Fitter<'_> {
     ) -> RowFit {
         let groups = row_groups(sample, self.waves.len(), pixel_noise);
         let freedom = self.freedom(fit_delay);
-        let mut best: Option<Solution> = None;
-        for exposure in self.exposures(start[EXPOSURE], &ROW_EXPOSURES) {
-            let mut params = start.to_vec();
-            params[EXPOSURE] = exposure;
-            let solution = self.solve(&groups, &params, &freedom);
-            if best.as_ref().is_none_or(|b| solution.cost < b.cost) {
-                best = Some(solution);
-            }
-        }
+        let starts = self
+            .exposures(start[EXPOSURE], &ROW_EXPOSURES)
+            .into_iter()
+            .map(|exposure| {
+                let mut params = start.to_vec();
+                params[EXPOSURE] = exposure;
+                params
+            })
+            .collect();
+        let best = self.best_of(&groups, starts, &freedom);
         let solution = best.unwrap_or_else(|| self.solve(&groups, start, &freedom));
         let evidence = if fit_delay {
             let flat = self.pivot(&solution.params, 0.0, mean_row(sample));
@@ -638,29 +727,92 @@ fn ramp_threshold(bands: usize) -> f64 {
     RAMP_SIGNIFICANCE.max(b + 5.0 * (2.0 * b).sqrt())
 }
 
+/// The Gauss–Newton information JᵀJ of a solution in unit-diagonal form, for its covariance
+/// σ²·(JᵀJ)⁻¹. The parameters' scales differ by orders of magnitude (ρ ≈ 1, e ≈ 0.5, Δ_i tens
+/// of chips, λ ≈ 1e-3 frame periods per row), so JᵀJ is inverted as D⁻¹·(D⁻¹JᵀJD⁻¹)⁻¹·D⁻¹
+/// with D = diag(√(JᵀJ)_kk): Jacobian columns scaled to unit norm, whose Gram matrix has a
+/// condition number set by the parameters' correlations alone, not by their units.
+struct ScaledInformation {
+    /// Eigen-decomposition of D⁻¹·JᵀJ·D⁻¹.
+    eigen: nalgebra::SymmetricEigen<f64, nalgebra::Dyn>,
+    /// D's diagonal (1 for a column of zeros).
+    scale: Vec<f64>,
+    /// Eigenvalues at or below this are flat directions the data leave undetermined.
+    flat: f64,
+}
+
+impl ScaledInformation {
+    /// From a solution (None when nothing was fitted).
+    fn new(solution: &Solution) -> Option<Self> {
+        let n = solution.free.len();
+        if n == 0 || solution.information.shape() != (n, n) {
+            return None;
+        }
+        let scale: Vec<f64> = (0..n)
+            .map(|k| {
+                let d = solution.information[(k, k)].max(0.0).sqrt();
+                if d > 0.0 && d.is_finite() { d } else { 1.0 }
+            })
+            .collect();
+        let scaled = DMatrix::from_fn(n, n, |r, c| {
+            solution.information[(r, c)] / (scale[r] * scale[c])
+        });
+        let eigen = scaled.symmetric_eigen();
+        let largest = eigen.eigenvalues.iter().fold(0.0f64, |m, &v| m.max(v));
+        Some(Self {
+            eigen,
+            scale,
+            flat: 1e-12 * largest,
+        })
+    }
+
+    /// (JᵀJ)⁻¹ over the determined directions (a pseudo-inverse).
+    fn inverse(&self) -> DMatrix<f64> {
+        let n = self.scale.len();
+        let mut inverse = DMatrix::zeros(n, n);
+        for (m, &value) in self.eigen.eigenvalues.iter().enumerate() {
+            if value > self.flat {
+                let v = self.eigen.eigenvectors.column(m);
+                inverse += v * v.transpose() / value;
+            }
+        }
+        DMatrix::from_fn(n, n, |r, c| {
+            inverse[(r, c)] / (self.scale[r] * self.scale[c])
+        })
+    }
+
+    /// ((JᵀJ)⁻¹)_aa for free parameter `a`, None when it loads on a flat direction.
+    fn variance(&self, a: usize) -> Option<f64> {
+        let mut variance = 0.0;
+        for (m, &value) in self.eigen.eigenvalues.iter().enumerate() {
+            let loading = self.eigen.eigenvectors[(a, m)];
+            if value > self.flat {
+                variance += loading * loading / value;
+            } else if loading.abs() > 1e-6 {
+                return None;
+            }
+        }
+        Some(variance / (self.scale[a] * self.scale[a]))
+    }
+}
+
 /// 1σ standard error of parameter `k` from the Gauss–Newton covariance σ²·(JᵀJ)⁻¹ of
 /// `solution` (0 when `k` was held; [`UNDETERMINED_STD`] at most, and when `k` loads on a
-/// direction the data leave flat: an eigenvalue below 1e-12 of the largest).
-fn standard_error(solution: &Solution, k: usize, pixel_noise: f64) -> f64 {
+/// direction the data leave flat: a scaled eigenvalue below 1e-12 of the largest, see
+/// [`ScaledInformation`]).
+fn standard_error(
+    solution: &Solution,
+    information: Option<&ScaledInformation>,
+    k: usize,
+    pixel_noise: f64,
+) -> f64 {
     let Some(a) = solution.free.iter().position(|&f| f == k) else {
         return 0.0;
     };
-    let n = solution.free.len();
-    if solution.information.shape() != (n, n) {
-        return UNDETERMINED_STD;
+    match information.and_then(|i| i.variance(a)) {
+        Some(variance) => (variance * pixel_noise).sqrt().min(UNDETERMINED_STD),
+        None => UNDETERMINED_STD,
     }
-    let eigen = solution.information.clone().symmetric_eigen();
-    let largest = eigen.eigenvalues.iter().fold(0.0f64, |m, &v| m.max(v));
-    let mut variance = 0.0;
-    for (m, &value) in eigen.eigenvalues.iter().enumerate() {
-        let loading = eigen.eigenvectors[(a, m)];
-        if value > 1e-12 * largest {
-            variance += loading * loading / value;
-        } else if loading.abs() > 1e-6 {
-            return UNDETERMINED_STD;
-        }
-    }
-    (variance * pixel_noise).sqrt().min(UNDETERMINED_STD)
 }
 
 /// The sample's mean region row.
@@ -765,25 +917,22 @@ fn orient(sample: &PixelSample, waves: &[ReceivedWaveform], model: &mut TimingMo
 }
 
 /// Relative 1σ gain uncertainty of each LED: the timing's covariance σ²·(JᵀJ)⁻¹ carried into
-/// the matched filter's coefficients, δg_i = (T⁺·∂T/∂θ_k)_ii·δθ_k, at region row `row`.
+/// the matched filter's coefficients, δg_i = (T⁺·∂T/∂θ_k)_ii·δθ_k, at region row `row`
+/// (the covariance over the determined directions, [`ScaledInformation`]).
 fn gain_uncertainty(
     waves: &[ReceivedWaveform],
     model: &TimingModel,
     solution: &Solution,
+    information: Option<&ScaledInformation>,
     row: f64,
     frames: usize,
     pixel_noise: f64,
 ) -> Vec<f64> {
     let n = solution.free.len();
-    if n == 0 {
+    let Some(information) = information.filter(|_| n > 0) else {
         return vec![0.0; waves.len()];
-    }
-    let covariance = solution
-        .information
-        .clone()
-        .pseudo_inverse(1e-12)
-        .unwrap_or_else(|_| DMatrix::zeros(n, n))
-        * pixel_noise;
+    };
+    let covariance = information.inverse() * pixel_noise;
     let params = model.params();
     let basis = model.basis(waves, row, frames);
     let base = model.columns(waves, row, frames);
