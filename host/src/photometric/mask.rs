@@ -13,7 +13,8 @@
 use super::outcome::Outcome;
 use crate::regions::{enclosed_holes, remove_small};
 use crate::types::LedImages;
-use ndarray::Array2;
+use ndarray::{Array2, Zip, s};
+use std::ops::Range;
 
 /// Thresholds of the automatic mask.
 #[derive(Debug, Clone, PartialEq, serde::Serialize, serde::Deserialize)]
@@ -65,23 +66,67 @@ pub(crate) fn object_region(
     noise: Option<&Array2<f32>>,
     config: &MaskConfig,
 ) -> ObjectRegion {
-    let usable = |o: &Outcome| matches!(o, Outcome::Solved(..) | Outcome::TwoLeds(..));
     let mut core = match given {
-        Some(m) => Array2::from_shape_fn(m.dim(), |p| m[p] && usable(&outcome[p])),
+        Some(m) => {
+            let mut core = m.clone();
+            core.zip_mut_with(outcome, |inside, o| *inside &= o.is_usable());
+            core
+        }
         None => found_object(images, albedo, outcome, noise, config),
     };
-    if given.is_none() {
-        remove_small(&mut core, config.min_component_pixels);
-    }
-    let size = core.iter().filter(|&&m| m).count();
+    // The object fills a small part of the frame: its pieces and holes lie inside its bounding
+    // box grown by one pixel, where labelling them costs a fraction of the whole frame.
+    let frame = core.dim();
+    let mut fill = Array2::from_elem(frame, false);
+    let Some((rows, cols)) = bounding_box(&core) else {
+        return ObjectRegion { object: core, fill };
+    };
+    let (rows, cols) = if given.is_none() {
+        let mut inner = core.slice(s![rows.clone(), cols.clone()]).to_owned();
+        remove_small(&mut inner, config.min_component_pixels);
+        core.slice_mut(s![rows, cols]).assign(&inner);
+        // Without the specks the box may shrink.
+        match bounding_box(&core) {
+            Some(bounds) => bounds,
+            None => return ObjectRegion { object: core, fill },
+        }
+    } else {
+        (rows, cols)
+    };
+    let inner = core.slice(s![rows.clone(), cols.clone()]).to_owned();
+    let size = inner.iter().filter(|&&m| m).count();
     let max_hole = (config.max_hole_fraction * size as f64) as usize;
-    let mut fill = enclosed_holes(&core, max_hole);
+    // A hole of the box that does not touch its border is one of the frame (the one-pixel rim
+    // is background wherever the box does not reach the frame's edge), and conversely.
+    fill.slice_mut(s![rows, cols])
+        .assign(&enclosed_holes(&inner, max_hole));
     if let Some(m) = given {
         fill.zip_mut_with(m, |f, &inside| *f &= inside);
     }
     let mut object = core;
     object.zip_mut_with(&fill, |o, &f| *o |= f);
     ObjectRegion { object, fill }
+}
+
+/// Rows and columns of the pixels set in `mask`, grown by one pixel within the frame; `None`
+/// when none is set.
+fn bounding_box(mask: &Array2<bool>) -> Option<(Range<usize>, Range<usize>)> {
+    let (rows, cols) = mask.dim();
+    let (mut top, mut bottom, mut left, mut right) = (usize::MAX, 0, usize::MAX, 0);
+    for (r, row) in mask.outer_iter().enumerate() {
+        let Some(first) = row.iter().position(|&m| m) else {
+            continue;
+        };
+        let last = row.iter().rposition(|&m| m).unwrap_or(first);
+        (top, bottom) = (top.min(r), r);
+        (left, right) = (left.min(first), right.max(last));
+    }
+    (top != usize::MAX).then(|| {
+        (
+            top.saturating_sub(1)..(bottom + 2).min(rows),
+            left.saturating_sub(1)..(right + 2).min(cols),
+        )
+    })
 }
 
 /// Usable pixels that pass the brightness and albedo tests (module docs).
@@ -92,34 +137,46 @@ fn found_object(
     noise: Option<&Array2<f32>>,
     config: &MaskConfig,
 ) -> Array2<bool> {
-    let shape = albedo.dim();
-    let brightest = Array2::from_shape_fn(shape, |p| {
-        images
-            .images
-            .iter()
-            .map(|im| im[p])
-            .fold(f32::NEG_INFINITY, f32::max)
-    });
-    let bright_ref = quantile(brightest.iter().copied(), 0.99);
+    let mut brightest = Array2::from_elem(albedo.dim(), f32::NEG_INFINITY);
+    for image in &images.images {
+        brightest.zip_mut_with(image, |b, &v| *b = b.max(v));
+    }
+    let bright_ref = match noise {
+        Some(_) => 0.0,
+        None => quantile(brightest.iter().copied(), 0.99),
+    };
     let albedo_ref = quantile(albedo.iter().copied(), 0.99);
-    Array2::from_shape_fn(shape, |p| {
-        let albedo_ok = match outcome[p] {
-            Outcome::Solved(..) => albedo[p] >= config.relative_albedo * albedo_ref,
-            Outcome::TwoLeds(..) => true,
-            _ => return false,
-        };
-        let signal_ok = match noise {
-            Some(n) => brightest[p] >= config.snr_threshold * n[p].max(f32::MIN_POSITIVE),
-            None => brightest[p] >= config.relative_brightness * bright_ref,
-        };
-        signal_ok && albedo_ok
-    })
+    let mut object = Array2::from_elem(albedo.dim(), false);
+    Zip::from(&mut object)
+        .and(outcome)
+        .and(albedo)
+        .and(&brightest)
+        .for_each(|inside, &outcome, &albedo, &brightest| {
+            let albedo_ok = match outcome {
+                Outcome::Solved => albedo >= config.relative_albedo * albedo_ref,
+                Outcome::TwoLeds => true,
+                _ => return,
+            };
+            let signal_ok = match noise {
+                Some(_) => true,
+                None => brightest >= config.relative_brightness * bright_ref,
+            };
+            *inside = signal_ok && albedo_ok;
+        });
+    if let Some(n) = noise {
+        Zip::from(&mut object)
+            .and(&brightest)
+            .and(n)
+            .for_each(|inside, &brightest, &sigma| {
+                *inside &= brightest >= config.snr_threshold * sigma.max(f32::MIN_POSITIVE);
+            });
+    }
+    object
 }
 
 #[cfg(test)]
 mod tests {
     use super::*;
-    use nalgebra::Vector3;
 
     /// A bright disc with a dark hole and a bright speck: the object is the disc, the speck is
     /// dropped and the hole is kept for the integrator to fill.
@@ -143,7 +200,7 @@ mod tests {
         };
         let outcome = value.mapv(|v| {
             if v > 0.1 {
-                Outcome::Solved(Vector3::z(), 0.5, 3)
+                Outcome::Solved
             } else {
                 Outcome::Dark
             }
