@@ -196,7 +196,13 @@ impl EdgeEquations {
         max_iterations: usize,
     ) -> usize {
         let lap = topology.laplacian(&self.weight);
-        // Right-hand side Dᵀ W t: edge k→j with z_j − z_k = t adds −w·t at k and +w·t at j.
+        let b = self.right_hand_side(topology);
+        conjugate_gradients(&lap, &b, x, tolerance, max_iterations)
+    }
+
+    /// The right-hand side Dᵀ W t of the normal equations: edge k→j with z_j − z_k = t adds
+    /// −w·t at k and +w·t at j.
+    pub fn right_hand_side(&self, topology: &Topology) -> Vec<f64> {
         let mut b = vec![0.0; topology.len()];
         for (k, nb) in topology.neighbours.iter().enumerate() {
             for (d, &j) in nb.iter().take(2).enumerate() {
@@ -207,7 +213,7 @@ impl EdgeEquations {
                 }
             }
         }
-        conjugate_gradients(&lap, &b, x, tolerance, max_iterations)
+        b
     }
 }
 
