@@ -25,8 +25,8 @@
 
 use crate::demod::Decoded;
 use crate::integrate::{
-    BilateralConfig, Confidence, IntegrateConfig, IntegrateError, Integration, SurfaceEvidence,
-    integrate_surface,
+    BilateralConfig, Confidence, IntegrateConfig, IntegrateError, Integration,
+    IntegrationWorkspace, SurfaceEvidence, integrate_surface_with,
 };
 use crate::photometric::lights::moved_depth;
 use crate::photometric::{
@@ -348,6 +348,8 @@ fn passes(
         LightModel::Distant => 1,
         LightModel::NearField { refinements } => refinements + 1,
     };
+    // The passes integrate on the same object mask: the integration graph is built once.
+    let mut workspace = IntegrationWorkspace::new();
     let distant = Lights::Distant(
         rig.distant_light_vectors()
             .iter()
@@ -397,7 +399,13 @@ fn passes(
                 .min(EARLY_PASS_REWEIGHTINGS);
             integrate_config.tolerance = integrate_config.tolerance.max(EARLY_PASS_TOLERANCE);
         }
-        let mut integration = integrate_surface(&evidence, &projection, &integrate_config, depth)?;
+        let mut integration = integrate_surface_with(
+            &evidence,
+            &projection,
+            &integrate_config,
+            depth,
+            &mut workspace,
+        )?;
         time("integration", pass, start);
         if matches!(config.light_model, LightModel::NearField { .. })
             && config.offset_search_mm > 0.0
