@@ -1097,38 +1097,8 @@ mod tests {
     /// halves are separate pieces.
     #[test]
     fn two_led_band_joins_the_halves() {
-        let (rows, cols, radius) = (61usize, 61usize, 28.0);
-        let inside = |r: usize, c: usize| {
-            let (x, y) = (c as f64 - 30.0, 30.0 - r as f64);
-            x * x + y * y < radius * radius
-        };
-        let height = |r: usize, c: usize| {
-            let (x, y) = (c as f64 - 30.0, 30.0 - r as f64);
-            (radius * radius - x * x - y * y).max(0.0).sqrt()
-        };
-        let truth = Array2::from_shape_fn((rows, cols), |(r, c)| height(r, c));
-        let normals = Array2::from_shape_fn((rows, cols), |(r, c)| {
-            Vector3::new(c as f64 - 30.0, 30.0 - r as f64, height(r, c)).normalize()
-        });
-        let band = |r: usize| (27..34).contains(&r);
-        let measured = Array2::from_shape_fn((rows, cols), |(r, c)| inside(r, c) && !band(r));
-        let lights = [Vector3::new(0.5, 0.1, 0.86), Vector3::new(-0.4, 0.3, 0.87)];
-        let planes: Vec<NormalPlane> = measured
-            .indexed_iter()
-            .filter(|&((r, c), _)| inside(r, c) && band(r))
-            .filter(|&((r, c), _)| lights.iter().all(|l| normals[(r, c)].dot(l) > 0.05))
-            .map(|((r, c), _)| {
-                let n = normals[(r, c)];
-                let (a1, a2) = (n.dot(&lights[0]), n.dot(&lights[1]));
-                NormalPlane {
-                    pixel: (r, c),
-                    across: lights[0] * a2 - lights[1] * a1,
-                    towards: lights[0] + lights[1],
-                    least_albedo: Vector3::zeros(),
-                }
-            })
-            .collect();
-        let field = field_of(&normals, &measured);
+        let (field, planes, truth) = banded_hemisphere();
+        let (rows, cols) = field.mask.dim();
         let config = IntegrateConfig {
             filter: ArtefactFilter { max_jump_mm: None },
             ..IntegrateConfig::default()
