@@ -15,7 +15,12 @@
 //! run in parallel and an allocation-free residual (same arithmetic, same results bit for
 //! bit): 32 frames 29 M / 192 M, 128 frames 161 M / 717 M (the fit 135 M serial): the serial
 //! part −55 % / −61 %, the total −9 % / −14 %. Wall-clock medians of the shared machine at
-//! load 10–17 (4 helpers on 2 cores) are not comparable; re-measure on a quiet machine.
+//! load 10–17 (4 helpers on 2 cores) are not comparable. Re-measured on one quiet machine
+//! (load < 2), before (430946e) and after, criterion medians: 32 frames 46.0 → 39.8 ms, 128
+//! frames 122.3 → 103.2 ms; the straightforward decoder (unchanged code) 545 / 498 ms there, 1.9×
+//! its 268 ms on the machine of the 20.4 / 61.9 ms figures, so this machine is about half as
+//! fast and the targets are judged against the straightforward decoder's ratio (32 frames
+//! 8.0 % of it, target 15 / 268 = 5.6 %; 128 frames 20.7 %, target 50 / 268 = 18.7 %).
 
 use criterion::{BatchSize, Criterion, criterion_group, criterion_main};
 use meb::capture::memory::MemorySource;
