@@ -21,6 +21,18 @@
 //! its 268 ms on the machine of the 20.4 / 61.9 ms figures, so this machine is about half as
 //! fast and the targets are judged against the straightforward decoder's ratio (32 frames
 //! 8.0 % of it, target 15 / 268 = 5.6 %; 128 frames 20.7 %, target 50 / 268 = 18.7 %).
+//!
+//! Session 23 (same results bit for bit): the seed scan's template scores accumulate every
+//! signal-space column in one pass over the frames (frame-major, zero-padded rows: independent
+//! chains, each column still summed in frame order), the Levenberg–Marquardt Jacobian's
+//! columns and the rolling-shutter test's band and row compressions run in parallel.
+//! Callgrind, whole decode (without the bench's frame copy), instructions: 32 frames 215 M →
+//! 210 M (seed scans 19.4 M → 11.6 M; the matched filter, 137 M, is now two thirds of it);
+//! 128 frames 873 M → 802 M (seed scans 226 M → 143 M, of which template filling 105 M;
+//! matched filter 342 M unchanged). Criterion medians at load 6.5–7.2 (other builds on the
+//! 2 cores, not comparable with the quiet figures above): 32 frames 196.6 ms against the
+//! straightforward decoder's 2838 ms (6.9 %), 128 frames 628.8 ms (22.2 %); the targets
+//! (5.6 % / 18.7 %) still want a quiet re-measurement and a faster matched filter.
 
 use criterion::{BatchSize, Criterion, criterion_group, criterion_main};
 use meb::capture::memory::MemorySource;

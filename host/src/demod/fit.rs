@@ -208,9 +208,13 @@ struct Projection<'a> {
     waves: &'a [ReceivedWaveform],
     groups: &'a [FitGroup],
     frames: usize,
-    /// Work space of one evaluation: the K × F template rows, orthonormalised in place
-    /// (the residual is evaluated hundreds of times per fit and allocates nothing).
-    basis: RefCell<Vec<f64>>,
+}
+
+thread_local! {
+    /// Work space of one residual evaluation on this thread: the K × F template rows and the
+    /// fitted values of one direction (a fit evaluates the residual hundreds of times, from
+    /// several threads, and allocates nothing for it).
+    static WORKSPACE: RefCell<(Vec<f64>, Vec<f64>)> = const { RefCell::new((Vec::new(), Vec::new())) };
 }
 
 impl<'a> Projection<'a> {
@@ -219,7 +223,6 @@ impl<'a> Projection<'a> {
             waves,
             groups,
             frames,
-            basis: RefCell::new(Vec::new()),
         }
     }
 }
@@ -227,27 +230,31 @@ impl<'a> Projection<'a> {
 impl Residuals for Projection<'_> {
     fn residuals(&self, params: &[f64], out: &mut Vec<f64>) {
         out.clear();
-        let f = self.frames;
+        // No frames, no residuals (and no zero-length chunks below).
+        let Some(f) = std::num::NonZeroUsize::new(self.frames).map(usize::from) else {
+            return;
+        };
         let k = self.waves.len() + 1;
-        let mut basis = self.basis.borrow_mut();
-        basis.resize(k * f, 0.0);
-        let mut projection = [0.0f64; MAX_COLUMNS];
-        let mut fitted = vec![0.0f64; f];
-        for group in self.groups {
-            fill_columns(params, self.waves, group.row, f, &mut basis);
-            orthonormalise(&mut basis, f);
-            for d in group.data.as_slice().chunks_exact(f.max(1)) {
-                for (c, q) in projection.iter_mut().zip(basis.chunks_exact(f)) {
-                    *c = q.iter().zip(d).map(|(a, b)| a * b).sum::<f64>();
+        WORKSPACE.with_borrow_mut(|(basis, fitted)| {
+            basis.resize(k * f, 0.0);
+            fitted.resize(f, 0.0);
+            let mut projection = [0.0f64; MAX_COLUMNS];
+            for group in self.groups {
+                fill_columns(params, self.waves, group.row, f, basis);
+                orthonormalise(basis, f);
+                for d in group.data.as_slice().chunks_exact(f) {
+                    for (c, q) in projection.iter_mut().zip(basis.chunks_exact(f)) {
+                        *c = q.iter().zip(d).map(|(a, b)| a * b).sum::<f64>();
+                    }
+                    // Σ_l q_l[j]·c_l in the order l = 0, 1, …, frame by frame.
+                    fitted.iter_mut().for_each(|x| *x = 0.0);
+                    for (q, &c) in basis.chunks_exact(f).zip(&projection) {
+                        fitted.iter_mut().zip(q).for_each(|(x, &v)| *x += v * c);
+                    }
+                    out.extend(d.iter().zip(fitted.iter()).map(|(&d, &x)| d - x));
                 }
-                // Σ_l q_l[j]·c_l in the order l = 0, 1, …, frame by frame.
-                fitted.iter_mut().for_each(|x| *x = 0.0);
-                for (q, &c) in basis.chunks_exact(f).zip(&projection) {
-                    fitted.iter_mut().zip(q).for_each(|(x, &v)| *x += v * c);
-                }
-                out.extend(d.iter().zip(&fitted).map(|(&d, &x)| d - x));
             }
-        }
+        });
     }
 }
 
@@ -551,7 +558,7 @@ impl Fitter<'_> {
             members[(row * bands / height).min(bands - 1)].push(p);
         }
         let groups: Vec<FitGroup> = members
-            .iter()
+            .par_iter()
             .filter(|m| m.len() >= 2)
             .filter_map(|m| compress(sample, m, 2 * self.waves.len()))
             .collect();
@@ -866,7 +873,7 @@ fn row_groups(sample: &PixelSample, leds: usize, pixel_noise: f64) -> Vec<FitGro
     let frames = sample.frames() as f64;
     sample
         .row_runs()
-        .into_iter()
+        .into_par_iter()
         .filter_map(|run| {
             let pixels = run.len() as f64;
             let x = sample.matrix(run.clone());

@@ -6,6 +6,7 @@
 //! targets another nalgebra major version and has no bounds, so this is written out here.
 
 use nalgebra::{DMatrix, DVector};
+use rayon::prelude::*;
 
 /// Largest number of iterations.
 const MAX_ITERATIONS: usize = 40;
@@ -18,8 +19,9 @@ const MAX_DAMPING_STEPS: usize = 12;
 /// Relative cost decrease below which an accepted step ends the search.
 const MIN_RELATIVE_DECREASE: f64 = 1e-12;
 
-/// A least-squares problem: residuals of a parameter vector.
-pub trait Residuals {
+/// A least-squares problem: residuals of a parameter vector (evaluated from several threads
+/// at once: the Jacobian's columns are independent).
+pub trait Residuals: Sync {
     /// Writes the residual vector of `params` into `out` (resized as needed).
     fn residuals(&self, params: &[f64], out: &mut Vec<f64>);
 }
@@ -125,22 +127,31 @@ pub fn minimise_within(
     }
 }
 
-/// Forward-difference Jacobian over the free parameters.
+/// Forward-difference Jacobian over the free parameters, its columns (one residual
+/// evaluation each) in parallel.
 fn jacobian(
     problem: &impl Residuals,
     params: &[f64],
     residual: &[f64],
     free: &[usize],
 ) -> DMatrix<f64> {
+    let columns: Vec<Vec<f64>> = free
+        .par_iter()
+        .map(|&k| {
+            let mut shifted = params.to_vec();
+            shifted[k] = params[k] + DIFFERENCE_STEP;
+            let mut out = Vec::new();
+            problem.residuals(&shifted, &mut out);
+            out.iter()
+                .zip(residual)
+                .map(|(x, r)| (x - r) / DIFFERENCE_STEP)
+                .collect()
+        })
+        .collect();
     let mut jacobian = DMatrix::zeros(residual.len(), free.len());
-    let mut shifted = params.to_vec();
-    let mut out = Vec::new();
-    for (a, &k) in free.iter().enumerate() {
-        shifted[k] = params[k] + DIFFERENCE_STEP;
-        problem.residuals(&shifted, &mut out);
-        shifted[k] = params[k];
-        for (row, (x, r)) in out.iter().zip(residual).enumerate() {
-            jacobian[(row, a)] = (x - r) / DIFFERENCE_STEP;
+    for (mut target, column) in jacobian.column_iter_mut().zip(&columns) {
+        for (t, &v) in target.iter_mut().zip(column) {
+            *t = v;
         }
     }
     jacobian

@@ -45,14 +45,43 @@ pub struct Start {
     pub shifts: Vec<f64>,
 }
 
+/// Lanes of the signal-space rows: the rank is padded to a multiple of this with zero columns.
+const LANES: usize = 4;
+/// Largest padded rank: the signal space holds at most 3·N + 2 directions (spectrum).
+const MAX_LANES: usize = (3 * super::MAX_LEDS + 2).div_ceil(LANES) * LANES;
+
 /// Scores templates against the signal space.
 struct Scorer<'a> {
-    space: DMatrixView<'a, f64>,
+    /// The signal space V (F × rank) frame-major, each frame's row padded with zeros to
+    /// `lanes` values, so that one pass over the frames accumulates every column's dot product
+    /// at once (each column still summed frame by frame, in order: the same arithmetic as a
+    /// column-by-column dot product, one independent chain per column).
+    rows: Vec<f64>,
+    /// Row length: the rank rounded up to [`LANES`].
+    lanes: usize,
     waves: &'a [ReceivedWaveform],
     frames: usize,
 }
 
-impl Scorer<'_> {
+impl<'a> Scorer<'a> {
+    /// The scorer of `space` (F × rank).
+    fn new(space: DMatrixView<'_, f64>, waves: &'a [ReceivedWaveform], frames: usize) -> Self {
+        let rank = space.ncols().min(MAX_LANES);
+        let lanes = rank.div_ceil(LANES).max(1) * LANES;
+        let mut rows = vec![0.0; frames * lanes];
+        for (c, column) in space.column_iter().take(rank).enumerate() {
+            for (j, &v) in column.iter().enumerate().take(frames) {
+                rows[j * lanes + c] = v;
+            }
+        }
+        Self {
+            rows,
+            lanes,
+            waves,
+            frames,
+        }
+    }
+
     /// |Vᵀt|² / |t|² of LED `led`'s centred template (0 for a flat template).
     fn score(&self, led: usize, timing: Timing, shift: f64, template: &mut [f64]) -> f64 {
         let Some(wave) = self.waves.get(led) else {
@@ -60,22 +89,22 @@ impl Scorer<'_> {
         };
         timing.fill_template(wave, shift, template);
         let mean = template.iter().sum::<f64>() / self.frames.max(1) as f64;
-        template.iter_mut().for_each(|t| *t -= mean);
-        let energy: f64 = template.iter().map(|t| t * t).sum();
+        let mut energy = 0.0;
+        let mut dots = [[0.0f64; LANES]; MAX_LANES / LANES];
+        let dots = &mut dots[..self.lanes / LANES];
+        for (t, row) in template.iter().zip(self.rows.chunks_exact(self.lanes)) {
+            let t = *t - mean;
+            energy += t * t;
+            for (d, v) in dots.iter_mut().zip(row.as_chunks::<LANES>().0) {
+                for (d, &v) in d.iter_mut().zip(v) {
+                    *d += v * t;
+                }
+            }
+        }
         if energy < 1e-15 {
             return 0.0;
         }
-        let captured: f64 = self
-            .space
-            .column_iter()
-            .map(|v| {
-                v.iter()
-                    .zip(template.iter())
-                    .map(|(a, b)| a * b)
-                    .sum::<f64>()
-                    .powi(2)
-            })
-            .sum();
+        let captured: f64 = dots.iter().flatten().map(|d| d.powi(2)).sum();
         captured / energy
     }
 
@@ -153,11 +182,7 @@ pub fn starts(
     frames: usize,
     limits: &FitLimits,
 ) -> Vec<Start> {
-    let scorer = Scorer {
-        space: space.basis(),
-        waves,
-        frames,
-    };
+    let scorer = Scorer::new(space.basis(), waves, frames);
     let rate = limits
         .rate_ratio
         .unwrap_or_else(|| scan_rate(&scorer, frames, limits.max_rate_mismatch));
