@@ -33,9 +33,27 @@
 //! 16 %, Laplacian products 11 %, memset 6 %, inpainting ≈ 10 %. The warm result lies 0.004 mm
 //! (median) from a cold solve to 10⁻⁷ (before: 0.002 mm). Quiet-machine criterion figures and
 //! an after-callgrind count were not taken (builds took 10–18 min at this load).
+//!
+//! Session 23 (callgrind instructions, `--toggle-collect='*integrate_surface_with*'`, the
+//! profile run of one case: its fresh and its `_workspace` integration; repeatable under load):
+//!
+//! | case      | before (main bcea852) | after   | change |
+//! |-----------|-----------------------|---------|--------|
+//! | warm_same | 1 101 M               | 744 M   | −32 %  |
+//! | cold      | 3 058 M               | 2 683 M | −12 %  |
+//!
+//! Where the warm case went before: push–pull inpainting 41 % (455 M: the slopes s_x, s_y and
+//! the albedo each built their pyramid and ran 30 Gauss–Seidel sweeps with 2-D bounds-checked
+//! indexing), V-cycles 11 %, hierarchy set-up 7 %, memset/calloc of fresh arrays 10 % (the
+//! full-frame class and slope arrays), edge equations 10 %. Changes: inpainting on flat arrays
+//! with each filled pixel's neighbours found once, s_x and s_y sharing one pyramid
+//! (`integrate/inpaint.rs`; 455 M → 117 M); pixel classes and slopes found inside the window
+//! only instead of on the 1280×720 grid. Results are bit-identical (same CG iterations per
+//! solve, same distances from the exact solve). Wall-clock figures were taken at a load
+//! average of 8–9 (a test build running), so only the instruction counts compare.
 
 use criterion::{BatchSize, Criterion, criterion_group, criterion_main};
-use meb::capture::{FrameSource, Samples};
+use meb::capture::Samples;
 use meb::integrate::{
     IntegrateConfig, Integration, IntegrationWorkspace, NormalPlane, SurfaceEvidence,
     integrate_surface, integrate_surface_with,
@@ -43,7 +61,6 @@ use meb::integrate::{
 use meb::photometric::PhotometricResult;
 use meb::reconstruct::{Reconstruction, from_decoded};
 use meb::rig::{Projection, Rig};
-use meb::simulate::{Scene, SceneObject, SimConfig, SimulatedCapture, Spin};
 use meb::types::NormalField;
 use meb::video::VideoConfig;
 use meb::video::decode::decode_frames;
@@ -52,6 +69,8 @@ use ndarray::Array2;
 use ndarray_npy::{read_npy, write_npy};
 use std::hint::black_box;
 use std::path::{Path, PathBuf};
+
+mod common;
 
 /// What the integration of one window sees: the last photometric pass and the depth found.
 struct WindowResult {
@@ -150,21 +169,8 @@ fn windows() -> Option<(Rig, VideoConfig, WindowResult, WindowResult)> {
 /// The two decoded windows of the turning ellipsoid (frames 4..36 and 44..76), reconstructed
 /// cold as `meb video` reconstructs its first window.
 fn simulated_windows(rig: &Rig, config: &VideoConfig) -> Option<(WindowResult, WindowResult)> {
-    let mut object = SceneObject::ellipsoid([100.0, 60.0, 60.0]);
-    object.spin = Some(Spin {
-        axis: Vector3::y_axis(),
-        rpm: 7.5,
-    });
-    let sim = SimConfig {
-        frames: 76,
-        ..SimConfig::default()
-    };
-    let mut capture = SimulatedCapture::new(rig.clone(), Scene::single(object), sim).ok()?;
-    let format = capture.format().clone();
-    let mut frames: Vec<Samples> = Vec::new();
-    while let Ok(Some(frame)) = capture.next_frame() {
-        frames.push(frame.samples);
-    }
+    let (format, clip) = common::turning_ellipsoid(rig, 76)?;
+    let frames: Vec<Samples> = clip.into_iter().map(|f| f.samples).collect();
     let first = decode_frames(frames.get(4..36)?, &format, &config.decode).ok()?;
     let second = decode_frames(frames.get(44..76)?, &format, &config.decode).ok()?;
     let first = from_decoded(&first, rig, None, &config.reconstruct).ok()?;

@@ -103,30 +103,16 @@ use meb::capture::{Frame, FrameFormat, FrameSource, Samples};
 use meb::demod::DecodeConfig;
 use meb::reconstruct::{WarmStart, from_decoded, from_decoded_warm};
 use meb::rig::Rig;
-use meb::simulate::{Scene, SceneObject, SimConfig, SimulatedCapture, Spin};
 use meb::video::decode::decode_frames;
 use meb::video::{VideoConfig, process};
-use nalgebra::Vector3;
 use std::hint::black_box;
+
+mod common;
 
 /// 80 frames (two thesis windows) of the turning ellipsoid on the thesis-dynamic rig.
 fn clip() -> Option<(Rig, FrameFormat, Vec<Frame>)> {
     let rig = Rig::preset("thesis-dynamic")?;
-    let mut object = SceneObject::ellipsoid([100.0, 60.0, 60.0]);
-    object.spin = Some(Spin {
-        axis: Vector3::y_axis(),
-        rpm: 7.5,
-    });
-    let config = SimConfig {
-        frames: 80,
-        ..SimConfig::default()
-    };
-    let mut capture = SimulatedCapture::new(rig.clone(), Scene::single(object), config).ok()?;
-    let format = capture.format().clone();
-    let mut frames = Vec::new();
-    while let Ok(Some(frame)) = capture.next_frame() {
-        frames.push(frame);
-    }
+    let (format, frames) = common::turning_ellipsoid(&rig, 80)?;
     Some((rig, format, frames))
 }
 

@@ -24,20 +24,16 @@
 //! of simulator seeds 1–4 from 5.24 / 4.53 / 5.69 / 5.23 mm to 3.97 / 4.02 / 4.78 / 3.46 mm.
 //!
 //! Holes (pixels lit by fewer than two LEDs that the object surrounds) get slopes interpolated
-//! from their surroundings by push–pull ([`inpaint`]) and a low weight, so the integrator bridges
+//! from their surroundings by push–pull ([`super::inpaint`]) and a low weight, so the integrator bridges
 //! them instead of cutting the object into islands.
 
 use super::least_squares::Topology;
 use super::multigrid::NONE;
 pub use crate::types::NormalPlane;
 use nalgebra::Vector3;
-use ndarray::Array2;
 
 /// Largest angle between a two-LED pixel's normal and the middle of its lit half-circle.
 const MAX_TILT_RAD: f64 = 80.0 * std::f64::consts::PI / 180.0;
-
-/// Gauss–Seidel sweeps that smooth the push–pull interpolation.
-const SMOOTHING_SWEEPS: usize = 30;
 
 impl NormalPlane {
     /// The normal on the circle nearest `n` in angle, within [`MAX_TILT_RAD`] of the direction
@@ -65,84 +61,6 @@ impl NormalPlane {
         let cos = (least / albedo).min(1.0);
         let sin = (1.0 - cos * cos).sqrt();
         Some(e1 * cos + e2 * sin.copysign(n.dot(&e2)))
-    }
-}
-
-/// Fills `values` at the pixels of `wanted` that are not `known`, from the known ones: a
-/// push–pull pyramid (coarser levels average the known values, finer ones blend them in) and a
-/// few Gauss–Seidel sweeps of the Laplace equation over the filled pixels.
-pub(crate) fn inpaint(values: &mut Array2<f64>, known: &Array2<bool>, wanted: &Array2<bool>) {
-    // Pull: levels of (value, weight) with weight in [0, 1].
-    let mut levels = vec![(values.clone(), known.mapv(|k| if k { 1.0 } else { 0.0 }))];
-    loop {
-        let (v, w) = &levels[levels.len() - 1];
-        let (rows, cols) = v.dim();
-        if (rows <= 1 && cols <= 1) || w.iter().all(|&x| x > 0.0) {
-            break;
-        }
-        let shape = (rows.div_ceil(2), cols.div_ceil(2));
-        let mut cv = Array2::zeros(shape);
-        let mut cw = Array2::zeros(shape);
-        for ((r, c), &wi) in w.indexed_iter() {
-            if wi > 0.0 {
-                cv[(r / 2, c / 2)] += wi * v[(r, c)];
-                cw[(r / 2, c / 2)] += wi;
-            }
-        }
-        for (value, weight) in cv.iter_mut().zip(cw.iter_mut()) {
-            if *weight > 0.0 {
-                *value /= *weight;
-                *weight = f64::min(*weight, 1.0);
-            }
-        }
-        levels.push((cv, cw));
-    }
-    // Push: blend every level with its parent where it is not fully known.
-    for l in (0..levels.len() - 1).rev() {
-        let (upper, lower) = levels.split_at_mut(l + 1);
-        let (fine_v, fine_w) = &mut upper[l];
-        let (coarse_v, _) = &lower[0];
-        for ((r, c), v) in fine_v.indexed_iter_mut() {
-            let w = fine_w[(r, c)];
-            if w < 1.0 {
-                // An unknown value (w = 0) may be NaN: take the coarse level's alone.
-                let coarse = coarse_v[(r / 2, c / 2)];
-                *v = if w > 0.0 {
-                    w * *v + (1.0 - w) * coarse
-                } else {
-                    coarse
-                };
-                fine_w[(r, c)] = 1.0;
-            }
-        }
-    }
-    let filled = &levels[0].0;
-    let (rows, cols) = values.dim();
-    let free: Vec<(usize, usize)> = wanted
-        .indexed_iter()
-        .filter(|&(p, &w)| w && !known[p])
-        .map(|(p, _)| p)
-        .collect();
-    for &p in &free {
-        values[p] = if filled[p].is_finite() {
-            filled[p]
-        } else {
-            0.0
-        };
-    }
-    for _ in 0..SMOOTHING_SWEEPS {
-        for &p in &free {
-            let (mut sum, mut n) = (0.0, 0);
-            for q in crate::regions::neighbours4(p, (rows, cols)) {
-                if wanted[q] || known[q] {
-                    sum += values[q];
-                    n += 1;
-                }
-            }
-            if n > 0 {
-                values[p] = sum / f64::from(n);
-            }
-        }
     }
 }
 
@@ -246,38 +164,5 @@ mod tests {
         assert!((rho * other.dot(&l1) - a1).abs() < 1e-9);
         assert!((rho * other.dot(&l2) - a2).abs() < 1e-9);
         assert!(plane.with_albedo(f64::NAN, &n).is_none());
-    }
-
-    #[test]
-    fn inpainting_fills_a_hole_in_a_linear_ramp_exactly_enough() {
-        let shape = (20, 24);
-        let ramp = Array2::from_shape_fn(shape, |(r, c)| 0.1 * c as f64 - 0.05 * r as f64);
-        let hole =
-            Array2::from_shape_fn(shape, |(r, c)| (6..12).contains(&r) && (8..16).contains(&c));
-        let known = hole.mapv(|h| !h);
-        let mut values = ramp.mapv(|v| v);
-        values.zip_mut_with(&hole, |v, &h| {
-            if h {
-                *v = 99.0;
-            }
-        });
-        let wanted = Array2::from_elem(shape, true);
-        let mut unknown_nan = values.clone();
-        unknown_nan.zip_mut_with(&hole, |v, &h| {
-            if h {
-                *v = f64::NAN;
-            }
-        });
-        inpaint(&mut values, &known, &wanted);
-        // Unknown values do not leak in, even when they are NaN.
-        inpaint(&mut unknown_nan, &known, &wanted);
-        assert_eq!(unknown_nan, values);
-        let worst = values
-            .iter()
-            .zip(ramp.iter())
-            .map(|(a, b)| (a - b).abs())
-            .fold(0.0, f64::max);
-        // A harmonic fill of a linear function is the function; 30 sweeps get close.
-        assert!(worst < 0.05, "worst {worst}");
     }
 }

@@ -1,0 +1,367 @@
+//! The least-squares solve of one window problem: slopes of two-LED pixels and holes filled in
+//! ([`super::inpaint`]), the two-LED alternation between depth and slopes ([`super::coverage`]),
+//! bilateral reweighting ([`super::bilateral`]), multigrid-preconditioned conjugate gradients
+//! ([`super::multigrid`]), then pieces, anchoring, the artefact filter and the full-grid output.
+
+use super::grid::DepthGrid;
+use super::inpaint::{Inpainting, inpaint};
+use super::least_squares::{self, EdgeEquations, Topology};
+use super::multigrid::Multigrid;
+use super::parts::{absorb_small_parts, anchor};
+use super::pcg::{Stop, preconditioned_cg};
+use super::warm::warm_start;
+use super::window::Window;
+use super::{
+    Confidence, IntegrateConfig, IntegrateError, Integration, IntegrationWorkspace, Integrator,
+    NormalPlane, SurfaceGradients, bilateral, coverage, fast_marching, filter_artefacts, workspace,
+};
+use crate::rig::Projection;
+use crate::types::DepthMap;
+use ndarray::{Array2, Array3};
+use std::time::Instant;
+
+/// Solve tolerance of a reweighting pass relative to the last pass's relative energy change.
+const INEXACT_SOLVE: f64 = 1e-2;
+
+/// Loosest relative residual of a reweighting pass's solve.
+const LOOSEST_SOLVE: f64 = 1e-4;
+
+/// A bilateral weight below which both sides of an edge have turned away from it.
+const DISCONTINUITY_WEIGHT: f64 = 0.05;
+
+/// Fewest pixels of a part (or 1 % of the mask, if more); smaller ones join a neighbour.
+const MIN_PART_PIXELS: usize = 200;
+
+/// One integration problem on a window of the grid.
+pub(super) struct Problem {
+    /// Class of every window pixel.
+    pub class: Array2<Confidence>,
+    /// Slopes (s_x, s_y) of measured pixels (others are filled in).
+    pub slopes: Array2<(f64, f64)>,
+    /// Two-LED pixels, in window coordinates.
+    pub planes: Vec<NormalPlane>,
+    /// Albedo of measured pixels (NaN elsewhere or when unknown).
+    pub albedo: Array2<f64>,
+    /// Window origin in the grid (row, column).
+    pub origin: (usize, usize),
+    /// The unknown and its slopes.
+    pub grid: DepthGrid,
+}
+
+/// Solves a window problem and places depth, confidence and normals in a `shape` grid.
+pub(super) fn solve_window(
+    problem: &Problem,
+    window: &Window,
+    shape: (usize, usize),
+    config: &IntegrateConfig,
+    initial: Option<&Array2<f32>>,
+    workspace: &mut IntegrationWorkspace,
+) -> Result<Integration, IntegrateError> {
+    let profile = &mut workspace.profile;
+    let t = Instant::now();
+    let region = problem.class.mapv(|k| k != Confidence::None);
+    // The graph (and hierarchy) of the last call when the mask is the same.
+    let cached = workspace
+        .cached
+        .take()
+        .filter(|c| c.origin == problem.origin && c.region == region);
+    profile.reused_graph = cached.is_some();
+    let topology = match cached {
+        Some(c) => c.topology,
+        None => Topology::new(&region),
+    };
+    profile.add("graph", t);
+    if topology.len() == 0 {
+        return Err(IntegrateError::EmptyMask);
+    }
+    let t = Instant::now();
+    let grid = &problem.grid;
+    let step = grid.step();
+    let (r0, c0) = problem.origin;
+    // Fill in the slopes of two-LED pixels and holes from the measured ones.
+    let mut sx = problem.slopes.mapv(|s| s.0);
+    let mut sy = problem.slopes.mapv(|s| s.1);
+    let known = problem.class.mapv(|k| k == Confidence::Measured);
+    if known.iter().any(|&k| k) && known != region {
+        let inpainting = Inpainting::new(&known, &region);
+        inpainting.fill(&mut sx);
+        inpainting.fill(&mut sy);
+    }
+    let mut slopes: Vec<(f64, f64)> = topology.cells.iter().map(|&p| (sx[p], sy[p])).collect();
+    let planes: Vec<(usize, NormalPlane)> = problem
+        .planes
+        .iter()
+        .filter_map(|p| topology.node(p.pixel).map(|k| (k, *p)))
+        .collect();
+    let clip = |s: (f64, f64)| {
+        (
+            s.0.clamp(-config.max_slope, config.max_slope),
+            s.1.clamp(-config.max_slope, config.max_slope),
+        )
+    };
+    // Two-LED pixels: the line a·s_x + b·s_y = c their circle is in slope space.
+    let lines: Vec<(f64, f64, f64)> = planes
+        .iter()
+        .map(|(_, plane)| {
+            let [a0, a1, a2] = grid.normal_affine(plane.pixel.0 + r0, plane.pixel.1 + c0);
+            let m = plane.across;
+            (m.dot(&a1), m.dot(&a2), -m.dot(&a0))
+        })
+        .collect();
+    // Keeps slopes on the lit half of the circle, within its tilt limit.
+    let on_circle = |plane: &NormalPlane, s: (f64, f64)| {
+        let (r, c) = (plane.pixel.0 + r0, plane.pixel.1 + c0);
+        plane
+            .project(&grid.normal(r, c, s.0, s.1))
+            .and_then(|n| grid.slopes(r, c, &n))
+            .map(clip)
+    };
+    // Two-LED pixels' albedo, interpolated from the measured pixels around them.
+    let mut albedo = problem.albedo.clone();
+    let albedo_known = Array2::from_shape_fn(albedo.dim(), |p| {
+        known[p] && albedo[p].is_finite() && albedo[p] > 0.0
+    });
+    if !planes.is_empty() && albedo_known.iter().any(|&k| k) {
+        inpaint(&mut albedo, &albedo_known, &region);
+    }
+    // The point of the circle with the interpolated albedo on the side of slopes `s` (`s` when
+    // the albedo or the circle's g₀ is unknown).
+    let with_albedo = |plane: &NormalPlane, s: (f64, f64)| {
+        let (r, c) = (plane.pixel.0 + r0, plane.pixel.1 + c0);
+        plane
+            .with_albedo(albedo[plane.pixel], &grid.normal(r, c, s.0, s.1))
+            .and_then(|m| grid.slopes(r, c, &m))
+            .map_or(s, clip)
+    };
+    for (k, plane) in &planes {
+        if let Some(s) = on_circle(plane, slopes[*k]) {
+            slopes[*k] = s;
+        }
+    }
+    let confidence: Vec<f64> = topology
+        .cells
+        .iter()
+        .map(|&p| match problem.class[p] {
+            Confidence::Measured => 1.0,
+            Confidence::TwoLeds => config.coverage.two_led_weight,
+            _ => config.coverage.fill_weight,
+        })
+        .collect();
+    let estimated: Vec<bool> = topology
+        .cells
+        .iter()
+        .map(|&p| problem.class[p] != Confidence::Measured)
+        .collect();
+    let warm = initial
+        .filter(|d| d.dim() == shape)
+        .and_then(|d| warm_start(d, &topology, grid, problem.origin));
+    let mut x = warm.clone().unwrap_or_else(|| vec![0.0; topology.len()]);
+    profile.add("inpainting and set-up", t);
+    let bilateral = config.integrator == Integrator::Bilateral;
+    let stiffness = bilateral::Stiffness {
+        units: grid.pixel_units(),
+        k: config.bilateral.stiffness,
+    };
+    let passes_allowed = match config.integrator {
+        Integrator::Bilateral => config.bilateral.max_iterations,
+        _ if planes.is_empty() => 1,
+        _ => config.coverage.iterations,
+    };
+    let (mut iterations, mut passes) = (0, 0);
+    let mut previous_energy: Option<f64> = None;
+    // Reweighting passes need solves only as exact as the weights are settled (inexact IRLS).
+    let mut solve_tolerance = config.tolerance;
+    let mut use_albedo = false;
+    // From a warm start the depth has settled already (the previous pass's or window's): the
+    // two-LED pixels take their slopes, and the albedo's side, from it before the first solve
+    // instead of alternating from the filled-in slopes (typically 2–3 solves instead of 6–8).
+    if warm.is_some() && !bilateral && !planes.is_empty() {
+        let t = Instant::now();
+        let sides = bilateral::uniform(&confidence, &slopes, &estimated);
+        for ((k, plane), &line) in planes.iter().zip(&lines) {
+            if let Some(s) = coverage::slopes_on_line(&topology, &x, *k, &sides[*k], step, line)
+                .and_then(|s| on_circle(plane, s))
+            {
+                slopes[*k] = with_albedo(plane, s);
+            }
+        }
+        use_albedo = true;
+        profile.add("coverage", t);
+    }
+    for pass in 0..passes_allowed {
+        passes = pass + 1;
+        let t = Instant::now();
+        let sides = if bilateral && (pass > 0 || warm.is_some()) {
+            bilateral::bilateral(&topology, &x, &slopes, &confidence, stiffness)
+        } else {
+            bilateral::uniform(&confidence, &slopes, &estimated)
+        };
+        let equations: EdgeEquations = bilateral::side_equations(&topology, &sides, &slopes, step);
+        let lap = topology.laplacian(&equations.weight);
+        let b = equations.right_hand_side(&topology);
+        profile.add("edge equations", t);
+        let t = Instant::now();
+        // A fresh hierarchy for every solve: the two-LED pixels' weights 0.5·n_z² follow their
+        // slopes, and a hierarchy kept from the first pass doubled the iterations on the turning
+        // ellipsoid (cold: 75 instead of 36 over 6 passes).
+        let mut multigrid = Multigrid::new(&lap, least_squares::REGULARISATION);
+        profile.add("hierarchy setup", t);
+        let t = Instant::now();
+        let solved = preconditioned_cg(
+            |u, v| lap.apply(u, v),
+            |r, z| multigrid.precondition(&lap, r, z),
+            &b,
+            &mut x,
+            Stop::ResidualNorm(solve_tolerance),
+            config.max_iterations,
+        );
+        profile.add("conjugate gradients", t);
+        profile.solve_iterations.push(solved);
+        iterations += solved;
+        let t = Instant::now();
+        for ((k, plane), &line) in planes.iter().zip(&lines) {
+            if let Some(s) = coverage::slopes_on_line(&topology, &x, *k, &sides[*k], step, line)
+                .and_then(|s| on_circle(plane, s))
+            {
+                slopes[*k] = if use_albedo { with_albedo(plane, s) } else { s };
+            }
+        }
+        if passes_allowed == 1 {
+            break;
+        }
+        let e = bilateral::energy(&topology, &sides, &slopes, step, &x);
+        profile.add("coverage", t);
+        let relative = previous_energy.map(|p| (p - e).abs() / p.max(f64::MIN_POSITIVE));
+        previous_energy = Some(e);
+        if let Some(r) = relative {
+            solve_tolerance = (r * INEXACT_SOLVE).clamp(config.tolerance, LOOSEST_SOLVE);
+        }
+        let tolerance = if bilateral {
+            config.bilateral.tolerance
+        } else {
+            config.coverage.tolerance
+        };
+        let settled = relative.is_some_and(|r| r < tolerance);
+        // The albedo's side is taken from the depth once the free alternation has settled
+        // (or used half its passes): a flat face fits either mirror image, so a side picked
+        // from the slopes filled in from other faces would stay.
+        if !use_albedo && (settled || 2 * passes >= passes_allowed) {
+            use_albedo = true;
+            previous_energy = None;
+            for (k, plane) in &planes {
+                slopes[*k] = with_albedo(plane, slopes[*k]);
+            }
+            continue;
+        }
+        if settled {
+            break;
+        }
+    }
+    let t = Instant::now();
+    let (piece_of_node, pieces) = topology.components();
+    let mut depth = Array2::from_elem(region.dim(), f64::NAN);
+    if config.integrator == Integrator::FastMarching {
+        let gradients = SurfaceGradients {
+            dzdx: Array2::from_shape_fn(region.dim(), |p| {
+                topology.node(p).map_or(0.0, |k| slopes[k].0)
+            }),
+            dzdy: Array2::from_shape_fn(region.dim(), |p| {
+                topology.node(p).map_or(0.0, |k| slopes[k].1)
+            }),
+            mask: Array2::from_shape_fn(region.dim(), |p| topology.node(p).is_some()),
+        };
+        let (fm, accepted) = fast_marching::integrate(&gradients, step, config.lambda)?;
+        depth = fm;
+        iterations = accepted;
+        passes = 1;
+    } else {
+        for (k, &p) in topology.cells.iter().enumerate() {
+            depth[p] = x[k];
+        }
+    }
+    anchor(&mut depth, &topology, &piece_of_node, pieces, config.anchor);
+    profile.add("pieces and anchoring", t);
+    let t = Instant::now();
+    // Parts: pieces further split where the bilateral integrator found a depth discontinuity
+    // all the way across (their relative depth is unknown to the normals).
+    let (part_of_node, parts) = if bilateral {
+        let cut =
+            bilateral::discontinuities(&topology, &x, &slopes, stiffness, DISCONTINUITY_WEIGHT);
+        let min_part = MIN_PART_PIXELS.max(topology.len() / 100);
+        absorb_small_parts(&topology, topology.components_without(&cut), min_part)
+    } else {
+        (piece_of_node.clone(), pieces)
+    };
+    let depth_mm = depth.mapv(|u| {
+        if u.is_finite() {
+            grid.depth_mm(u)
+        } else {
+            f64::NAN
+        }
+    });
+    let valid = depth_mm.mapv(f64::is_finite);
+    let (kept, kept_fraction) = filter_artefacts(&depth_mm, &valid, &config.filter);
+    profile.add("artefact filter", t);
+    let t = Instant::now();
+    let mut out = Integration {
+        depth: DepthMap {
+            depth_mm: Array2::from_elem(shape, f32::NAN),
+            pitch_mm: match grid {
+                DepthGrid::Orthographic { pitch_mm } => *pitch_mm,
+                DepthGrid::Perspective { .. } => f64::NAN,
+            },
+            perspective: match grid {
+                DepthGrid::Orthographic { .. } => None,
+                DepthGrid::Perspective {
+                    intrinsics,
+                    distance_mm,
+                } => Some(Projection::Perspective {
+                    intrinsics: *intrinsics,
+                    distance_mm: *distance_mm,
+                }),
+            },
+        },
+        kept: Array2::from_elem(shape, false),
+        kept_fraction,
+        iterations,
+        passes,
+        pieces,
+        piece: Array2::from_elem(shape, u32::MAX),
+        parts,
+        part: Array2::from_elem(shape, u32::MAX),
+        confidence: Array2::from_elem(shape, Confidence::None),
+        completed_normals: Array3::from_elem((shape.0, shape.1, 3), f32::NAN),
+    };
+    if let DepthGrid::Perspective {
+        distance_mm,
+        intrinsics,
+    } = grid
+    {
+        out.depth.pitch_mm = distance_mm / intrinsics.fx;
+    }
+    for (k, &(r, c)) in topology.cells.iter().enumerate() {
+        if !kept[(r, c)] {
+            continue;
+        }
+        let full = (r + window.rows.start, c + window.cols.start);
+        out.depth.depth_mm[full] = depth_mm[(r, c)] as f32;
+        out.kept[full] = true;
+        out.piece[full] = piece_of_node[k];
+        out.part[full] = part_of_node[k];
+        let class = problem.class[(r, c)];
+        out.confidence[full] = class;
+        if class != Confidence::Measured {
+            let n = grid.normal(full.0, full.1, slopes[k].0, slopes[k].1);
+            for j in 0..3 {
+                out.completed_normals[(full.0, full.1, j)] = n[j] as f32;
+            }
+        }
+    }
+    profile.add("output", t);
+    workspace.cached = Some(workspace::CachedSystem {
+        origin: problem.origin,
+        region,
+        topology,
+    });
+    Ok(out)
+}
