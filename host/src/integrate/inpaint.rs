@@ -223,7 +223,9 @@ mod tests {
         // Two holes, one touching the border, and a region that is not the whole grid.
         let shape = (17, 23);
         let known = Array2::from_shape_fn(shape, |(r, c)| {
-            !((3..9).contains(&r) && (4..12).contains(&c)) && !(r < 4 && c > 18)
+            let first_hole = (3..9).contains(&r) && (4..12).contains(&c);
+            let border_hole = r < 4 && c > 18;
+            !(first_hole || border_hole)
         });
         let wanted = Array2::from_shape_fn(shape, |(r, c)| r + c > 3);
         let a = Array2::from_shape_fn(shape, |(r, c)| ((r * 7 + c * 13) % 11) as f64);
