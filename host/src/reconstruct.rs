@@ -18,10 +18,11 @@
 //! pass's light vectors come from the previous depth instead of z = 0, each part's offset is
 //! carried over in closed form (the median offset that puts the integrated depth on the previous
 //! one) and kept unless the misfit clearly prefers another in a bracket of a few mm (a t-test
-//! over bands of the part, [`OFFSET_PREFERENCE_T`]), and the integrator starts from the previous
-//! depth with the early passes' loose settings. One pass is normally enough: a second runs
-//! only when the depth moved more than [`WARM_LIGHTS_MOVED_MM`] from the one its light vectors
-//! were computed at. A warm result that strays from its start is redone cold.
+//! over bands of the part, [`OFFSET_PREFERENCE_T`]); a preferred offset is blended with the
+//! carried one by a prior across windows ([`WARM_OFFSET_GAIN`]), and the integrator starts from
+//! the previous depth with the early passes' loose settings. One pass is normally enough: a
+//! second runs only when the depth moved more than [`WARM_LIGHTS_MOVED_MM`] from the one its
+//! light vectors were computed at. A warm result that strays from its start is redone cold.
 
 use crate::demod::Decoded;
 use crate::integrate::{
@@ -89,6 +90,17 @@ const OFFSET_TEST_BANDS: usize = 20;
 /// object moves by a fraction of that; a plain minimum made successive offsets differ by a
 /// median 3–4 mm and one window in five leave the warm bracket.
 pub const OFFSET_PREFERENCE_T: f64 = 3.0;
+
+/// Share of the way from the carried offset to a clearly preferred one that a warm start
+/// moves: the steady-state gain K of a constant-position Kalman filter across windows,
+/// K = P⁻/(P⁻ + r) with P⁻ = P + q and P = (−q + √(q² + 4qr))/2. Process noise: the turning
+/// ellipsoid's surface moves by at most ~2 mm between windows, σ_q ≈ 1 mm (q = 1 mm²).
+/// Measurement noise: the misfit's minimum jumps between windows (successive windows' offsets
+/// differed by a median 3–4 mm, so σ_r ≈ 3.5 / (0.674 √2) ≈ 3.7 mm, r ≈ 13.7 mm²), which gives
+/// P ≈ 3.2 mm², K ≈ 0.24. A within-window test cannot see that jitter (the minimum is sharp in
+/// every window); the prior across windows damps it, and a move of at most K times the ±4 mm
+/// bracket (< [`WARM_LIGHTS_MOVED_MM`]) lets a warm window stop after one pass.
+pub const WARM_OFFSET_GAIN: f64 = 0.24;
 
 /// Median absolute difference in mm from the warm start beyond which a warm result is redone
 /// cold.
@@ -268,9 +280,10 @@ pub fn reconstruct(
 /// [`reconstruct`], started from `warm` when it is given and the near-field model is used
 /// ([`WarmStart`]): light vectors at the previous depth, each part's offset searched within
 /// ±[`WARM_OFFSET_BRACKET_MM`] of the offset carried from it (kept unless the misfit clearly
-/// prefers another, [`OFFSET_PREFERENCE_T`]), integration warm-started with the early passes'
-/// loose settings, and passes stopped once the depth lies within [`WARM_LIGHTS_MOVED_MM`]
-/// (median) of the one the pass's light vectors came from. A warm result that moved more than
+/// prefers another, [`OFFSET_PREFERENCE_T`], and then moved by the share [`WARM_OFFSET_GAIN`]
+/// of the way to it), integration warm-started with the early passes' loose settings, and
+/// passes stopped once the depth lies within [`WARM_LIGHTS_MOVED_MM`] (median) of the one the
+/// pass's light vectors came from. A warm result that moved more than
 /// [`WARM_MAX_MOVE_MM`] (median) from the start, clearly preferred an offset at the bracket's
 /// edge, covers pixels the start did not know, or failed, is redone cold ([`Start::Redone`]).
 pub fn reconstruct_warm(
@@ -687,8 +700,10 @@ fn best_offset(
             if offset == centre || !clearly_better(&model.terms(centre), &model.terms(offset)) {
                 return Some((centre, false));
             }
+            // The minimum is one window's measurement: blend it with the carried offset
+            // (WARM_OFFSET_GAIN). Whether it left the bracket is judged on the measurement.
             Some((
-                offset,
+                centre + WARM_OFFSET_GAIN * (offset - centre),
                 (offset - a).min(b - offset) < 2.0 * OFFSET_TOLERANCE_MM,
             ))
         }
