@@ -96,6 +96,16 @@
 //! 1070–2100 ms before, 105–260 ms after (cold and warm alike); the warm second window ran 3
 //! passes before (offset search 280–370 ms each) and 2 after (77 ms each); integration
 //! (unchanged code) 1.7–4.2 s before and 0.75–1.7 s after per pass, load alone.
+//!
+//! A prior across windows ([`meb::reconstruct::WARM_OFFSET_GAIN`]): at main bcea852 (load 5)
+//! the warm second window ran 2 passes (`moved_mm` 3.9: its misfit clearly preferred an offset
+//! ~4 mm from the carried one, near the ±4 mm bracket's edge, and pass 1 jumped there):
+//! photometric stereo 66 + 56 ms, integration 189 + 191 ms, offset search 30 + 34 ms, 565 ms.
+//! A warm start now moves 0.24 of the way to a clearly preferred offset (≤ 0.96 mm), under the
+//! 1 mm stop, so such a window stops after 1 pass (the bench's after-profile was not taken
+//! before the deadline). On the 320×180 turning ellipsoid of `video_cli` the t-test never
+//! prefers another offset, so its per-frame RMSE is unchanged (warm 0.404/0.506/0.418/0.407/
+//! 0.402 mm, cold 0.404/0.422/0.449/0.257/0.587 mm before and after).
 
 use criterion::{BatchSize, Criterion, criterion_group, criterion_main};
 use meb::capture::memory::MemorySource;

@@ -377,6 +377,22 @@ fn a_warm_started_window_equals_a_cold_one_on_a_still_object() {
     );
     let (rms, shared) = depth_difference(&redone.integration.depth.depth_mm, cold_depth);
     assert!(rms < 1e-3 && shared == 1.0, "redone vs cold: {rms} mm");
+    // A warm start 7 mm off, beyond the ±4 mm bracket but inside the wider ±12 mm one
+    // (WARM_WIDE_BRACKET_MM), stays warm: no cold redo, and the part does not move away from
+    // the cold depth (it keeps the carried offset or moves part of the way back to it).
+    let mut near = WarmStart::of(&cold);
+    near.depth_mm.mapv_inplace(|z| z + 7.0);
+    let kept = from_decoded_warm(&decoded, &rig, None, &config.reconstruct, Some(&near)).unwrap();
+    assert!(
+        matches!(kept.start, Start::Warm { .. }),
+        "a 7 mm warm start was not kept: {:?}",
+        kept.start
+    );
+    let (rms, shared) = depth_difference(&kept.integration.depth.depth_mm, cold_depth);
+    assert!(
+        rms < 7.2 && shared > 0.99,
+        "kept vs cold: {rms} mm RMS, {shared} shared"
+    );
 }
 
 #[test]
