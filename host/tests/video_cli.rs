@@ -365,30 +365,28 @@ fn a_warm_started_window_equals_a_cold_one_on_a_still_object() {
     assert!(rms < 0.1, "warm vs cold: {rms} mm RMS");
     assert!(moved_mm < 0.1, "moved {moved_mm} mm (median)");
     assert!(shared > 0.99, "warm covers {shared} of the cold pixels");
-    // A warm start 30 mm off is out of its bracket: the window is redone cold, as if there had
-    // been no warm start.
-    let mut far = WarmStart::of(&cold);
-    far.depth_mm.mapv_inplace(|z| z + 30.0);
-    let redone = from_decoded_warm(&decoded, &rig, None, &config.reconstruct, Some(&far)).unwrap();
-    assert!(
-        matches!(redone.start, Start::Redone { .. }),
-        "{:?}",
-        redone.start
-    );
-    let (rms, shared) = depth_difference(&redone.integration.depth.depth_mm, cold_depth);
+    // The same window warm-started from its cold result moved `mm` further from the camera.
+    let started_off = |mm: f32| {
+        let mut off = WarmStart::of(&cold);
+        off.depth_mm.mapv_inplace(|z| z + mm);
+        let result =
+            from_decoded_warm(&decoded, &rig, None, &config.reconstruct, Some(&off)).unwrap();
+        let (rms, shared) = depth_difference(&result.integration.depth.depth_mm, cold_depth);
+        (result.start, rms, shared)
+    };
+    // 30 mm off is out of both brackets: the window is redone cold, as if there had been no
+    // warm start.
+    let (start, rms, shared) = started_off(30.0);
+    assert!(matches!(start, Start::Redone { .. }), "{start:?}");
     assert!(rms < 1e-3 && shared == 1.0, "redone vs cold: {rms} mm");
-    // A warm start 7 mm off, beyond the ±4 mm bracket but inside the wider ±12 mm one
+    // 7 mm off, beyond the ±4 mm bracket but inside the wider ±12 mm one
     // (WARM_WIDE_BRACKET_MM), stays warm: no cold redo, and the part does not move away from
     // the cold depth (it keeps the carried offset or moves part of the way back to it).
-    let mut near = WarmStart::of(&cold);
-    near.depth_mm.mapv_inplace(|z| z + 7.0);
-    let kept = from_decoded_warm(&decoded, &rig, None, &config.reconstruct, Some(&near)).unwrap();
+    let (start, rms, shared) = started_off(7.0);
     assert!(
-        matches!(kept.start, Start::Warm { .. }),
-        "a 7 mm warm start was not kept: {:?}",
-        kept.start
+        matches!(start, Start::Warm { .. }),
+        "a 7 mm warm start was not kept: {start:?}"
     );
-    let (rms, shared) = depth_difference(&kept.integration.depth.depth_mm, cold_depth);
     assert!(
         rms < 7.2 && shared > 0.99,
         "kept vs cold: {rms} mm RMS, {shared} shared"
