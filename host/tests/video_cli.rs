@@ -365,7 +365,7 @@ fn a_warm_started_window_equals_a_cold_one_on_a_still_object() {
     assert!(rms < 0.1, "warm vs cold: {rms} mm RMS");
     assert!(moved_mm < 0.1, "moved {moved_mm} mm (median)");
     assert!(shared > 0.99, "warm covers {shared} of the cold pixels");
-    // The same window warm-started from its cold result moved `mm` further from the camera.
+    // The same window warm-started from its cold result with every depth `mm` larger.
     let started_off = |mm: f32| {
         let mut off = WarmStart::of(&cold);
         off.depth_mm.mapv_inplace(|z| z + mm);
