@@ -102,10 +102,23 @@
 //! ~4 mm from the carried one, near the ±4 mm bracket's edge, and pass 1 jumped there):
 //! photometric stereo 66 + 56 ms, integration 189 + 191 ms, offset search 30 + 34 ms, 565 ms.
 //! A warm start now moves 0.24 of the way to a clearly preferred offset (≤ 0.96 mm), under the
-//! 1 mm stop, so such a window stops after 1 pass (the bench's after-profile was not taken
-//! before the deadline). On the 320×180 turning ellipsoid of `video_cli` the t-test never
-//! prefers another offset, so its per-frame RMSE is unchanged (warm 0.404/0.506/0.418/0.407/
-//! 0.402 mm, cold 0.404/0.422/0.449/0.257/0.587 mm before and after).
+//! 1 mm stop, so such a window stops after 1 pass. On the 320×180 turning ellipsoid of
+//! `video_cli` the t-test never prefers another offset, so its per-frame RMSE is unchanged
+//! (warm 0.404/0.506/0.418/0.407/0.402 mm, cold 0.404/0.422/0.449/0.257/0.587 mm).
+//!
+//! Session 23, criterion on the quiet machine (load ≈ 1), main bcea852 → after the damped
+//! offset, the wider warm bracket ([`meb::reconstruct::WARM_WIDE_BRACKET_MM`]), the faster
+//! decode and integration hole filling: `window_warm` 432 ms (421–443) → **181 ms** (173–190),
+//! 1 pass instead of 2 (photometric stereo 30 ms, integration 99 ms, offset search 14 ms);
+//! `window` 1.11 s → 0.83 s; `reconstruct` (cold) 1.12 s → 0.83 s; `decode` 26.4 → 19.6 ms;
+//! `decode_carried_timing` 24.6 → 17.0 ms. The bench's warm result now lies a median 3.5 mm
+//! from the cold one (0.36 mm before): the damped offset, not the shape. Against ground truth
+//! on a 1280×720 turning-ellipsoid clip the damped offsets are the closer ones: `meb video`,
+//! 2000 frames (49 windows of 40, release build, quiet): absolute depth offset from the truth
+//! mean 0.52 → −0.11 mm, standard deviation 2.41 → 1.07 mm, worst 5.14 → 2.12 mm; depth RMSE
+//! (offset removed) median 0.79 → 0.70 mm, worst 1.58 → 1.20 mm; cold redos 17 → 0; wall
+//! 29.4 s → 14.5 s (1.7 → 3.4 3-D frames/s), reconstruction 579 → 281 ms per window, peak RSS
+//! 338 → 323 MB. Still ~7× from 25 3-D frames/s: integration (≈ 100 ms warm) is next.
 
 use criterion::{BatchSize, Criterion, criterion_group, criterion_main};
 use meb::capture::memory::MemorySource;
