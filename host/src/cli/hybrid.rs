@@ -106,7 +106,7 @@ struct TruthRow {
 /// What every object's folder shares: the plain command's inputs and report fields.
 pub struct ObjectReport<'a> {
     /// The plain command's inputs (rig, decoded capture, ground truth).
-    pub inputs: &'a super::reconstruct::Inputs,
+    pub inputs: &'a super::truth::Inputs,
     /// The reconstruction settings.
     pub config: &'a ReconstructConfig,
     /// Input, rig and truth for the report's summary.
@@ -189,7 +189,7 @@ impl ObjectReport<'_> {
         let field = &object.reconstruction.photometric.field;
         let depth = &object.fused.depth;
         let (depth_errors, angular_errors) = match &self.inputs.truth {
-            Some(t) => super::reconstruct::compare(t, field, &depth.depth_mm)?,
+            Some(t) => super::truth::compare(t, field, &depth.depth_mm)?,
             None => (None, None),
         };
         let mut summary = super::common::reconstruction_summary(

@@ -12,4 +12,5 @@ pub mod reconstruct;
 pub mod simulate;
 pub mod simulate_tof;
 pub mod tof;
+pub mod truth;
 pub mod video;
