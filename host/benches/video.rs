@@ -119,6 +119,12 @@
 //! (offset removed) median 0.79 → 0.70 mm, worst 1.58 → 1.20 mm; cold redos 17 → 0; wall
 //! 29.4 s → 14.5 s (1.7 → 3.4 3-D frames/s), reconstruction 579 → 281 ms per window, peak RSS
 //! 338 → 323 MB. Still ~7× from 25 3-D frames/s: integration (≈ 100 ms warm) is next.
+//!
+//! Session 24 (issue #14): the multigrid aggregation is kept across the solves on one mask and
+//! only the Galerkin operators are recomputed (`Multigrid::reweight`), the bilateral energy no
+//! longer sums side weights it does not use, and the offset search gathers its model once for
+//! both warm brackets and evaluates the carried offset's misfit once. The warm window's depth
+//! is byte-identical before and after (53 857 pixels, checked through the `meb` test build).
 
 use criterion::{BatchSize, Criterion, criterion_group, criterion_main};
 use meb::capture::memory::MemorySource;

@@ -572,22 +572,19 @@ fn place_parts(
         let bracket = match carried {
             None => Bracket::Scan(config.offset_search_mm),
             Some(before) => match carried_offset(depth, before, &pixels, &projection) {
-                Some(centre) => Bracket::Around(centre, WARM_OFFSET_BRACKET_MM),
+                Some(centre) => Bracket::Around {
+                    centre,
+                    half: WARM_OFFSET_BRACKET_MM,
+                    wider: WARM_WIDE_BRACKET_MM,
+                },
                 None => return Err(format!("part {part} has no depth in the warm start")),
             },
         };
-        let Some((mut offset, mut at_edge)) =
+        let Some((offset, at_edge)) =
             best_offset(images, rig, noise, depth, &pixels, ps, config, bracket)
         else {
             continue;
         };
-        if let (true, Bracket::Around(centre, _)) = (at_edge, bracket) {
-            // The minimum may lie just beyond the narrow bracket: look once more, wider.
-            let wide = Bracket::Around(centre, WARM_WIDE_BRACKET_MM);
-            if let Some(found) = best_offset(images, rig, noise, depth, &pixels, ps, config, wide) {
-                (offset, at_edge) = found;
-            }
-        }
         if at_edge {
             return Err(format!(
                 "part {part}'s depth offset lies at the edge of the warm start's ±{WARM_WIDE_BRACKET_MM} mm bracket"
@@ -657,14 +654,24 @@ fn constraining_pixels(
 enum Bracket {
     /// A coarse scan of ±this many mm, then golden-section refinement around its best sample.
     Scan(f64),
-    /// Golden-section search of (centre ± half-width) mm.
-    Around(f64, f64),
+    /// Golden-section search of `centre` ± `half` mm, and once more of `centre` ± `wider` mm
+    /// when the minimum lies at the first one's edge (it may lie just beyond).
+    Around {
+        /// The carried offset (mm).
+        centre: f64,
+        /// Half-width of the first bracket (mm).
+        half: f64,
+        /// Half-width of the wider one (mm).
+        wider: f64,
+    },
 }
 
 /// The offset (mm towards the camera, within the `bracket`) of the depth of `pixels` that
 /// minimises their Lambertian misfit (module docs) — around a carried offset, that offset
 /// unless the misfit clearly prefers the minimum ([`clearly_better`]) — and whether it lies at
-/// the bracket's edge; `None` with fewer than 16 pixels.
+/// the (wider) bracket's edge; `None` with fewer than 16 pixels. The light vectors and the
+/// pixels' rays and values are gathered once ([`ModelMisfit`]) for every bracket searched, and
+/// the carried offset's misfit once for both.
 #[allow(clippy::too_many_arguments)]
 fn best_offset(
     images: &LedImages,
@@ -689,7 +696,7 @@ fn best_offset(
         &config.photometric,
     );
     let misfit = |offset: f64| model.at(offset);
-    let (best, best_value, a, b) = match bracket {
+    match bracket {
         Bracket::Scan(half) => {
             // Coarse scan, then golden-section refinement around the best sample.
             let samples = 13;
@@ -702,29 +709,44 @@ fn best_offset(
                     (best, best_value) = (o, v);
                 }
             }
-            (best, best_value, best - step, best + step)
+            let refined = golden_section(&misfit, best - step, best + step);
+            let offset = if misfit(refined) <= best_value {
+                refined
+            } else {
+                best
+            };
+            Some((offset, false))
         }
-        Bracket::Around(centre, half) => (centre, misfit(centre), centre - half, centre + half),
-    };
-    let refined = golden_section(&misfit, a, b);
-    let offset = if misfit(refined) <= best_value {
-        refined
-    } else {
-        best
-    };
-    match bracket {
-        Bracket::Scan(_) => Some((offset, false)),
         // A warm start keeps the carried offset unless the misfit clearly prefers the best.
-        Bracket::Around(centre, _) => {
-            if offset == centre || !clearly_better(&model.terms(centre), &model.terms(offset)) {
-                return Some((centre, false));
+        Bracket::Around {
+            centre,
+            half,
+            wider,
+        } => {
+            let centre_value = misfit(centre);
+            let mut centre_terms: Option<Vec<(f64, f64)>> = None;
+            let mut search = |half: f64| {
+                let (a, b) = (centre - half, centre + half);
+                let refined = golden_section(&misfit, a, b);
+                let lower = misfit(refined) <= centre_value;
+                if refined == centre || !lower {
+                    return (centre, false);
+                }
+                let kept = centre_terms.get_or_insert_with(|| model.terms(centre));
+                if !clearly_better(kept, &model.terms(refined)) {
+                    return (centre, false);
+                }
+                // The minimum is one window's measurement: blend it with the carried offset
+                // (WARM_OFFSET_GAIN). Whether it left the bracket is judged on the measurement.
+                (
+                    centre + WARM_OFFSET_GAIN * (refined - centre),
+                    (refined - a).min(b - refined) < 2.0 * OFFSET_TOLERANCE_MM,
+                )
+            };
+            match search(half) {
+                (_, true) => Some(search(wider)),
+                found => Some(found),
             }
-            // The minimum is one window's measurement: blend it with the carried offset
-            // (WARM_OFFSET_GAIN). Whether it left the bracket is judged on the measurement.
-            Some((
-                centre + WARM_OFFSET_GAIN * (offset - centre),
-                (offset - a).min(b - offset) < 2.0 * OFFSET_TOLERANCE_MM,
-            ))
         }
     }
 }

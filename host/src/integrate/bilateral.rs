@@ -156,8 +156,6 @@ struct EdgeSides {
     w: (f64, f64),
     /// Slopes of k and j along the edge (y up, so negated for the down edges).
     g: (f64, f64),
-    /// The two nodes' side weights summed (for the weight floor).
-    total: f64,
     /// The right/lower node.
     j: usize,
 }
@@ -185,7 +183,6 @@ fn edge_sides<'a>(
                 d,
                 w: (sides[k][d], sides[j][d + 2]),
                 g,
-                total: sides[k].iter().sum::<f64>() + sides[j].iter().sum::<f64>(),
                 j,
             }
         })
@@ -207,7 +204,10 @@ pub(crate) fn side_equations(
         let (wk, wj) = e.w;
         let (gk, gj) = e.g;
         let total = wk + wj;
-        weight[e.k][e.d] = total.max(WEIGHT_FLOOR * e.total).max(f64::MIN_POSITIVE);
+        // The floor scales with both nodes' side weights summed (computed here only: the
+        // energy does not need them).
+        let sides_total = sides[e.k].iter().sum::<f64>() + sides[e.j].iter().sum::<f64>();
+        weight[e.k][e.d] = total.max(WEIGHT_FLOOR * sides_total).max(f64::MIN_POSITIVE);
         target[e.k][e.d] = if total > 0.0 {
             step * (wk * gk + wj * gj) / total
         } else {

@@ -11,6 +11,11 @@
 //! before, backward after the coarse correction; a shifted dense Cholesky solve on the coarsest
 //! level) is a symmetric positive-definite preconditioner, so CG converges in a number of
 //! iterations nearly independent of the mask's size.
+//!
+//! The aggregation (coarse grids, node maps, components) depends on the mask's graph only, so
+//! solves on the same mask with new edge weights (the coverage passes of one integration, the
+//! passes of one reconstruction) keep it and recompute only the Galerkin operators and the
+//! coarsest factor ([`Multigrid::reweight`], identical to a fresh hierarchy).
 
 use nalgebra::{DMatrix, DVector};
 
@@ -138,6 +143,20 @@ impl GridLaplacian {
             .iter()
             .map(|&(r, c)| index[(r / 2) * cols + c / 2])
             .collect();
+        let coarse = self.galerkin((rows, cols), cells, &parent, regularisation);
+        (coarse, parent)
+    }
+
+    /// The Galerkin operator PᵀAP on the aggregates `cells` (grid `shape`) that `parent` maps
+    /// this operator's nodes to: the coarse edge weights sum the fine edges joining two
+    /// aggregates.
+    fn galerkin(
+        &self,
+        shape: (usize, usize),
+        cells: Vec<(usize, usize)>,
+        parent: &[u32],
+        regularisation: f64,
+    ) -> GridLaplacian {
         let n = cells.len();
         let mut neighbours = vec![[NONE; 4]; n];
         let mut weights = vec![[0.0; 4]; n];
@@ -166,8 +185,7 @@ impl GridLaplacian {
             .zip(&count)
             .map(|(w, &m)| w.iter().sum::<f64>() + regularisation * m as f64)
             .collect();
-        let coarse = GridLaplacian::new((rows, cols), cells, neighbours, weights, diag);
-        (coarse, parent)
+        GridLaplacian::new(shape, cells, neighbours, weights, diag)
     }
 }
 
@@ -206,22 +224,7 @@ impl Multigrid {
             }
             levels.push(CoarseLevel { a, parent });
         }
-        let coarsest = levels.last().and_then(|l| {
-            let a = &l.a;
-            let n = a.len();
-            let mean_diag = a.diag.iter().sum::<f64>() / n as f64;
-            let mut m = DMatrix::zeros(n, n);
-            for k in 0..n {
-                m[(k, k)] = a.diag[k] + COARSE_SHIFT * mean_diag;
-                for d in 0..4 {
-                    let j = a.neighbours[k][d];
-                    if j != NONE {
-                        m[(k, j as usize)] = -a.weights[k][d];
-                    }
-                }
-            }
-            m.cholesky()
-        });
+        let coarsest = levels.last().and_then(|l| coarsest_factor(&l.a));
         let (component, component_size) = components(levels.last().map_or(fine, |l| &l.a));
         let sizes: Vec<usize> = std::iter::once(fine.len())
             .chain(levels.iter().map(|l| l.a.len()))
@@ -236,6 +239,21 @@ impl Multigrid {
             solution: zeros(),
             residual: zeros(),
         }
+    }
+
+    /// Recomputes the coarse operators for new edge weights of `fine`, which must have the
+    /// graph of the operator the hierarchy was built for (the same mask): the aggregates, the
+    /// node maps, the components and the scratch are kept, so the result equals
+    /// [`Self::new`]`(fine, regularisation)` bit for bit at a fraction of its cost.
+    pub fn reweight(&mut self, fine: &GridLaplacian, regularisation: f64) {
+        for l in 0..self.levels.len() {
+            let (finer_levels, rest) = self.levels.split_at_mut(l);
+            let finer = finer_levels.last().map_or(fine, |f| &f.a);
+            let level = &mut rest[0];
+            let cells = std::mem::take(&mut level.a.cells);
+            level.a = finer.galerkin(level.a.shape, cells, &level.parent, regularisation);
+        }
+        self.coarsest = self.levels.last().and_then(|l| coarsest_factor(&l.a));
     }
 
     /// z = B⁻¹ r: one symmetric V-cycle from z = 0 on the finest operator `fine`.
@@ -295,6 +313,24 @@ impl Multigrid {
     }
 }
 
+/// The Cholesky factor of the coarsest operator `a` with its diagonal shifted by
+/// [`COARSE_SHIFT`] times its mean (`None` if it does not factor).
+fn coarsest_factor(a: &GridLaplacian) -> Option<nalgebra::Cholesky<f64, nalgebra::Dyn>> {
+    let n = a.len();
+    let mean_diag = a.diag.iter().sum::<f64>() / n as f64;
+    let mut m = DMatrix::zeros(n, n);
+    for k in 0..n {
+        m[(k, k)] = a.diag[k] + COARSE_SHIFT * mean_diag;
+        for d in 0..4 {
+            let j = a.neighbours[k][d];
+            if j != NONE {
+                m[(k, j as usize)] = -a.weights[k][d];
+            }
+        }
+    }
+    m.cholesky()
+}
+
 /// Connected component of every node of `a` and the node count of each component.
 fn components(a: &GridLaplacian) -> (Vec<usize>, Vec<f64>) {
     let mut label = vec![usize::MAX; a.len()];
@@ -342,6 +378,37 @@ mod tests {
         let mask = ndarray::Array2::from_shape_fn((rows, cols), |(r, c)| inside(r, c));
         let topology = super::super::least_squares::Topology::new(&mask);
         topology.laplacian(&vec![[1.0; 2]; topology.len()])
+    }
+
+    /// A hierarchy reweighted for new edge weights preconditions exactly as one built afresh
+    /// for them, and differently from the one it was built for (the weights reached it).
+    #[test]
+    fn a_reweighted_hierarchy_equals_a_fresh_one() {
+        let mask = ndarray::Array2::from_shape_fn((60, 75), |(r, c)| {
+            let (y, x) = (r as f64 - 30.0, c as f64 - 35.0);
+            x * x + y * y < 28.0 * 28.0 && !(20..26).contains(&c)
+        });
+        let topology = super::super::least_squares::Topology::new(&mask);
+        let n = topology.len();
+        let weight = |k: usize, d: usize| [1.0 + ((k * 31 + d * 7) % 13) as f64, 0.5][d % 2];
+        let first = topology.laplacian(&(0..n).map(|_| [1.0; 2]).collect::<Vec<_>>());
+        let second = topology.laplacian(
+            &(0..n)
+                .map(|k| [weight(k, 0), weight(k, 1)])
+                .collect::<Vec<_>>(),
+        );
+        let mut kept = Multigrid::new(&first, 1e-10);
+        let r: Vec<f64> = (0..n).map(|k| ((k * 7919) % 101) as f64 - 50.0).collect();
+        let mut before = vec![0.0; n];
+        kept.precondition(&first, &r, &mut before);
+        kept.reweight(&second, 1e-10);
+        let mut fresh = Multigrid::new(&second, 1e-10);
+        let (mut a, mut b) = (vec![0.0; n], vec![0.0; n]);
+        kept.precondition(&second, &r, &mut a);
+        fresh.precondition(&second, &r, &mut b);
+        assert!(kept.levels.len() >= 2, "{} levels", kept.levels.len());
+        assert_eq!(a, b);
+        assert_ne!(a, before);
     }
 
     #[test]

@@ -66,9 +66,9 @@ pub(super) fn solve_window(
         .take()
         .filter(|c| c.origin == problem.origin && c.region == region);
     profile.reused_graph = cached.is_some();
-    let topology = match cached {
-        Some(c) => c.topology,
-        None => Topology::new(&region),
+    let (topology, mut hierarchy) = match cached {
+        Some(c) => (c.topology, c.hierarchy),
+        None => (Topology::new(&region), None),
     };
     profile.add("graph", t);
     if topology.len() == 0 {
@@ -201,10 +201,17 @@ pub(super) fn solve_window(
         let b = equations.right_hand_side(&topology);
         profile.add("edge equations", t);
         let t = Instant::now();
-        // A fresh hierarchy for every solve: the two-LED pixels' weights 0.5·n_z² follow their
-        // slopes, and a hierarchy kept from the first pass doubled the iterations on the turning
-        // ellipsoid (cold: 75 instead of 36 over 6 passes).
-        let mut multigrid = Multigrid::new(&lap, least_squares::REGULARISATION);
+        // Fresh coarse operators for every solve: the two-LED pixels' weights 0.5·n_z² follow
+        // their slopes, and operators kept from the first pass doubled the iterations on the
+        // turning ellipsoid (cold: 75 instead of 36 over 6 passes). The aggregation depends
+        // on the graph only, so it is kept across solves (and calls) on the same mask.
+        let multigrid = match hierarchy.as_mut() {
+            Some(m) => {
+                m.reweight(&lap, least_squares::REGULARISATION);
+                m
+            }
+            None => hierarchy.insert(Multigrid::new(&lap, least_squares::REGULARISATION)),
+        };
         profile.add("hierarchy setup", t);
         let t = Instant::now();
         let solved = preconditioned_cg(
@@ -362,6 +369,7 @@ pub(super) fn solve_window(
         origin: problem.origin,
         region,
         topology,
+        hierarchy,
     });
     Ok(out)
 }

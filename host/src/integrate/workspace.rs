@@ -4,11 +4,14 @@
 //! photometric-stereo ↔ integration passes, so consecutive least-squares solves often share
 //! their mask. [`IntegrationWorkspace`] keeps the last solve's integration graph;
 //! [`super::integrate_surface_with`] reuses it when the next problem has the same mask on the
-//! same window. The multigrid hierarchy is not kept: the two-LED pixels' edge weights follow
-//! their slopes, and a hierarchy built for the first coverage pass doubled the conjugate-gradient
-//! iterations of the later ones on the turning ellipsoid (75 instead of 36).
+//! same window, with its multigrid aggregation (levels, node maps, components). The coarse
+//! operators themselves are recomputed for every solve ([`Multigrid::reweight`]): the two-LED
+//! pixels' edge weights follow their slopes, and operators built for the first coverage pass
+//! doubled the conjugate-gradient iterations of the later ones on the turning ellipsoid (75
+//! instead of 36).
 
 use super::least_squares::Topology;
+use super::multigrid::Multigrid;
 use crate::timing::StageTiming;
 use ndarray::Array2;
 use std::time::Instant;
@@ -59,6 +62,8 @@ pub(crate) struct CachedSystem {
     pub region: Array2<bool>,
     /// Their graph.
     pub topology: Topology,
+    /// The multigrid aggregation on that graph, with the last solve's coarse operators.
+    pub hierarchy: Option<Multigrid>,
 }
 
 /// What [`super::integrate_surface_with`] keeps between calls (module docs). Create one per

@@ -594,12 +594,10 @@ impl<'a> ModelMisfit<'a> {
             .map(|&(r, c)| {
                 values.extend(images.images.iter().map(|im| f64::from(im[(r, c)])));
                 let sigma = noise.map_or(0.0, |n| f64::from(n[(r, c)]));
-                (
-                    lights.ray(r, c),
-                    lights.view_at(r, c),
-                    lights.depth_at(r, c),
-                    sigma,
-                )
+                // One ray per pixel: the view vector is its direction ([`Lights::view_at`]).
+                let ray = lights.ray(r, c);
+                let view = ray.towards_camera();
+                (ray, view, lights.depth_at(r, c), sigma)
             })
             .collect();
         Self {
