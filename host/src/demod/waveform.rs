@@ -11,8 +11,22 @@
 //! ```
 //!
 //! With w = 1 and ρ = 1 this is exactly SPEC §3's `(1-α)·s[j+k] + α·s[j+k+1]`. The integral is
-//! evaluated in O(1) from the carrier's cumulative sum, which is periodic because every
-//! carrier has 50 % duty.
+//! evaluated in O(1) from the carrier's cumulative sum S, which is periodic because every
+//! carrier has 50 % duty: S(t) = S[m] + (t − m)·s[m] with m = ⌊t⌋.
+//!
+//! Whole templates ([`Timing::fill_template`], the seed scans' and the timing fit's innermost
+//! loop) use the carriers' Manchester structure instead of the tables, so that the loop
+//! vectorises without gathers: s_i[m] = +1 exactly when bit 0 of m equals bit i + 1 (SPEC §2),
+//! so every chip pair (2q, 2q+1) sums to zero and, with σ = 1 − 2·(bit i + 1 of m),
+//!
+//! ```text
+//! m even: S[m] = 0, s[m] = σ;      m odd: S[m] = σ, s[m] = −σ,
+//! ```
+//!
+//! where the bits come from exact floors of t·2^−b. The same `S[m] + (t − m)·s[m]` is then
+//! formed with the same operands, so the values are those of the tables bit for bit (a test
+//! checks both against each other, and the tables against the carrier definition). On x86-64
+//! the loop is built for AVX (vector floors) and chosen at run time; elsewhere the tables serve.
 
 use protocol::carriers::chip_is_on;
 
@@ -28,6 +42,8 @@ pub struct ReceivedWaveform {
     cumulative: Vec<f64>,
     /// The carrier ±1 over one period.
     chips: Vec<f64>,
+    /// 2^−(led+1): chip index times this, floored, has bit i + 1 of the index as its parity.
+    pair_scale: f64,
 }
 
 impl ReceivedWaveform {
@@ -44,7 +60,11 @@ impl ReceivedWaveform {
             sum += s;
             cumulative.push(sum);
         }
-        Self { cumulative, chips }
+        Self {
+            cumulative,
+            chips,
+            pair_scale: 0.5f64.powi(led as i32 + 1),
+        }
     }
 
     /// Carrier period in chips.
@@ -94,6 +114,24 @@ impl ReceivedWaveform {
         }
         (self.integral(t + width) - self.integral(t)) / width
     }
+
+    /// [`ReceivedWaveform::integral`] from the Manchester structure (module docs) instead of
+    /// the tables: the same value bit for bit, with floors in place of table look-ups.
+    #[inline(always)]
+    fn manchester_integral(&self, t: f64) -> f64 {
+        let floor = t.floor();
+        let fraction = t - floor;
+        let odd = floor - 2.0 * (floor * 0.5).floor();
+        let block = (floor * self.pair_scale).floor();
+        let bit = block - 2.0 * (block * 0.5).floor();
+        let sigma = 1.0 - 2.0 * bit;
+        let (cumulative, chip) = if odd == 0.0 {
+            (0.0, sigma)
+        } else {
+            (sigma, -sigma)
+        };
+        cumulative + fraction * chip
+    }
 }
 
 /// Timing shared by every LED of a capture: camera rate and exposure.
@@ -128,7 +166,54 @@ impl Timing {
             for (j, v) in out.iter_mut().enumerate() {
                 *v = self.template(wave, shift, j);
             }
-        } else if self.exposure == 1.0 {
+            return;
+        }
+        #[cfg(target_arch = "x86_64")]
+        if out.len() < i32::MAX as usize && std::arch::is_x86_feature_detected!("avx") {
+            // SAFETY: the CPU has AVX (checked just above).
+            unsafe { self.fill_template_avx(wave, shift, out) };
+            return;
+        }
+        self.fill_template_tables(wave, shift, out);
+    }
+
+    /// [`Timing::fill_template`] from the Manchester closed form, built for AVX (4-lane vector
+    /// floors); frame indices go through `i32` so that their conversion vectorises too.
+    #[cfg(target_arch = "x86_64")]
+    #[target_feature(enable = "avx")]
+    fn fill_template_avx(&self, wave: &ReceivedWaveform, shift: f64, out: &mut [f64]) {
+        self.fill_template_closed_form(wave, shift, out);
+    }
+
+    /// The positive-width templates from [`ReceivedWaveform::manchester_integral`], each frame
+    /// on its own (no carried state, so the loop vectorises): the same operations on the same
+    /// operands as [`Timing::fill_template_tables`].
+    #[inline(always)]
+    fn fill_template_closed_form(&self, wave: &ReceivedWaveform, shift: f64, out: &mut [f64]) {
+        let rate = self.rate_ratio;
+        let width = self.exposure * rate;
+        let scale = 0.5 / width;
+        if self.exposure == 1.0 {
+            // Frame 0 starts at `shift` itself, as in the table loop: 0·ρ + Δ is Δ for ρ > 0
+            // except for the sign of a zero, and S(±0) is the same +0.
+            for (j, v) in out.iter_mut().enumerate() {
+                let start = f64::from(j as i32) * rate + shift;
+                let end = f64::from(j as i32 + 1) * rate + shift;
+                *v = (wave.manchester_integral(end) - wave.manchester_integral(start)) * scale;
+            }
+        } else {
+            for (j, v) in out.iter_mut().enumerate() {
+                let t = f64::from(j as i32) * rate + shift;
+                *v = (wave.manchester_integral(t + width) - wave.manchester_integral(t)) * scale;
+            }
+        }
+    }
+
+    /// The positive-width templates from the carrier tables (any target).
+    fn fill_template_tables(&self, wave: &ReceivedWaveform, shift: f64, out: &mut [f64]) {
+        let rate = self.rate_ratio;
+        let width = self.exposure * rate;
+        if self.exposure == 1.0 {
             let scale = 0.5 / width;
             let mut start = wave.integral(shift);
             for (j, v) in out.iter_mut().enumerate() {
@@ -180,6 +265,57 @@ mod tests {
                     (v - expected).abs() < 1e-9,
                     "e={exposure} j={j}: {v} vs {expected}"
                 );
+            }
+        }
+    }
+
+    #[test]
+    fn closed_form_integral_is_the_tables_bit_for_bit() {
+        for led in 0..8 {
+            let wave = ReceivedWaveform::new(led);
+            let period = wave.period() as f64;
+            for k in -4000..4000 {
+                // Chip boundaries, their neighbours and odd fractions, both signs, several periods.
+                for t in [
+                    k as f64 * 0.25,
+                    k as f64 * 0.37 + 1e-9,
+                    k as f64 * period / 97.0,
+                ] {
+                    let (want, got) = (wave.integral(t), wave.manchester_integral(t));
+                    assert_eq!(
+                        want.to_bits(),
+                        got.to_bits(),
+                        "led {led}, t {t}: {want} vs {got}"
+                    );
+                }
+            }
+        }
+    }
+
+    #[test]
+    fn filled_templates_are_the_table_loop_bit_for_bit() {
+        let mut fast = vec![0.0; 131];
+        let mut tables = vec![0.0; 131];
+        for led in 0..6 {
+            let wave = ReceivedWaveform::new(led);
+            for rate in [1.0, 0.97, 1.0 + 1.0 / 256.0, 1.0213, 0.6] {
+                for exposure in [1.0, 0.95, 0.5, 0.1] {
+                    let timing = Timing {
+                        rate_ratio: rate,
+                        exposure,
+                    };
+                    for shift in [0.0, -0.0, 0.3, 2.75, -1.4, 17.125, 63.99, 200.5] {
+                        timing.fill_template(&wave, shift, &mut fast);
+                        timing.fill_template_tables(&wave, shift, &mut tables);
+                        for (j, (a, b)) in fast.iter().zip(&tables).enumerate() {
+                            assert_eq!(
+                                a.to_bits(),
+                                b.to_bits(),
+                                "led {led} rate {rate} e {exposure} shift {shift} frame {j}"
+                            );
+                        }
+                    }
+                }
             }
         }
     }
