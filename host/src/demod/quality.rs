@@ -12,6 +12,17 @@
 //!   rate, exposure or a rolling shutter the model misses leaves LED i's energy there.
 //! - gain uncertainty: the timing's statistical uncertainty carried into the LED's gain
 //!   ([`super::fit`]).
+//! - changing pixels: when an LED leaves modulation unexplained, the sums are split by pixel
+//!   (x_p's own share U_p = Σ_i |Π_i x_p|² − d_p·σ², S_p = Σ_i (x_p·û_i)²). A moving scene
+//!   (a silhouette sweeping over a pixel, a shadow edge) changes a few pixels abruptly, and
+//!   the step lands on the low harmonics that span the slow carriers' subspaces although the
+//!   timing is right; a wrong timing leaves a misfit in proportion to every pixel's modulation
+//!   (a wrong shift, rate or exposure moves or reshapes the same chip edges everywhere). So a
+//!   pixel is set aside as changing when U_p exceeds noise alone by [`CHANGING_NOISE_SIGMAS`]
+//!   standard deviations (σ²·√(2·d_p)) *and* its share U_p / S_p is [`CHANGING_SHARE_RATIO`]
+//!   times the sample's median share; at most [`MAX_CHANGING_SHARE`] of the sample (beyond it
+//!   the misfit is not local and nothing is set aside), and the LEDs' figures are measured
+//!   again on the pixels kept. `changing_share` records what was set aside.
 //!
 //! A decode is implausible when an LED has no signal above noise, leaves a significant part of
 //! its modulation unexplained, or has a gain uncertain by more than [`MAX_GAIN_UNCERTAINTY`] (1σ), or when a fitted rolling-shutter line
@@ -36,6 +47,12 @@ pub const MAX_UNEXPLAINED_FRACTION: f64 = 1e-3;
 /// give the per-LED gains to the precision photometric stereo needs. (0.33 %, i.e. 1 % at 3σ,
 /// refused the thesis rig's own cube at ±0.42 %, whose reconstruction is accurate.)
 pub const MAX_GAIN_UNCERTAINTY: f64 = 0.01;
+/// A changing pixel's unexplained energy exceeds noise alone by this many standard deviations …
+const CHANGING_NOISE_SIGMAS: f64 = 6.0;
+/// … and its unexplained share of its modulation is this many times the sample's median.
+const CHANGING_SHARE_RATIO: f64 = 10.0;
+/// Most of the pixel sample set aside as changing (module docs).
+const MAX_CHANGING_SHARE: f64 = 0.2;
 /// Harmonics of an LED's carrier spanning its subspace.
 const HARMONICS: usize = 4;
 /// A subspace direction shorter than this (relative) after orthogonalisation is dropped.
@@ -52,6 +69,10 @@ pub struct LedQuality {
     pub unexplained_fraction: f64,
     /// Relative 1σ uncertainty of the LED's gain from the timing fit.
     pub gain_uncertainty: f64,
+    /// Share of the pixel sample set aside as changing during the window before these
+    /// figures were measured (module docs; 0 when nothing was).
+    #[serde(default)]
+    pub changing_share: f64,
 }
 
 impl LedQuality {
@@ -169,10 +190,30 @@ pub fn measure(
         }
         parts.add_gram(gram, &total, sample.len(), fit.pixel_noise, &mut sums);
     }
-    let noise = space.noise.max(f64::MIN_POSITIVE);
     let pixels = sample.len().max(1) as f64;
     let dof = frames.saturating_sub(waves.len() + 1).max(1) as f64;
-    let leds = (0..waves.len())
+    let mut leds = summarise(&sums, space.noise, fit);
+    if leds.iter().any(LedQuality::leaves_modulation_unexplained) {
+        let shares = pixel_shares(sample, fit, waves, &subspaces);
+        if let Some(kept) = without_changing_pixels(&shares, fit.pixel_noise) {
+            let set_aside = shares.len() - kept.pixels;
+            leds = summarise(&kept, fit.pixel_noise * kept.pixels as f64, fit);
+            for led in &mut leds {
+                led.changing_share = set_aside as f64 / shares.len() as f64;
+            }
+        }
+    }
+    FitQuality {
+        leds,
+        levels: sums.levels.iter().map(|s| s / pixels).collect(),
+        residual_rms: (sums.residual.max(0.0) / (pixels * dof)).sqrt(),
+    }
+}
+
+/// Each LED's figures from the `sums` over pixels whose noise energy per direction is `noise`.
+fn summarise(sums: &Sums, noise: f64, fit: &TimingFit) -> Vec<LedQuality> {
+    let noise = noise.max(f64::MIN_POSITIVE);
+    (0..sums.signal.len())
         .map(|i| {
             let s = sums.signal[i] - noise;
             let u = sums.unexplained[i] - sums.expected[i];
@@ -185,23 +226,108 @@ pub fn measure(
                     f64::INFINITY
                 },
                 gain_uncertainty: fit.gain_uncertainty.get(i).copied().unwrap_or(0.0),
+                changing_share: 0.0,
             }
         })
-        .collect();
-    FitQuality {
-        leds,
-        levels: sums.levels.iter().map(|s| s / pixels).collect(),
-        residual_rms: (sums.residual.max(0.0) / (pixels * dof)).sqrt(),
+        .collect()
+}
+
+/// One sample pixel's part of the per-LED sums of [`measure`].
+#[derive(Debug, Clone, PartialEq)]
+struct PixelShare {
+    /// (x_p·û_i)² per LED.
+    signal: Vec<f64>,
+    /// |Π_i x_p|² per LED.
+    unexplained: Vec<f64>,
+    /// d_i, the directions of LED i's subspace left after the templates, per LED.
+    directions: Vec<usize>,
+}
+
+/// Every sample pixel's [`PixelShare`] for the fitted timing.
+fn pixel_shares(
+    sample: &PixelSample,
+    fit: &TimingFit,
+    waves: &[ReceivedWaveform],
+    subspaces: &[Vec<Vec<f64>>],
+) -> Vec<PixelShare> {
+    let frames = sample.frames();
+    let whole = std::iter::once(0..sample.len());
+    let runs: Vec<std::ops::Range<usize>> = if fit.rolling {
+        sample.row_runs()
+    } else {
+        whole.collect()
+    };
+    let mut shares = Vec::with_capacity(sample.len());
+    for run in runs {
+        let row = if fit.rolling {
+            sample.rows()[run.start] as f64
+        } else {
+            0.0
+        };
+        let parts = Parts::new(&fit.model, waves, subspaces, row, frames);
+        shares.extend(run.map(|p| parts.share(sample.pixel(p))));
     }
+    shares
+}
+
+/// The per-LED sums over the pixels that are not changing (module docs), or `None` when no
+/// pixel is, or more than [`MAX_CHANGING_SHARE`] of them would be.
+fn without_changing_pixels(shares: &[PixelShare], pixel_noise: f64) -> Option<Sums> {
+    let excess = |p: &PixelShare| {
+        let directions: usize = p.directions.iter().sum();
+        let unexplained: f64 = p.unexplained.iter().sum();
+        (
+            unexplained - directions as f64 * pixel_noise,
+            pixel_noise * (2.0 * directions as f64).sqrt(),
+        )
+    };
+    let share = |p: &PixelShare| {
+        let signal: f64 = p.signal.iter().sum();
+        let (over, _) = excess(p);
+        if signal > 0.0 {
+            over.max(0.0) / signal
+        } else {
+            f64::INFINITY
+        }
+    };
+    let mut shares_sorted: Vec<f64> = shares.iter().map(share).collect();
+    let middle = shares_sorted.len() / 2;
+    let (_, median, _) = shares_sorted.select_nth_unstable_by(middle, f64::total_cmp);
+    let median = *median;
+    let changing: Vec<bool> = shares
+        .iter()
+        .map(|p| {
+            let (over, spread) = excess(p);
+            over > CHANGING_NOISE_SIGMAS * spread && share(p) > CHANGING_SHARE_RATIO * median
+        })
+        .collect();
+    let set_aside = changing.iter().filter(|&&c| c).count();
+    if set_aside == 0 || set_aside as f64 > MAX_CHANGING_SHARE * shares.len() as f64 {
+        return None;
+    }
+    let leds = shares.first().map_or(0, |p| p.signal.len());
+    let mut sums = Sums::new(leds);
+    for (p, _) in shares.iter().zip(&changing).filter(|(_, c)| !**c) {
+        for i in 0..leds {
+            sums.signal[i] += p.signal[i];
+            sums.unexplained[i] += p.unexplained[i];
+            sums.expected[i] += p.directions[i] as f64 * pixel_noise;
+        }
+    }
+    sums.pixels = shares.len() - set_aside;
+    Some(sums)
 }
 
 /// Running sums of [`measure`].
+#[derive(Debug)]
 struct Sums {
     signal: Vec<f64>,
     unexplained: Vec<f64>,
     expected: Vec<f64>,
     levels: Vec<f64>,
     residual: f64,
+    /// Pixels summed (set by [`without_changing_pixels`]).
+    pixels: usize,
 }
 
 impl Sums {
@@ -212,6 +338,7 @@ impl Sums {
             expected: vec![0.0; leds],
             levels: vec![0.0; leds],
             residual: 0.0,
+            pixels: 0,
         }
     }
 }
@@ -246,6 +373,19 @@ impl Parts {
             basis,
             unique,
             left,
+        }
+    }
+
+    /// One pixel's part of the per-LED sums.
+    fn share(&self, x: &[f64]) -> PixelShare {
+        PixelShare {
+            signal: self.unique.iter().map(|u| dot(u, x).powi(2)).collect(),
+            unexplained: self
+                .left
+                .iter()
+                .map(|left| left.iter().map(|b| dot(b, x).powi(2)).sum())
+                .collect(),
+            directions: self.left.iter().map(Vec::len).collect(),
         }
     }
 
@@ -462,4 +602,54 @@ fn led_subspace(wave: &ReceivedWaveform, rate: f64, frames: usize) -> Vec<Vec<f6
         }
     }
     columns
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// A pixel of 4 LEDs with modulation `signal` per LED and `unexplained` per LED on top of
+    /// noise alone (8 directions per LED, noise 1 per direction).
+    fn pixel(signal: f64, unexplained: f64) -> PixelShare {
+        PixelShare {
+            signal: vec![signal; 4],
+            unexplained: vec![8.0 + unexplained; 4],
+            directions: vec![8; 4],
+        }
+    }
+
+    #[test]
+    fn a_few_pixels_the_scene_changed_are_set_aside() {
+        // 95 pixels the fit explains (noise only), 5 with a large local misfit (an edge).
+        let mut shares: Vec<PixelShare> = (0..95).map(|k| pixel(1e3 + k as f64, 0.5)).collect();
+        shares.extend((0..5).map(|_| pixel(1e3, 200.0)));
+        let kept = without_changing_pixels(&shares, 1.0).expect("the edge pixels are set aside");
+        assert_eq!(kept.pixels, 95);
+        for i in 0..4 {
+            let excess = kept.unexplained[i] - kept.expected[i];
+            assert!((excess - 95.0 * 0.5).abs() < 1e-9, "LED {i}: {excess}");
+        }
+    }
+
+    #[test]
+    fn a_misfit_in_proportion_to_the_modulation_is_kept() {
+        // A wrong timing: every pixel leaves the same share of its modulation unexplained,
+        // bright and dim alike, so nothing is set aside and the misfit stays measured.
+        let shares: Vec<PixelShare> = (0..100)
+            .map(|k| {
+                let signal = 100.0 * (1 + k % 20) as f64;
+                pixel(signal, 0.05 * signal)
+            })
+            .collect();
+        assert!(without_changing_pixels(&shares, 1.0).is_none());
+    }
+
+    #[test]
+    fn a_misfit_on_many_pixels_is_not_set_aside() {
+        // 30 % of the sample far off: more than a local change, so nothing is set aside.
+        let shares: Vec<PixelShare> = (0..100)
+            .map(|k| pixel(1e3, if k % 10 < 3 { 500.0 } else { 0.0 }))
+            .collect();
+        assert!(without_changing_pixels(&shares, 1.0).is_none());
+    }
 }

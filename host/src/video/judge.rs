@@ -99,6 +99,7 @@ mod tests {
                     unexplained: u,
                     unexplained_fraction: 0.01,
                     gain_uncertainty: 0.001,
+                    changing_share: 0.0,
                 },
             })
             .collect();
