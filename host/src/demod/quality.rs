@@ -376,15 +376,20 @@ impl Parts {
         }
     }
 
+    /// LED `i`'s signal (x·û_i)² and unexplained energy |Π_i x|² in one pixel `x` (a left
+    /// direction is orthogonal to the templates, so bᵀ(x − P_T x) = bᵀx).
+    fn energies(&self, i: usize, x: &[f64]) -> (f64, f64) {
+        let signal = dot(&self.unique[i], x).powi(2);
+        let unexplained = self.left[i].iter().map(|b| dot(b, x).powi(2)).sum::<f64>();
+        (signal, unexplained)
+    }
+
     /// One pixel's part of the per-LED sums.
     fn share(&self, x: &[f64]) -> PixelShare {
+        let (signal, unexplained) = (0..self.unique.len()).map(|i| self.energies(i, x)).unzip();
         PixelShare {
-            signal: self.unique.iter().map(|u| dot(u, x).powi(2)).collect(),
-            unexplained: self
-                .left
-                .iter()
-                .map(|left| left.iter().map(|b| dot(b, x).powi(2)).sum())
-                .collect(),
+            signal,
+            unexplained,
             directions: self.left.iter().map(Vec::len).collect(),
         }
     }
@@ -408,10 +413,10 @@ impl Parts {
                 .zip(&coefficients[1..])
                 .for_each(|(s, c)| *s += c);
             sums.residual += dot(&residual, &residual);
-            for (i, (u, left)) in self.unique.iter().zip(&self.left).enumerate() {
-                sums.signal[i] += dot(u, x).powi(2);
-                // A left direction is orthogonal to the templates: bᵀr = bᵀx.
-                sums.unexplained[i] += left.iter().map(|b| dot(b, x).powi(2)).sum::<f64>();
+            for i in 0..self.unique.len() {
+                let (signal, unexplained) = self.energies(i, x);
+                sums.signal[i] += signal;
+                sums.unexplained[i] += unexplained;
             }
         }
         for (e, l) in sums.expected.iter_mut().zip(&self.left) {
