@@ -44,6 +44,18 @@
 //! template filling 105 M → 28.2 M (`Timing::fill_template`, inclusive), whole decode
 //! 802 M → 732 M (−9 %; both "before" figures are session 23's, of the unchanged code); the
 //! matched filter (342 M, `row_avx2`) unchanged and now 47 % of the decode.
+//!
+//! Session 26: the matched filter's report sums (saturated / under-exposed / valid counts, noise
+//! power, per-LED level sums) were added pixel by pixel in f64 with a branch per pixel, a
+//! quarter of the row kernel's samples (perf annotate, 32 frames); they now go into per-lane
+//! f64 sums with bitwise masks, folded once per row (`LaneStats`; the counts are exact, the
+//! sums equal to rounding, tested). Callgrind, whole process minus the same binary run with no
+//! bench selected (frame generation): 32 frames 235.5 M → 200.0 M instructions per decode
+//! (−15 %); the row kernel's share in the accumulation loop rose from 55 % to 66 % of its
+//! samples. The sweep's 815 gains are unchanged to the printed digit. Wall clock on this VM
+//! (load 1–2) moved by more than the change between runs of one binary (28.5–40.4 ms for the
+//! same 32-frame code within minutes), so no wall-clock before/after is claimed: criterion
+//! 32 frames 34.2–38.3 ms (after) against 28.5–43.7 ms (before) in alternating runs.
 
 use criterion::{BatchSize, Criterion, criterion_group, criterion_main};
 use meb::capture::memory::MemorySource;
