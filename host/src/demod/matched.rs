@@ -382,8 +382,8 @@ impl<const K: usize> Default for LaneStats<K> {
 }
 
 impl<const K: usize> LaneStats<K> {
-    /// Adds a whole tile, as [`PixelStats::add`] does pixel by pixel (the masks are recomputed
-    /// from the maxima so that the loop stays in vector registers).
+    /// Adds a whole tile, as [`PixelStats::add`] does pixel by pixel (the masks are classified
+    /// again from the maxima so that the loop stays in vector registers).
     #[allow(clippy::needless_range_loop)] // indexed lanes vectorise
     #[inline(always)]
     fn add<T: Code>(
@@ -397,9 +397,7 @@ impl<const K: usize> LaneStats<K> {
         // that vectorises where a branch on a stored flag did not).
         let mut keep = [0u32; TILE];
         for l in 0..TILE {
-            let code = u32::from(max_code[l].code());
-            let saturated = code >= limits.white;
-            let underexposed = code < limits.dark;
+            let (saturated, underexposed) = limits.classify(max_code[l].code());
             let valid = !saturated & !underexposed;
             keep[l] = 0u32.wrapping_sub(u32::from(valid));
             self.saturated[l] += u32::from(saturated);
