@@ -225,6 +225,16 @@ fn report(name: &str, out: &Integration, workspace: &IntegrationWorkspace) {
     for step in &p.steps {
         eprintln!("  {:>8.2} ms  {}", step.ms, step.stage);
     }
+    // A fingerprint of the depth map's bits: a change meant to keep results bit-identical
+    // shows here.
+    let fingerprint = out
+        .depth
+        .depth_mm
+        .iter()
+        .fold(0xcbf2_9ce4_8422_2325_u64, |h, z| {
+            (h ^ u64::from(z.to_bits())).wrapping_mul(0x0100_0000_01b3)
+        });
+    eprintln!("  depth fingerprint {fingerprint:016x}");
     let cg = p.ms("conjugate gradients");
     let iterations: usize = p.solve_iterations.iter().sum();
     if iterations > 0 {

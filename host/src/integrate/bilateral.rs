@@ -20,6 +20,10 @@
 
 use super::least_squares::{EdgeEquations, Topology};
 use super::multigrid::NONE;
+use rayon::prelude::*;
+
+/// Nodes per parallel task (and per band of the energy's sum).
+const NODES_PER_TASK: usize = 4096;
 
 /// Weights of a node's one-sided equations: right (forward x), down (forward row), left, up.
 pub(crate) type SideWeights = [f64; 4];
@@ -38,7 +42,8 @@ pub(crate) fn uniform(
     scaled: &[bool],
 ) -> Vec<SideWeights> {
     confidence
-        .iter()
+        .par_iter()
+        .with_min_len(NODES_PER_TASK)
         .zip(slopes)
         .zip(scaled)
         .map(|((&c, &(sx, sy)), &scale)| {
@@ -160,19 +165,18 @@ struct EdgeSides {
     j: usize,
 }
 
-/// Every edge's one-sided equations ([`EdgeSides`]).
-fn edge_sides<'a>(
+/// The one-sided equations ([`EdgeSides`]) of node k's right and down edges.
+fn node_edges<'a>(
     topology: &'a Topology,
     sides: &'a [SideWeights],
     slopes: &'a [(f64, f64)],
+    k: usize,
 ) -> impl Iterator<Item = EdgeSides> + 'a {
-    topology
-        .neighbours
-        .iter()
-        .enumerate()
-        .flat_map(|(k, nb)| [(k, 0, nb[0]), (k, 1, nb[1])])
-        .filter(|&(_, _, j)| j != NONE)
-        .map(move |(k, d, j)| {
+    let nb = topology.neighbours[k];
+    [(0, nb[0]), (1, nb[1])]
+        .into_iter()
+        .filter(|&(_, j)| j != NONE)
+        .map(move |(d, j)| {
             let j = j as usize;
             let g = match d {
                 0 => (slopes[k].0, slopes[j].0),
@@ -190,34 +194,42 @@ fn edge_sides<'a>(
 
 /// Edge equations from one-sided equations: edge k→j (right or down) has weight
 /// W = w_k(forward) + w_j(backward) and target the weighted mean of h·s_k and h·s_j (with the
-/// sign of y up for the down edges).
+/// sign of y up for the down edges). Every node's two edges are found on their own, in
+/// parallel.
 pub(crate) fn side_equations(
     topology: &Topology,
     sides: &[SideWeights],
     slopes: &[(f64, f64)],
     step: f64,
 ) -> EdgeEquations {
-    let n = topology.len();
-    let mut weight = vec![[0.0; 2]; n];
-    let mut target = vec![[0.0; 2]; n];
-    for e in edge_sides(topology, sides, slopes) {
-        let (wk, wj) = e.w;
-        let (gk, gj) = e.g;
-        let total = wk + wj;
-        // The floor scales with both nodes' side weights summed (computed here only: the
-        // energy does not need them).
-        let sides_total = sides[e.k].iter().sum::<f64>() + sides[e.j].iter().sum::<f64>();
-        weight[e.k][e.d] = total.max(WEIGHT_FLOOR * sides_total).max(f64::MIN_POSITIVE);
-        target[e.k][e.d] = if total > 0.0 {
-            step * (wk * gk + wj * gj) / total
-        } else {
-            0.5 * step * (gk + gj)
-        };
-    }
+    let (weight, target) = (0..topology.len())
+        .into_par_iter()
+        .with_min_len(NODES_PER_TASK)
+        .map(|k| {
+            let (mut weight, mut target) = ([0.0; 2], [0.0; 2]);
+            for e in node_edges(topology, sides, slopes, k) {
+                let (wk, wj) = e.w;
+                let (gk, gj) = e.g;
+                let total = wk + wj;
+                // The floor scales with both nodes' side weights summed (computed here only:
+                // the energy does not need them).
+                let sides_total = sides[e.k].iter().sum::<f64>() + sides[e.j].iter().sum::<f64>();
+                weight[e.d] = total.max(WEIGHT_FLOOR * sides_total).max(f64::MIN_POSITIVE);
+                target[e.d] = if total > 0.0 {
+                    step * (wk * gk + wj * gj) / total
+                } else {
+                    0.5 * step * (gk + gj)
+                };
+            }
+            (weight, target)
+        })
+        .unzip();
     EdgeEquations { weight, target }
 }
 
-/// Σ over one-sided equations of w·(Δz − h·s)² at `x` (the bilateral energy).
+/// Σ over one-sided equations of w·(Δz − h·s)² at `x` (the bilateral energy), summed in
+/// parallel over fixed bands of nodes and then over the bands in order, so the sum does not
+/// depend on how the work was shared.
 pub(crate) fn energy(
     topology: &Topology,
     sides: &[SideWeights],
@@ -225,12 +237,20 @@ pub(crate) fn energy(
     step: f64,
     x: &[f64],
 ) -> f64 {
-    edge_sides(topology, sides, slopes)
-        .map(|e| {
-            let delta = x[e.j] - x[e.k];
-            e.w.0 * (delta - step * e.g.0).powi(2) + e.w.1 * (delta - step * e.g.1).powi(2)
+    let bands: Vec<f64> = (0..topology.len().div_ceil(NODES_PER_TASK))
+        .into_par_iter()
+        .map(|band| {
+            let nodes = band * NODES_PER_TASK..((band + 1) * NODES_PER_TASK).min(topology.len());
+            nodes
+                .flat_map(|k| node_edges(topology, sides, slopes, k))
+                .map(|e| {
+                    let delta = x[e.j] - x[e.k];
+                    e.w.0 * (delta - step * e.g.0).powi(2) + e.w.1 * (delta - step * e.g.1).powi(2)
+                })
+                .sum::<f64>()
         })
-        .sum()
+        .collect();
+    bands.iter().sum()
 }
 
 #[cfg(test)]

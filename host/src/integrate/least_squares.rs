@@ -14,6 +14,10 @@ use super::multigrid::{GridLaplacian, Multigrid, NONE};
 use super::pcg::{Stop, preconditioned_cg};
 use super::{IntegrateConfig, IntegrateError, SurfaceGradients};
 use ndarray::Array2;
+use rayon::prelude::*;
+
+/// Nodes per parallel task.
+const NODES_PER_TASK: usize = 4096;
 
 /// Diagonal shift that makes the Neumann Laplacian definite (fixes the free constant).
 pub(crate) const REGULARISATION: f64 = 1e-10;
@@ -133,20 +137,33 @@ impl Topology {
         (label, count as usize)
     }
 
-    /// The weighted Laplacian of edge weights `weight[k]` = (right, down) edges of node k.
+    /// The weighted Laplacian of edge weights `weight[k]` = (right, down) edges of node k; every
+    /// node's row is gathered on its own, in parallel.
     pub fn laplacian(&self, weight: &[[f64; 2]]) -> GridLaplacian {
-        let n = self.len();
-        let mut weights = vec![[0.0; 4]; n];
-        for (k, nb) in self.neighbours.iter().enumerate() {
-            for (d, &j) in nb.iter().take(2).enumerate() {
-                if j != NONE {
-                    weights[k][d] = weight[k][d];
-                    weights[j as usize][d + 2] = weight[k][d];
+        let weights: Vec<[f64; 4]> = self
+            .neighbours
+            .par_iter()
+            .with_min_len(NODES_PER_TASK)
+            .enumerate()
+            .map(|(k, nb)| {
+                let mut w = [0.0; 4];
+                for d in 0..4 {
+                    let j = nb[d];
+                    if j != NONE {
+                        // Right/down edges are stored at k, left/up ones at the neighbour.
+                        w[d] = if d < 2 {
+                            weight[k][d]
+                        } else {
+                            weight[j as usize][d - 2]
+                        };
+                    }
                 }
-            }
-        }
+                w
+            })
+            .collect();
         let diag = weights
-            .iter()
+            .par_iter()
+            .with_min_len(NODES_PER_TASK)
             .map(|w| REGULARISATION + w.iter().sum::<f64>())
             .collect();
         GridLaplacian::new(
@@ -203,17 +220,34 @@ impl EdgeEquations {
     /// The right-hand side Dᵀ W t of the normal equations: edge k→j with z_j − z_k = t adds
     /// −w·t at k and +w·t at j.
     pub fn right_hand_side(&self, topology: &Topology) -> Vec<f64> {
-        let mut b = vec![0.0; topology.len()];
-        for (k, nb) in topology.neighbours.iter().enumerate() {
-            for (d, &j) in nb.iter().take(2).enumerate() {
-                if j != NONE {
-                    let wt = self.weight[k][d] * self.target[k][d];
-                    b[k] -= wt;
-                    b[j as usize] += wt;
+        // b_k = Σ over k's edges of ±w·t: the edge from the node above and the one from the
+        // node to the left arrive first, then k's own right and down edges leave (the order
+        // in which a pass over the edges would add them up).
+        let flow = |j: u32, d: usize| {
+            let j = j as usize;
+            self.weight[j][d] * self.target[j][d]
+        };
+        topology
+            .neighbours
+            .par_iter()
+            .with_min_len(NODES_PER_TASK)
+            .enumerate()
+            .map(|(k, nb)| {
+                let mut b = 0.0;
+                if nb[3] != NONE {
+                    b += flow(nb[3], 1);
                 }
-            }
-        }
-        b
+                if nb[2] != NONE {
+                    b += flow(nb[2], 0);
+                }
+                for d in 0..2 {
+                    if nb[d] != NONE {
+                        b -= flow(k as u32, d);
+                    }
+                }
+                b
+            })
+            .collect()
     }
 }
 

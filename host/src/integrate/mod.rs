@@ -17,6 +17,7 @@
 //! filter ([`filter`]) then drops points that jump more than 10 mm from a neighbour. Everything
 //! runs on the mask's bounding box only.
 
+mod band_cholesky;
 pub mod bilateral;
 pub mod coverage;
 pub mod fast_marching;

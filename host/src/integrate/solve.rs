@@ -18,6 +18,7 @@ use super::{
 use crate::rig::Projection;
 use crate::types::DepthMap;
 use ndarray::{Array2, Array3};
+use rayon::prelude::*;
 use std::time::Instant;
 
 /// Solve tolerance of a reweighting pass relative to the last pass's relative energy change.
@@ -46,6 +47,30 @@ pub(super) struct Problem {
     pub origin: (usize, usize),
     /// The unknown and its slopes.
     pub grid: DepthGrid,
+}
+
+/// Two-LED pixels per parallel task of [`update_two_led_slopes`].
+const PLANES_PER_TASK: usize = 1024;
+
+/// Sets the slopes of every two-LED pixel `planes[i]` that `new(slopes, i)` gives a value for.
+/// Each pixel's new value depends on the slopes before the update and its own data only, so
+/// they are found in parallel and then stored.
+fn update_two_led_slopes(
+    slopes: &mut [(f64, f64)],
+    planes: &[(usize, NormalPlane)],
+    new: impl Fn(&[(f64, f64)], usize) -> Option<(f64, f64)> + Sync,
+) {
+    let before: &[(f64, f64)] = slopes;
+    let updated: Vec<Option<(f64, f64)>> = (0..planes.len())
+        .into_par_iter()
+        .with_min_len(PLANES_PER_TASK)
+        .map(|i| new(before, i))
+        .collect();
+    for ((k, _), s) in planes.iter().zip(updated) {
+        if let Some(s) = s {
+            slopes[*k] = s;
+        }
+    }
 }
 
 /// Solves a window problem and places depth, confidence and normals in a `shape` grid.
@@ -82,11 +107,33 @@ pub(super) fn solve_window(
     let mut sx = problem.slopes.mapv(|s| s.0);
     let mut sy = problem.slopes.mapv(|s| s.1);
     let known = problem.class.mapv(|k| k == Confidence::Measured);
-    if known.iter().any(|&k| k) && known != region {
-        let inpainting = Inpainting::new(&known, &region);
-        inpainting.fill(&mut sx);
-        inpainting.fill(&mut sy);
-    }
+    // Two-LED pixels' albedo, interpolated from the measured pixels around them (at the same
+    // time as the slopes: the three fills are independent).
+    let mut albedo = problem.albedo.clone();
+    let albedo_known = Array2::from_shape_fn(albedo.dim(), |p| {
+        known[p] && albedo[p].is_finite() && albedo[p] > 0.0
+    });
+    let fill_slopes = known.iter().any(|&k| k) && known != region;
+    let fill_albedo = problem
+        .planes
+        .iter()
+        .any(|p| topology.node(p.pixel).is_some())
+        && albedo_known.iter().any(|&k| k);
+    rayon::join(
+        || {
+            if fill_slopes {
+                let inpainting = Inpainting::new(&known, &region);
+                rayon::join(|| inpainting.fill(&mut sx), || inpainting.fill(&mut sy));
+            }
+        },
+        || {
+            if fill_albedo {
+                inpaint(&mut albedo, &albedo_known, &region);
+            }
+        },
+    );
+    profile.add("inpainting", t);
+    let t = Instant::now();
     let mut slopes: Vec<(f64, f64)> = topology.cells.iter().map(|&p| (sx[p], sy[p])).collect();
     let planes: Vec<(usize, NormalPlane)> = problem
         .planes
@@ -116,14 +163,6 @@ pub(super) fn solve_window(
             .and_then(|n| grid.slopes(r, c, &n))
             .map(clip)
     };
-    // Two-LED pixels' albedo, interpolated from the measured pixels around them.
-    let mut albedo = problem.albedo.clone();
-    let albedo_known = Array2::from_shape_fn(albedo.dim(), |p| {
-        known[p] && albedo[p].is_finite() && albedo[p] > 0.0
-    });
-    if !planes.is_empty() && albedo_known.iter().any(|&k| k) {
-        inpaint(&mut albedo, &albedo_known, &region);
-    }
     // The point of the circle with the interpolated albedo on the side of slopes `s` (`s` when
     // the albedo or the circle's g₀ is unknown).
     let with_albedo = |plane: &NormalPlane, s: (f64, f64)| {
@@ -133,11 +172,10 @@ pub(super) fn solve_window(
             .and_then(|m| grid.slopes(r, c, &m))
             .map_or(s, clip)
     };
-    for (k, plane) in &planes {
-        if let Some(s) = on_circle(plane, slopes[*k]) {
-            slopes[*k] = s;
-        }
-    }
+    update_two_led_slopes(&mut slopes, &planes, |slopes, i| {
+        let (k, plane) = &planes[i];
+        on_circle(plane, slopes[*k])
+    });
     let confidence: Vec<f64> = topology
         .cells
         .iter()
@@ -152,11 +190,13 @@ pub(super) fn solve_window(
         .iter()
         .map(|&p| problem.class[p] != Confidence::Measured)
         .collect();
+    profile.add("set-up", t);
+    let t = Instant::now();
     let warm = initial
         .filter(|d| d.dim() == shape)
         .and_then(|d| warm_start(d, &topology, grid, problem.origin));
     let mut x = warm.clone().unwrap_or_else(|| vec![0.0; topology.len()]);
-    profile.add("inpainting and set-up", t);
+    profile.add("warm start", t);
     let bilateral = config.integrator == Integrator::Bilateral;
     let stiffness = bilateral::Stiffness {
         units: grid.pixel_units(),
@@ -178,13 +218,12 @@ pub(super) fn solve_window(
     if warm.is_some() && !bilateral && !planes.is_empty() {
         let t = Instant::now();
         let sides = bilateral::uniform(&confidence, &slopes, &estimated);
-        for ((k, plane), &line) in planes.iter().zip(&lines) {
-            if let Some(s) = coverage::slopes_on_line(&topology, &x, *k, &sides[*k], step, line)
+        update_two_led_slopes(&mut slopes, &planes, |_, i| {
+            let (k, plane) = &planes[i];
+            coverage::slopes_on_line(&topology, &x, *k, &sides[*k], step, lines[i])
                 .and_then(|s| on_circle(plane, s))
-            {
-                slopes[*k] = with_albedo(plane, s);
-            }
-        }
+                .map(|s| with_albedo(plane, s))
+        });
         use_albedo = true;
         profile.add("coverage", t);
     }
@@ -226,13 +265,12 @@ pub(super) fn solve_window(
         profile.solve_iterations.push(solved);
         iterations += solved;
         let t = Instant::now();
-        for ((k, plane), &line) in planes.iter().zip(&lines) {
-            if let Some(s) = coverage::slopes_on_line(&topology, &x, *k, &sides[*k], step, line)
+        update_two_led_slopes(&mut slopes, &planes, |_, i| {
+            let (k, plane) = &planes[i];
+            coverage::slopes_on_line(&topology, &x, *k, &sides[*k], step, lines[i])
                 .and_then(|s| on_circle(plane, s))
-            {
-                slopes[*k] = if use_albedo { with_albedo(plane, s) } else { s };
-            }
-        }
+                .map(|s| if use_albedo { with_albedo(plane, s) } else { s })
+        });
         if passes_allowed == 1 {
             break;
         }
@@ -255,9 +293,10 @@ pub(super) fn solve_window(
         if !use_albedo && (settled || 2 * passes >= passes_allowed) {
             use_albedo = true;
             previous_energy = None;
-            for (k, plane) in &planes {
-                slopes[*k] = with_albedo(plane, slopes[*k]);
-            }
+            update_two_led_slopes(&mut slopes, &planes, |slopes, i| {
+                let (k, plane) = &planes[i];
+                Some(with_albedo(plane, slopes[*k]))
+            });
             continue;
         }
         if settled {
