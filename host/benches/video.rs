@@ -125,6 +125,22 @@
 //! longer sums side weights it does not use, and the offset search gathers its model once for
 //! both warm brackets and evaluates the carried offset's misfit once. The warm window's depth
 //! is byte-identical before and after (53 857 pixels, checked through the `meb` test build).
+//!
+//! Session 27 (2026-12-03), photometric stereo: the per-LED noise gains (a serial pass over every
+//! image, a third of the stage) read the images as slices, two at a time against one pass over
+//! the noise map, gathering the negative readings without a branch per reading and advancing
+//! the images' sums side by side (same additions in the same order); the automatic mask reads
+//! the brightest LED only at usable pixels instead of building a full-frame map; the final
+//! assembly visits only solved and two-LED pixels; whether the object holds a usable pixel is
+//! known from the region instead of a full-frame scan. Every output is bit-identical (normals, albedo, masks, LED
+//! counts, planes and gains hashed over the cold and warm windows and three direct calls).
+//! Stage profile of this bench, before/after binaries alternated, 3 runs each, at a load
+//! average of 4 (another build on the 2 cores): "photometric stereo, warm (pass 1)" 59.1 /
+//! 116.1 / 85.0 ms → 50.5 / 52.0 / 86.7 ms (medians 85.0 → 52.0); median of all nine PS
+//! stages per run 51.1 / 87.0 / 85.9 → 36.9 / 38.5 / 49.6 ms. Direct calls run back to back
+//! (median of 3 before, 5 after): warm depth, no mask 63.1 → 44.9 ms; with the object mask
+//! (passes 2–4) 44.0 → 32.1 ms. Left: the parallel per-pixel solve (≈ 40 % of the stage),
+//! the speck and hole labelling (`regions`) and the fresh full-frame NaN arrays.
 
 use criterion::{BatchSize, Criterion, criterion_group, criterion_main};
 use meb::capture::memory::MemorySource;

@@ -55,6 +55,9 @@ pub(crate) struct ObjectRegion {
     pub object: Array2<bool>,
     /// Holes: object pixels with neither a normal nor a two-LED circle.
     pub fill: Array2<bool>,
+    /// Whether the object holds a usable pixel (one with a normal or a two-LED circle): every
+    /// object that is not empty does, for holes are only looked for around usable pixels.
+    pub usable: bool,
 }
 
 /// The object from the solve's outcomes (module docs).
@@ -79,7 +82,11 @@ pub(crate) fn object_region(
     let frame = core.dim();
     let mut fill = Array2::from_elem(frame, false);
     let Some((rows, cols)) = bounding_box(&core) else {
-        return ObjectRegion { object: core, fill };
+        return ObjectRegion {
+            object: core,
+            fill,
+            usable: false,
+        };
     };
     let (rows, cols) = if given.is_none() {
         let mut inner = core.slice(s![rows.clone(), cols.clone()]).to_owned();
@@ -88,7 +95,13 @@ pub(crate) fn object_region(
         // Without the specks the box may shrink.
         match bounding_box(&core) {
             Some(bounds) => bounds,
-            None => return ObjectRegion { object: core, fill },
+            None => {
+                return ObjectRegion {
+                    object: core,
+                    fill,
+                    usable: false,
+                };
+            }
         }
     } else {
         (rows, cols)
@@ -105,7 +118,12 @@ pub(crate) fn object_region(
     }
     let mut object = core;
     object.zip_mut_with(&fill, |o, &f| *o |= f);
-    ObjectRegion { object, fill }
+    // The box holds a pixel of the core, which is usable.
+    ObjectRegion {
+        object,
+        fill,
+        usable: true,
+    }
 }
 
 /// Rows and columns of the pixels set in `mask`, grown by one pixel within the frame; `None`
@@ -137,40 +155,82 @@ fn found_object(
     noise: Option<&Array2<f32>>,
     config: &MaskConfig,
 ) -> Array2<bool> {
+    let albedo_ref = quantile(albedo.iter().copied(), 0.99);
+    match noise {
+        Some(noise) => found_over_noise(images, albedo, albedo_ref, outcome, noise, config),
+        None => found_over_bright_pixels(images, albedo, albedo_ref, outcome, config),
+    }
+}
+
+/// Whether a pixel of `outcome` and `albedo` passes the albedo test against the reference
+/// `albedo_ref`; `None` for a pixel that is not usable (module docs).
+fn albedo_passes(
+    outcome: Outcome,
+    albedo: f32,
+    albedo_ref: f32,
+    config: &MaskConfig,
+) -> Option<bool> {
+    match outcome {
+        Outcome::Solved => Some(albedo >= config.relative_albedo * albedo_ref),
+        Outcome::TwoLeds => Some(true),
+        _ => None,
+    }
+}
+
+/// The object with a noise map: usable pixels whose albedo passes and whose brightest LED stands
+/// `snr_threshold` σ above zero. Only usable pixels can pass, so the brightest LED is read at
+/// those alone.
+fn found_over_noise(
+    images: &LedImages,
+    albedo: &Array2<f32>,
+    albedo_ref: f32,
+    outcome: &Array2<Outcome>,
+    noise: &Array2<f32>,
+    config: &MaskConfig,
+) -> Array2<bool> {
+    let mut object = Array2::from_elem(albedo.dim(), false);
+    Zip::indexed(&mut object)
+        .and(outcome)
+        .and(albedo)
+        .and(noise)
+        .for_each(|pixel, inside, &outcome, albedo, sigma| {
+            let Some(albedo_ok) = albedo_passes(outcome, *albedo, albedo_ref, config) else {
+                return;
+            };
+            let brightest = images
+                .images
+                .iter()
+                .fold(f32::NEG_INFINITY, |b, image| b.max(image[pixel]));
+            *inside = albedo_ok && brightest >= config.snr_threshold * sigma.max(f32::MIN_POSITIVE);
+        });
+    object
+}
+
+/// The object without a noise map: usable pixels whose albedo passes and whose brightest LED
+/// reaches `relative_brightness` of the image's bright pixels (its 99th percentile).
+fn found_over_bright_pixels(
+    images: &LedImages,
+    albedo: &Array2<f32>,
+    albedo_ref: f32,
+    outcome: &Array2<Outcome>,
+    config: &MaskConfig,
+) -> Array2<bool> {
     let mut brightest = Array2::from_elem(albedo.dim(), f32::NEG_INFINITY);
     for image in &images.images {
         brightest.zip_mut_with(image, |b, &v| *b = b.max(v));
     }
-    let bright_ref = match noise {
-        Some(_) => 0.0,
-        None => quantile(brightest.iter().copied(), 0.99),
-    };
-    let albedo_ref = quantile(albedo.iter().copied(), 0.99);
+    let bright_ref = quantile(brightest.iter().copied(), 0.99);
     let mut object = Array2::from_elem(albedo.dim(), false);
     Zip::from(&mut object)
         .and(outcome)
         .and(albedo)
         .and(&brightest)
         .for_each(|inside, &outcome, &albedo, &brightest| {
-            let albedo_ok = match outcome {
-                Outcome::Solved => albedo >= config.relative_albedo * albedo_ref,
-                Outcome::TwoLeds => true,
-                _ => return,
+            let Some(albedo_ok) = albedo_passes(outcome, albedo, albedo_ref, config) else {
+                return;
             };
-            let signal_ok = match noise {
-                Some(_) => true,
-                None => brightest >= config.relative_brightness * bright_ref,
-            };
-            *inside = signal_ok && albedo_ok;
+            *inside = brightest >= config.relative_brightness * bright_ref && albedo_ok;
         });
-    if let Some(n) = noise {
-        Zip::from(&mut object)
-            .and(&brightest)
-            .and(n)
-            .for_each(|inside, &brightest, &sigma| {
-                *inside &= brightest >= config.snr_threshold * sigma.max(f32::MIN_POSITIVE);
-            });
-    }
     object
 }
 

@@ -27,7 +27,7 @@ use super::{Lights, PhotometricConfig, PhotometricError, check_shape, noise::led
 use crate::rig::PixelRay;
 use crate::types::{LedImages, NormalField, NormalPlane};
 use nalgebra::{Matrix3, Vector3};
-use ndarray::{Array2, Array3, Axis, Zip};
+use ndarray::{Array2, Array3, Zip, s};
 use rayon::prelude::*;
 
 /// Normals and albedo plus what else photometric stereo learnt about each pixel.
@@ -331,12 +331,7 @@ pub fn estimate_normals(
         noise,
         &config.mask,
     );
-    let usable = region
-        .object
-        .iter()
-        .zip(solved.outcome.iter())
-        .any(|(&o, out)| o && out.is_usable());
-    if !usable {
+    if !region.usable {
         return Err(diagnose(&solved.outcome, lights, mask.is_some(), config));
     }
     Ok(assemble(solved, region, gains))
@@ -477,25 +472,24 @@ fn assemble(
     region: super::mask::ObjectRegion,
     gains: Vec<f64>,
 ) -> PhotometricResult {
-    let shape = solved.albedo.dim();
-    let mut valid = Array2::from_elem(shape, false);
-    Zip::from(&mut valid)
-        .and(solved.normals.lanes_mut(Axis(2)))
-        .and(&mut solved.albedo)
-        .and(&mut solved.lit_count)
-        .and(&solved.outcome)
-        .and(&region.object)
-        .for_each(|valid, mut normal, albedo, lit, &outcome, &inside| {
-            if inside && outcome == Outcome::Solved {
-                *valid = true;
-                return;
-            }
-            if !inside {
-                *lit = 0;
-            }
-            *albedo = f32::NAN;
-            normal.fill(f32::NAN);
-        });
+    let mut valid = Array2::from_elem(solved.albedo.dim(), false);
+    // `solve_all` wrote normals, albedo and LED counts only where a pixel was solved or lit by
+    // two LEDs; everywhere else they already read NaN and 0, so only those pixels are visited.
+    Zip::indexed(&solved.outcome).for_each(|(r, c), &outcome| {
+        if !outcome.is_usable() {
+            return;
+        }
+        let inside = region.object[(r, c)];
+        if inside && outcome == Outcome::Solved {
+            valid[(r, c)] = true;
+            return;
+        }
+        if !inside {
+            solved.lit_count[(r, c)] = 0;
+        }
+        solved.albedo[(r, c)] = f32::NAN;
+        solved.normals.slice_mut(s![r, c, ..]).fill(f32::NAN);
+    });
     let planes = solved
         .planes
         .into_iter()
