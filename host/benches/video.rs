@@ -141,6 +141,16 @@
 //! (median of 3 before, 5 after): warm depth, no mask 63.1 → 44.9 ms; with the object mask
 //! (passes 2–4) 44.0 → 32.1 ms. Left: the parallel per-pixel solve (≈ 40 % of the stage),
 //! the speck and hole labelling (`regions`) and the fresh full-frame NaN arrays.
+//!
+//! Session 27, integration (`benches/integrate.rs` has the details): red–black Gauss–Seidel
+//! in the V-cycle (15 CG iterations instead of 17 for the warm window), a band Cholesky factor
+//! on the coarsest level, and the per-node loops of every pass in parallel bands. With the
+//! photometric-stereo change above, criterion on a quiet machine (load 1.5–1.9), main a529b3b
+//! and this code alternated, two runs each: `window_warm` 170 / 169 ms → **153 / 142 ms**;
+//! `window` (cold, whole pipeline with the decoder overlapping) 939 ms / 1.00 s → 806 / 844 ms.
+//! The warm window's stage profile, one run each: photometric stereo 46–53 → 30 ms,
+//! integration 124–133 → 88–102 ms, offset search 13–15 ms either way. Still ≈ 4× from the
+//! 40 ms target.
 
 use criterion::{BatchSize, Criterion, criterion_group, criterion_main};
 use meb::capture::memory::MemorySource;

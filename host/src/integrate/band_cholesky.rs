@@ -70,17 +70,19 @@ impl BandCholesky {
         let at = |i: usize, j: usize| i * width + j + b - i;
         // L y = b, forwards.
         for i in 0..self.n {
+            let first = i.saturating_sub(b);
             let mut s = x[i];
-            for m in i.saturating_sub(b)..i {
-                s -= self.factor[at(i, m)] * x[m];
+            for (m, &xm) in (first..i).zip(&x[first..i]) {
+                s -= self.factor[at(i, m)] * xm;
             }
             x[i] = s / self.factor[at(i, i)];
         }
         // Lᵀ x = y, backwards.
         for i in (0..self.n).rev() {
+            let last = (i + b + 1).min(self.n);
             let mut s = x[i];
-            for m in i + 1..(i + b + 1).min(self.n) {
-                s -= self.factor[at(m, i)] * x[m];
+            for (m, &xm) in (i + 1..last).zip(&x[i + 1..last]) {
+                s -= self.factor[at(m, i)] * xm;
             }
             x[i] = s / self.factor[at(i, i)];
         }

@@ -240,8 +240,8 @@ impl EdgeEquations {
                 if nb[2] != NONE {
                     b += flow(nb[2], 0);
                 }
-                for d in 0..2 {
-                    if nb[d] != NONE {
+                for (d, &j) in nb.iter().enumerate().take(2) {
+                    if j != NONE {
                         b -= flow(k as u32, d);
                     }
                 }
