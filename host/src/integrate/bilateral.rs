@@ -19,11 +19,8 @@
 //! [`super::least_squares`]. With w⁺ = w⁻ = ½ and no n_z factor this is plain least squares.
 
 use super::least_squares::{EdgeEquations, Topology};
-use super::multigrid::NONE;
+use super::multigrid::{NONE, PARALLEL_BAND as NODES_PER_TASK};
 use rayon::prelude::*;
-
-/// Nodes per parallel task (and per band of the energy's sum).
-const NODES_PER_TASK: usize = 4096;
 
 /// Weights of a node's one-sided equations: right (forward x), down (forward row), left, up.
 pub(crate) type SideWeights = [f64; 4];

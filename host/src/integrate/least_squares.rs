@@ -10,14 +10,11 @@
 //! V-cycle ([`super::multigrid`]), which keeps the iteration count nearly independent of the
 //! mask's size.
 
-use super::multigrid::{GridLaplacian, Multigrid, NONE};
+use super::multigrid::{GridLaplacian, Multigrid, NONE, PARALLEL_BAND as NODES_PER_TASK};
 use super::pcg::{Stop, preconditioned_cg};
 use super::{IntegrateConfig, IntegrateError, SurfaceGradients};
 use ndarray::Array2;
 use rayon::prelude::*;
-
-/// Nodes per parallel task.
-const NODES_PER_TASK: usize = 4096;
 
 /// Diagonal shift that makes the Neumann Laplacian definite (fixes the free constant).
 pub(crate) const REGULARISATION: f64 = 1e-10;

@@ -39,8 +39,8 @@ const SMOOTHING_SWEEPS: usize = 1;
 /// Operators (or colours) with fewer nodes run on the calling thread: handing a smaller one to
 /// the thread pool costs more than it saves.
 const PARALLEL_NODES: usize = 16_384;
-/// Nodes per parallel task.
-const PARALLEL_BAND: usize = 4_096;
+/// Nodes per parallel task, here and in the per-node loops of every integration pass.
+pub(crate) const PARALLEL_BAND: usize = 4_096;
 
 /// A weighted graph Laplacian on a grid: node k sits at `cells[k]`; neighbours right, down, left,
 /// up with their edge weights; `diag` = Σ weights + the regularising shift.
@@ -162,7 +162,8 @@ impl GridLaplacian {
     /// One red–black Gauss–Seidel sweep on A x = b: the even nodes of the checkerboard, then
     /// the odd ones (`forward`), or the reverse, so that a forward sweep before and a backward
     /// one after a coarse correction keep the V-cycle symmetric. The nodes of one colour depend
-    /// only on the other colour's ([`Self::new`] checks it), so their updates are independent:
+    /// only on the other colour's (grid neighbours differ by one row or column; [`Self::new`]
+    /// checks it in debug builds), so their updates are independent:
     /// they are computed in parallel bands into `scratch` (at least half the node count long)
     /// and then stored (Trottenberg, Oosterlee & Schüller, "Multigrid", 2001, §2.1: the
     /// red–black smoothing factor of the 5-point Laplacian is 1/4, lexicographic order's 1/2).
