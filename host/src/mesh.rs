@@ -303,6 +303,7 @@ mod tests {
             fov_deg: None,
             pixel_pitch_mm: Some(1.0),
             intrinsics: None,
+            axis_px: None,
         }
     }
 

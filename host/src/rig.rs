@@ -84,6 +84,12 @@ pub struct Camera {
     /// Pinhole intrinsics: makes the camera perspective.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub intrinsics: Option<Intrinsics>,
+    /// Orthographic cameras: where the optical axis (x = y = 0) meets the image, as [column,
+    /// row] in pixels from the image's top-left corner (pixel centres at +0.5); the image
+    /// centre when absent. A region of interest cut from a larger image keeps the larger
+    /// image's axis ([`Camera::cropped`]). Perspective cameras take theirs from the intrinsics.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub axis_px: Option<[f64; 2]>,
 }
 
 /// Pinhole intrinsics in pixels with radial distortion (OpenCV convention, module docs).
@@ -134,12 +140,14 @@ impl PixelRay {
 /// How scene points map to pixels (the part of [`Camera`] geometry needs).
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub enum Projection {
-    /// Parallel rays along −z, `pitch_mm` apart, centred on the image.
+    /// Parallel rays along −z, `pitch_mm` apart.
     Orthographic {
         /// Grid pitch h, mm per pixel.
         pitch_mm: f64,
-        /// Image width and height in pixels.
-        size: (usize, usize),
+        /// Where the optical axis meets the image, (column, row) in pixels from the top-left
+        /// corner: (width/2, height/2) for a camera centred on its image
+        /// ([`Projection::centred`]).
+        axis: (f64, f64),
     },
     /// Rays through the camera centre (0, 0, `distance_mm`).
     Perspective {
@@ -210,15 +218,24 @@ impl Intrinsics {
 }
 
 impl Projection {
+    /// The orthographic projection of pitch `pitch_mm` centred on an image of `size` (width,
+    /// height) pixels.
+    pub fn centred(pitch_mm: f64, size: (usize, usize)) -> Self {
+        Projection::Orthographic {
+            pitch_mm,
+            axis: (size.0 as f64 / 2.0, size.1 as f64 / 2.0),
+        }
+    }
+
     /// The projection of every `step`-th row and column (pixel (r, c) of the result is pixel
     /// (r·step, c·step) here): focal lengths and principal point divided by `step`, or the
-    /// pitch multiplied by it.
+    /// pitch multiplied by it and the axis moved so that each pixel keeps its ray.
     pub fn every(&self, step: usize) -> Self {
         let k = step.max(1) as f64;
         match *self {
-            Projection::Orthographic { pitch_mm, size } => Projection::Orthographic {
+            Projection::Orthographic { pitch_mm, axis } => Projection::Orthographic {
                 pitch_mm: pitch_mm * k,
-                size: (size.0.div_ceil(step.max(1)), size.1.div_ceil(step.max(1))),
+                axis: ((axis.0 - 0.5) / k + 0.5, (axis.1 - 0.5) / k + 0.5),
             },
             Projection::Perspective {
                 intrinsics,
@@ -239,9 +256,9 @@ impl Projection {
     /// The ray of the (continuous) pixel position (row, col).
     pub fn ray(&self, row: f64, col: f64) -> PixelRay {
         match *self {
-            Projection::Orthographic { pitch_mm, size } => {
-                let x = (col + 0.5 - size.0 as f64 / 2.0) * pitch_mm;
-                let y = (size.1 as f64 / 2.0 - row - 0.5) * pitch_mm;
+            Projection::Orthographic { pitch_mm, axis } => {
+                let x = (col + 0.5 - axis.0) * pitch_mm;
+                let y = (axis.1 - row - 0.5) * pitch_mm;
                 PixelRay {
                     base: Vector3::new(x, y, 0.0),
                     slope: Vector3::z(),
@@ -264,9 +281,9 @@ impl Projection {
     /// Continuous pixel (row, col) of a scene point; `None` at or behind a perspective camera.
     pub fn project(&self, point: &Vector3<f64>) -> Option<(f64, f64)> {
         match *self {
-            Projection::Orthographic { pitch_mm, size } => Some((
-                size.1 as f64 / 2.0 - point.y / pitch_mm - 0.5,
-                point.x / pitch_mm + size.0 as f64 / 2.0 - 0.5,
+            Projection::Orthographic { pitch_mm, axis } => Some((
+                axis.1 - point.y / pitch_mm - 0.5,
+                point.x / pitch_mm + axis.0 - 0.5,
             )),
             Projection::Perspective {
                 intrinsics,
@@ -292,6 +309,7 @@ impl Camera {
             fov_deg: None,
             pixel_pitch_mm,
             intrinsics,
+            axis_px: None,
         }
     }
 
@@ -317,9 +335,39 @@ impl Camera {
             },
             None => Projection::Orthographic {
                 pitch_mm: self.pitch_mm(),
-                size: (self.width, self.height),
+                axis: match self.axis_px {
+                    Some([col, row]) => (col, row),
+                    None => (self.width as f64 / 2.0, self.height as f64 / 2.0),
+                },
             },
         }
+    }
+
+    /// The camera of the region `rows` × `cols` of this camera's image (a region of interest):
+    /// every pixel keeps its ray. The grid pitch is fixed (`pixel_pitch_mm`, since a field of
+    /// view would scale with the width), and the optical axis (`axis_px`, or the intrinsics'
+    /// principal point) moves by the region's top-left corner. The region must lie inside the
+    /// image.
+    pub fn cropped(&self, rows: std::ops::Range<usize>, cols: std::ops::Range<usize>) -> Camera {
+        let (top, left) = (rows.start as f64, cols.start as f64);
+        let mut camera = Camera {
+            width: cols.len(),
+            height: rows.len(),
+            ..self.clone()
+        };
+        match (&mut camera.intrinsics, self.projection()) {
+            (Some(k), _) => {
+                k.cx -= left;
+                k.cy -= top;
+            }
+            (None, Projection::Orthographic { pitch_mm, axis }) => {
+                camera.pixel_pitch_mm = Some(pitch_mm);
+                camera.fov_deg = None;
+                camera.axis_px = Some([axis.0 - left, axis.1 - top]);
+            }
+            (None, Projection::Perspective { .. }) => {}
+        }
+        camera
     }
 
     /// Whether the camera is a pinhole (perspective) camera.
@@ -601,6 +649,7 @@ impl Rig {
             fov_deg: Some(fov_deg),
             pixel_pitch_mm: None,
             intrinsics: None,
+            axis_px: None,
         };
         let (camera, positions): (Camera, Vec<[f64; 3]>) = match name {
             // Four LEDs 100 mm left/right/top/bottom of a camera looking down from 460 mm.
@@ -676,6 +725,13 @@ impl Rig {
         if !(c.distance_mm.is_finite() && c.distance_mm > 0.0) {
             return Err(bad("camera.distance_mm", "must be a positive number"));
         }
+        if c.intrinsics.is_some() && c.axis_px.is_some() {
+            return Err(bad(
+                "camera.axis_px",
+                "a perspective camera's axis is its principal point: remove `axis_px` and set \
+                 the intrinsics' cx, cy",
+            ));
+        }
         match (c.intrinsics, c.pixel_pitch_mm, c.fov_deg) {
             (Some(_), Some(_), _) | (Some(_), _, Some(_)) => {
                 return Err(bad(
@@ -685,6 +741,12 @@ impl Rig {
                 ));
             }
             (Some(k), None, None) => validate_intrinsics(&k, c.width, c.height)?,
+            (None, ..) if c.axis_px.is_some_and(|a| !a.iter().all(|v| v.is_finite())) => {
+                return Err(bad(
+                    "camera.axis_px",
+                    "must be two finite numbers of pixels",
+                ));
+            }
             (None, Some(h), _) if !(h.is_finite() && h > 0.0) => {
                 return Err(bad("camera.pixel_pitch_mm", "must be a positive number"));
             }
@@ -906,6 +968,55 @@ mod tests {
             let (a, b) = (coarse.ray(row, col), full.ray(3.0 * row, 3.0 * col));
             let (pa, pb) = (a.at(10.0), b.at(10.0));
             assert!((pa - pb).norm() < 1e-9, "{pa} vs {pb}");
+        }
+    }
+
+    /// Each pixel of a camera cut to a region of interest sees along the ray of its pixel in
+    /// the full image, for a field-of-view, a pitch and a pinhole camera.
+    #[test]
+    fn a_cropped_camera_keeps_each_pixels_ray() {
+        let mut by_fov = Camera::test_64x48(None, None);
+        by_fov.fov_deg = Some(40.0);
+        for full in [by_fov, Camera::test_64x48(Some(0.7), None), perspective()] {
+            let region = full.cropped(10..30, 25..60);
+            assert_eq!((region.width, region.height), (35, 20));
+            let rig = |camera: &Camera| Rig {
+                camera: camera.clone(),
+                ..Rig::preset("thesis-dynamic").expect("preset")
+            };
+            let region_rig = rig(&region);
+            region_rig.validate().expect("a valid region camera");
+            let text = region_rig.to_toml_string();
+            assert_eq!(Rig::from_toml_str(&text, "region").unwrap(), region_rig);
+            for (row, col) in [(0.0, 0.0), (4.5, 7.0), (19.0, 34.0)] {
+                let (a, b) = (region.ray(row, col), full.ray(row + 10.0, col + 25.0));
+                assert!(
+                    (a.at(7.0) - b.at(7.0)).norm() < 1e-9,
+                    "{full:?} at {row}, {col}"
+                );
+                let (r, c) = region.project(&b.at(-3.0)).expect("in front of the camera");
+                assert!((r - row).abs() < 1e-6 && (c - col).abs() < 1e-6, "{r}, {c}");
+            }
+        }
+        // An axis is for orthographic cameras, in finite pixels.
+        let mut rig = Rig::preset("thesis-dynamic").expect("preset");
+        rig.camera.axis_px = Some([f64::NAN, 3.0]);
+        assert!(rig.validate().is_err());
+        rig.camera = Camera {
+            axis_px: Some([1.0, 2.0]),
+            ..perspective()
+        };
+        assert!(rig.validate().is_err());
+    }
+
+    /// Every third pixel of an orthographic camera sees along the ray of its full-grid pixel.
+    #[test]
+    fn sub_sampled_orthographic_projection_keeps_each_pixels_ray() {
+        let full = Camera::test_64x48(Some(0.5), None).projection();
+        let coarse = full.every(3);
+        for (row, col) in [(0.0, 0.0), (4.0, 7.0), (15.0, 20.0)] {
+            let (a, b) = (coarse.ray(row, col), full.ray(3.0 * row, 3.0 * col));
+            assert!((a.at(10.0) - b.at(10.0)).norm() < 1e-9);
         }
     }
 

@@ -184,6 +184,7 @@ mod tests {
                 k1: -0.3,
                 k2: 0.1,
             }),
+            axis_px: None,
         };
         let grid = DepthGrid::new(&camera.projection());
         (camera, grid)

@@ -316,10 +316,7 @@ pub fn integrate_normals(
             planes: &[],
             fill: None,
         },
-        &Projection::Orthographic {
-            pitch_mm,
-            size: (shape.1, shape.0),
-        },
+        &Projection::centred(pitch_mm, (shape.1, shape.0)),
         config,
         initial,
     )
@@ -617,10 +614,7 @@ mod tests {
             filter: ArtefactFilter { max_jump_mm: None },
             ..IntegrateConfig::default()
         };
-        let projection = Projection::Orthographic {
-            pitch_mm: 1.0,
-            size: (cols, rows),
-        };
+        let projection = Projection::centred(1.0, (cols, rows));
         let evidence = SurfaceEvidence {
             field: &field,
             planes: &planes,
@@ -698,10 +692,7 @@ mod tests {
         use rand::{RngExt, SeedableRng};
         let (mut field, planes, truth) = banded_hemisphere();
         let shape = field.mask.dim();
-        let projection = Projection::Orthographic {
-            pitch_mm: 1.0,
-            size: (shape.1, shape.0),
-        };
+        let projection = Projection::centred(1.0, (shape.1, shape.0));
         let config = IntegrateConfig {
             filter: ArtefactFilter { max_jump_mm: None },
             tolerance: 1e-5,
@@ -790,10 +781,7 @@ mod tests {
                 planes: &[],
                 fill: Some(&hole),
             },
-            &Projection::Orthographic {
-                pitch_mm: 1.0,
-                size: (cols, rows),
-            },
+            &Projection::centred(1.0, (cols, rows)),
             &IntegrateConfig {
                 integrator: Integrator::Bilateral,
                 ..IntegrateConfig::default()
@@ -829,6 +817,7 @@ mod tests {
                 k1: -0.2,
                 k2: 0.0,
             }),
+            axis_px: None,
         };
         let radius = 20.0;
         let shape = (camera.height, camera.width);

@@ -75,13 +75,7 @@ pub fn compare_normals(
 /// neighbour is missing on both sides.
 pub fn normals_from_depth(depth: &Array2<f32>, pitch_mm: f64) -> Array3<f32> {
     let (rows, cols) = depth.dim();
-    normals_from_depth_seen_by(
-        depth,
-        &Projection::Orthographic {
-            pitch_mm,
-            size: (cols, rows),
-        },
-    )
+    normals_from_depth_seen_by(depth, &Projection::centred(pitch_mm, (cols, rows)))
 }
 
 /// Unit normals of a depth map seen through `projection`: the cross product of the central

@@ -71,6 +71,7 @@ mod tests {
             fov_deg: None,
             pixel_pitch_mm: Some(1.0),
             intrinsics: None,
+            axis_px: None,
         };
         // Square x, y ∈ [−4, 4] with z = 0.5 x + 3.
         let p = |x: f64, y: f64| Vector3::new(x, y, 0.5 * x + 3.0);

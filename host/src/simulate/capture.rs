@@ -533,6 +533,7 @@ mod tests {
             fov_deg: None,
             pixel_pitch_mm: Some(pitch),
             intrinsics: None,
+            axis_px: None,
         };
         rig
     }

@@ -47,6 +47,7 @@ impl DatasetConfig {
                 fov_deg: Some(43.0),
                 pixel_pitch_mm: None,
                 intrinsics: None,
+                axis_px: None,
             },
             leds: Vec::new(),
             tof_camera: None,

@@ -23,6 +23,9 @@
 //! the previous depth with the early passes' loose settings. One pass is normally enough: a
 //! second runs only when the depth moved more than [`WARM_LIGHTS_MOVED_MM`] from the one its
 //! light vectors were computed at. A warm result that strays from its start is redone cold.
+//! A warm window is reconstructed inside the previous depth's bounding box grown by
+//! [`ROI_MARGIN_PX`] (its region of interest, [`roi`]) and pasted back into the full frame; an
+//! object that reaches the region's edge is reconstructed on the full frame instead.
 
 use crate::demod::Decoded;
 use crate::integrate::{
@@ -39,6 +42,10 @@ use crate::types::{LedImages, NormalField};
 use ndarray::{Array2, Zip};
 use std::time::Instant;
 use thiserror::Error;
+
+mod roi;
+pub use roi::ROI_MARGIN_PX;
+use roi::Roi;
 
 /// Bilateral reweightings, or two-LED alternations, of the near-field passes before the last
 /// (they only feed the next pass's light vectors).
@@ -324,7 +331,14 @@ pub fn reconstruct_warm(
     let near_field = matches!(config.light_model, LightModel::NearField { .. });
     let mut start = Start::Cold;
     if let Some(warm) = warm.filter(|w| near_field && w.depth_mm.dim() == shape) {
-        let reason = match passes(images, rig, mask, noise, config, Some(warm), &mut timings) {
+        let in_region = Roi::around(&warm.depth_mm, mask, ROI_MARGIN_PX).and_then(|roi| {
+            warm_in_region(&roi, images, rig, mask, noise, config, warm, &mut timings)
+        });
+        let result = match in_region {
+            Some(result) => result,
+            None => passes(images, rig, mask, noise, config, Some(warm), &mut timings),
+        };
+        let reason = match result {
             Ok((photometric, integration, Ok(start))) => {
                 return Ok(Reconstruction {
                     photometric,
@@ -348,6 +362,62 @@ pub fn reconstruct_warm(
     })
 }
 
+/// The warm [`passes`] inside the region of interest `roi` ([`roi`]), pasted back into the full
+/// frame; `None` when the object reached the region's edge (the full frame is needed).
+#[allow(clippy::too_many_arguments)]
+fn warm_in_region(
+    roi: &Roi,
+    images: &LedImages,
+    rig: &Rig,
+    mask: Option<&Array2<bool>>,
+    noise: Option<&Array2<f32>>,
+    config: &ReconstructConfig,
+    warm: &WarmStart,
+    timings: &mut Vec<StageTiming>,
+) -> Option<PassesResult> {
+    let started = Instant::now();
+    let region_rig = roi.cut_rig(rig);
+    let region_images = roi.cut_images(images);
+    let region_mask = mask.map(|m| roi.cut(m));
+    let region_noise = noise.map(|n| roi.cut(n));
+    let region_warm = WarmStart {
+        depth_mm: roi.cut(&warm.depth_mm),
+    };
+    timings.push(StageTiming::since(
+        "region of interest, warm".to_string(),
+        started,
+    ));
+    let result = passes(
+        &region_images,
+        &region_rig,
+        region_mask.as_ref(),
+        region_noise.as_ref(),
+        config,
+        Some(&region_warm),
+        timings,
+    );
+    let started = Instant::now();
+    let pasted = match result {
+        Ok((photometric, _, _)) if roi.reached_edge(&photometric.object_mask) => return None,
+        Ok((photometric, integration, start)) => {
+            let (photometric, integration) =
+                roi.paste(photometric, integration, &rig.camera.projection());
+            Ok((photometric, integration, start))
+        }
+        Err(error) => Err(error),
+    };
+    timings.push(StageTiming::since(
+        "full frame from the region, warm".to_string(),
+        started,
+    ));
+    Some(pasted)
+}
+
+/// What [`passes`] returns: the last pass's photometric stereo and integration, and how the
+/// result started or why a warm one cannot be trusted.
+type PassesResult =
+    Result<(PhotometricResult, Integration, Result<Start, String>), ReconstructError>;
+
 /// The photometric stereo ↔ integration passes (module docs), cold or from `warm`, with how the
 /// result started ([`Start::Cold`], or [`Start::Warm`] with the passes run and how far it moved)
 /// or why a warm result cannot be trusted.
@@ -359,7 +429,7 @@ fn passes(
     config: &ReconstructConfig,
     warm: Option<&WarmStart>,
     timings: &mut Vec<StageTiming>,
-) -> Result<(PhotometricResult, Integration, Result<Start, String>), ReconstructError> {
+) -> PassesResult {
     let projection = rig.camera.projection();
     let label = if warm.is_some() { ", warm" } else { "" };
     let mut time = |stage: &str, pass: usize, start: Instant| {
@@ -871,14 +941,113 @@ pub fn level_noise(decoded: &Decoded) -> Array2<f32> {
 mod tests {
     use super::*;
 
+    /// LED images of a sphere of `radius_mm` on a 320×180 thesis-dynamic rig, with a flat
+    /// noise map (the decoder's σ), as `meb video` passes them.
+    fn sphere(radius_mm: f64) -> (Rig, LedImages, Array2<f32>) {
+        use crate::simulate::geometry::SurfaceMap;
+        use crate::simulate::lighting::led_images;
+        use crate::simulate::scene::{Scene, SceneObject, Shape};
+        let mut rig = Rig::preset("thesis-dynamic").expect("preset");
+        (rig.camera.width, rig.camera.height) = (320, 180);
+        let scene = Scene::single(SceneObject::new(Shape::Sphere { radius_mm }));
+        let map = SurfaceMap::render(&scene, &rig.camera, 0.0);
+        let mut images = led_images(&map, &rig, 1.0);
+        // Brightest reading 0.5 of full scale.
+        let brightest = images.iter().flatten().fold(0.0f32, |m, &v| m.max(v));
+        for image in &mut images {
+            image.mapv_inplace(|v| v * 0.5 / brightest);
+        }
+        let images = LedImages { images };
+        let noise = Array2::from_elem((180, 320), 1e-4);
+        (rig, images, noise)
+    }
+
+    /// A warm window reconstructed in its region of interest and pasted back is the one the
+    /// full frame gives: the same pixels, the same depth to float rounding.
+    #[test]
+    fn a_warm_window_in_its_region_equals_the_full_frames() {
+        let (rig, images, noise) = sphere(30.0);
+        let config = ReconstructConfig::default();
+        let cold =
+            reconstruct_warm(&images, &rig, None, Some(&noise), &config, None).expect("cold");
+        let warm = WarmStart::of(&cold);
+        let (full_ps, full, start) = passes(
+            &images,
+            &rig,
+            None,
+            Some(&noise),
+            &config,
+            Some(&warm),
+            &mut Vec::new(),
+        )
+        .expect("full frame");
+        assert!(start.is_ok(), "{start:?}");
+        let region = reconstruct_warm(&images, &rig, None, Some(&noise), &config, Some(&warm))
+            .expect("in the region");
+        assert!(
+            matches!(region.start, Start::Warm { .. }),
+            "{:?}",
+            region.start
+        );
+        assert!(
+            region
+                .timings
+                .iter()
+                .any(|t| t.stage.starts_with("region of interest")),
+            "the region of interest was not used"
+        );
+        let (a, b) = (&region.integration.depth.depth_mm, &full.depth.depth_mm);
+        assert_eq!(a.dim(), b.dim());
+        let mut worst = 0.0f32;
+        for ((p, x), y) in a.indexed_iter().zip(b) {
+            assert_eq!(x.is_finite(), y.is_finite(), "pixel {p:?}: {x} vs {y}");
+            if x.is_finite() {
+                worst = worst.max((x - y).abs());
+            }
+        }
+        assert!(worst < 1e-3, "region vs full frame: {worst} mm");
+        assert_eq!(region.integration.kept, full.kept);
+        assert_eq!(region.integration.part, full.part);
+        let (ps, full_ps) = (&region.photometric, &full_ps);
+        assert_eq!(ps.object_mask, full_ps.object_mask);
+        assert_eq!(ps.fill, full_ps.fill);
+        assert_eq!(ps.lit_count, full_ps.lit_count);
+        let pixels = |ps: &PhotometricResult| ps.planes.iter().map(|p| p.pixel).collect::<Vec<_>>();
+        assert_eq!(pixels(ps), pixels(full_ps));
+    }
+
+    /// An object that reaches an inner edge of the region may go on beyond it: the region's
+    /// result is not used.
+    #[test]
+    fn an_object_beyond_its_region_is_left_to_the_full_frame() {
+        let (rig, images, noise) = sphere(30.0);
+        let config = ReconstructConfig::default();
+        let cold =
+            reconstruct_warm(&images, &rig, None, Some(&noise), &config, None).expect("cold");
+        let warm = WarmStart::of(&cold);
+        // A region around the sphere's middle alone.
+        let mut middle = Array2::from_elem(warm.depth_mm.dim(), f32::NAN);
+        middle[(90, 160)] = 0.0;
+        let roi = Roi::around(&middle, None, 10).expect("a small region");
+        let mut timings = Vec::new();
+        let result = warm_in_region(
+            &roi,
+            &images,
+            &rig,
+            None,
+            Some(&noise),
+            &config,
+            &warm,
+            &mut timings,
+        );
+        assert!(result.is_none(), "a cut-off object was pasted back");
+    }
+
     #[test]
     fn the_carried_offset_undoes_a_move_for_either_camera() {
         let rig = Rig::preset("thesis-dynamic").expect("preset");
         let perspective = rig.camera.projection();
-        let orthographic = Projection::Orthographic {
-            pitch_mm: 0.5,
-            size: (8, 6),
-        };
+        let orthographic = Projection::centred(0.5, (8, 6));
         let depth = Array2::from_shape_fn((6, 8), |(r, c)| (r as f32 - 2.5) * (c as f32 + 1.0));
         let pixels: Vec<(usize, usize)> = depth.indexed_iter().map(|(p, _)| p).collect();
         for projection in [&perspective, &orthographic] {

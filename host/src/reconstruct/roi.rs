@@ -1,0 +1,225 @@
+//! The region of interest of a warm-started window.
+//!
+//! From one window of `meb video` to the next the object moves little, so a warm window is
+//! reconstructed inside the previous depth's bounding box grown by [`ROI_MARGIN_PX`], on LED
+//! images, noise, mask and a camera cut to that region ([`Camera::cropped`]: every pixel keeps
+//! its ray), and the result is pasted back into full-frame arrays that hold, outside the region,
+//! exactly what a full-frame reconstruction leaves outside its object (NaN normals, albedo and
+//! depth, no LEDs, no masks, no pieces). Photometric stereo, integration and the depth-offset
+//! search then visit the object's neighbourhood instead of the whole frame. An object that
+//! reaches an edge of the region that is not an edge of the frame may go on beyond it: that
+//! window is reconstructed on the full frame instead ([`Roi::reached_edge`]).
+
+use crate::integrate::{Confidence, Integration};
+use crate::photometric::PhotometricResult;
+use crate::rig::{Projection, Rig};
+use crate::types::LedImages;
+use ndarray::{Array2, Array3, s};
+use std::ops::Range;
+
+/// Pixels added on every side of the warm start's bounding box: what the object's silhouette
+/// may move between windows (the turning ellipsoid's rim moves a few pixels per window).
+pub const ROI_MARGIN_PX: usize = 32;
+
+/// A region of interest cuts less than this share of the frame's pixels: not worth it.
+const WORTHWHILE_SHARE: f64 = 0.75;
+
+/// A rectangle of the frame.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub(crate) struct Roi {
+    rows: Range<usize>,
+    cols: Range<usize>,
+    /// The frame's (rows, columns).
+    frame: (usize, usize),
+}
+
+impl Roi {
+    /// The bounding box of the finite values of `depth` and the pixels of `mask` grown by
+    /// `margin` pixels on every side and clipped to the frame; `None` without such a pixel or
+    /// when the region would keep more than [`WORTHWHILE_SHARE`] of the frame.
+    pub fn around(depth: &Array2<f32>, mask: Option<&Array2<bool>>, margin: usize) -> Option<Self> {
+        let frame = depth.dim();
+        if mask.is_some_and(|m| m.dim() != frame) {
+            return None;
+        }
+        let (mut top, mut bottom, mut left, mut right) = (usize::MAX, 0, usize::MAX, 0);
+        for (r, row) in depth.outer_iter().enumerate() {
+            let mask_row = mask.map(|m| m.row(r));
+            let mut inside = row
+                .iter()
+                .enumerate()
+                .filter(|&(c, z)| z.is_finite() || mask_row.is_some_and(|m| m[c]));
+            let Some((first, _)) = inside.next() else {
+                continue;
+            };
+            let last = inside.next_back().map_or(first, |(c, _)| c);
+            (top, bottom) = (top.min(r), r);
+            (left, right) = (left.min(first), right.max(last));
+        }
+        if top == usize::MAX {
+            return None;
+        }
+        let roi = Self {
+            rows: top.saturating_sub(margin)..(bottom + margin + 1).min(frame.0),
+            cols: left.saturating_sub(margin)..(right + margin + 1).min(frame.1),
+            frame,
+        };
+        let share = (roi.rows.len() * roi.cols.len()) as f64 / (frame.0 * frame.1) as f64;
+        (share <= WORTHWHILE_SHARE).then_some(roi)
+    }
+
+    /// The region of a full-frame array.
+    pub fn cut<T: Clone>(&self, full: &Array2<T>) -> Array2<T> {
+        full.slice(s![self.rows.clone(), self.cols.clone()])
+            .to_owned()
+    }
+
+    /// The LED images cut to the region.
+    pub fn cut_images(&self, images: &LedImages) -> LedImages {
+        LedImages {
+            images: images.images.iter().map(|image| self.cut(image)).collect(),
+        }
+    }
+
+    /// The rig whose camera sees the region only.
+    pub fn cut_rig(&self, rig: &Rig) -> Rig {
+        Rig {
+            camera: rig.camera.cropped(self.rows.clone(), self.cols.clone()),
+            ..rig.clone()
+        }
+    }
+
+    /// Whether `object` (of the region's size) reaches an edge of the region that is not an
+    /// edge of the frame: the object may go on beyond it.
+    pub fn reached_edge(&self, object: &Array2<bool>) -> bool {
+        let (rows, cols) = object.dim();
+        let any = |view: ndarray::ArrayView1<bool>| view.iter().any(|&b| b);
+        (self.rows.start > 0 && any(object.row(0)))
+            || (self.rows.end < self.frame.0 && rows > 0 && any(object.row(rows - 1)))
+            || (self.cols.start > 0 && any(object.column(0)))
+            || (self.cols.end < self.frame.1 && cols > 0 && any(object.column(cols - 1)))
+    }
+
+    /// A full-frame array holding `region` (of the region's size) inside the region and
+    /// `outside` elsewhere.
+    fn paste2<T: Clone>(&self, region: &Array2<T>, outside: T) -> Array2<T> {
+        let mut full = Array2::from_elem(self.frame, outside);
+        full.slice_mut(s![self.rows.clone(), self.cols.clone()])
+            .assign(region);
+        full
+    }
+
+    /// [`Self::paste2`] for per-pixel vectors (rows, columns, channels).
+    fn paste3(&self, region: &Array3<f32>, outside: f32) -> Array3<f32> {
+        let mut full = Array3::from_elem((self.frame.0, self.frame.1, region.dim().2), outside);
+        full.slice_mut(s![self.rows.clone(), self.cols.clone(), ..])
+            .assign(region);
+        full
+    }
+
+    /// The results of the region as full-frame ones: pixel indices moved by the region's
+    /// corner, arrays pasted into the frame, and the depth's perspective projection replaced by
+    /// the full frame's `projection`.
+    pub fn paste(
+        &self,
+        mut photometric: PhotometricResult,
+        mut integration: Integration,
+        projection: &Projection,
+    ) -> (PhotometricResult, Integration) {
+        let (top, left) = (self.rows.start, self.cols.start);
+        let ps = &mut photometric;
+        ps.field.normals = self.paste3(&ps.field.normals, f32::NAN);
+        ps.field.albedo = self.paste2(&ps.field.albedo, f32::NAN);
+        ps.field.mask = self.paste2(&ps.field.mask, false);
+        ps.lit_count = self.paste2(&ps.lit_count, 0);
+        ps.object_mask = self.paste2(&ps.object_mask, false);
+        ps.fill = self.paste2(&ps.fill, false);
+        for plane in &mut ps.planes {
+            plane.pixel = (plane.pixel.0 + top, plane.pixel.1 + left);
+        }
+        integration.depth.depth_mm = self.paste2(&integration.depth.depth_mm, f32::NAN);
+        if integration.depth.perspective.is_some() {
+            integration.depth.perspective = Some(*projection);
+        }
+        integration.kept = self.paste2(&integration.kept, false);
+        integration.piece = self.paste2(&integration.piece, u32::MAX);
+        integration.part = self.paste2(&integration.part, u32::MAX);
+        integration.confidence = self.paste2(&integration.confidence, Confidence::None);
+        integration.completed_normals = self.paste3(&integration.completed_normals, f32::NAN);
+        (photometric, integration)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn depth_with_block(
+        frame: (usize, usize),
+        rows: Range<usize>,
+        cols: Range<usize>,
+    ) -> Array2<f32> {
+        Array2::from_shape_fn(frame, |(r, c)| {
+            if rows.contains(&r) && cols.contains(&c) {
+                (r * frame.1 + c) as f32
+            } else {
+                f32::NAN
+            }
+        })
+    }
+
+    #[test]
+    fn the_region_is_the_bounding_box_grown_and_clipped_to_the_frame() {
+        let depth = depth_with_block((60, 80), 20..30, 5..40);
+        let roi = Roi::around(&depth, None, 8).expect("a small object");
+        assert_eq!((roi.rows.clone(), roi.cols.clone()), (12..38, 0..48));
+        // A given mask widens the box.
+        let mut mask = Array2::from_elem((60, 80), false);
+        mask[(40, 50)] = true;
+        let roi = Roi::around(&depth, Some(&mask), 8).expect("a small object");
+        assert_eq!((roi.rows.clone(), roi.cols.clone()), (12..49, 0..59));
+        // Nothing known, or a region that keeps most of the frame: no region.
+        assert_eq!(
+            Roi::around(&Array2::from_elem((60, 80), f32::NAN), None, 8),
+            None
+        );
+        assert_eq!(
+            Roi::around(&depth_with_block((60, 80), 5..55, 5..75), None, 8),
+            None
+        );
+    }
+
+    #[test]
+    fn an_object_at_an_inner_edge_of_the_region_may_go_on_beyond_it() {
+        let roi = Roi::around(&depth_with_block((60, 80), 20..30, 5..40), None, 8).unwrap();
+        let (rows, cols) = (roi.rows.len(), roi.cols.len());
+        let object = |r: usize, c: usize| {
+            let mut o = Array2::from_elem((rows, cols), false);
+            o[(r, c)] = true;
+            o
+        };
+        assert!(!roi.reached_edge(&object(10, 10)));
+        // The left edge is the frame's: nothing lies beyond it.
+        assert!(!roi.reached_edge(&object(10, 0)));
+        assert!(roi.reached_edge(&object(0, 10)));
+        assert!(roi.reached_edge(&object(rows - 1, 10)));
+        assert!(roi.reached_edge(&object(10, cols - 1)));
+    }
+
+    #[test]
+    fn cut_and_pasted_arrays_keep_the_region_and_fill_the_rest() {
+        let frame = (30, 40);
+        let depth = depth_with_block(frame, 10..14, 12..20);
+        let roi = Roi::around(&depth, None, 2).unwrap();
+        let region = roi.cut(&depth);
+        assert_eq!(region.dim(), (8, 12));
+        let full = roi.paste2(&region, f32::NAN);
+        for ((p, a), b) in full.indexed_iter().zip(&depth) {
+            assert!(a == b || (a.is_nan() && b.is_nan()), "{p:?}: {a} vs {b}");
+        }
+        let vectors = Array3::from_shape_fn((8, 12, 3), |(r, c, j)| (r * 100 + c * 10 + j) as f32);
+        let pasted = roi.paste3(&vectors, -1.0);
+        assert_eq!(pasted[(8 + 3, 10 + 4, 2)], vectors[(3, 4, 2)]);
+        assert_eq!(pasted[(0, 0, 0)], -1.0);
+    }
+}
