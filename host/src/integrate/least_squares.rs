@@ -135,10 +135,10 @@ impl Topology {
     }
 
     /// The weighted Laplacian of edge weights `weight[k]` = (right, down) edges of node k; every
-    /// node's row and diagonal are gathered on their own, in parallel.
+    /// node's row is gathered on its own, in parallel.
     pub fn laplacian(&self, weight: &[[f64; 2]]) -> GridLaplacian {
-        let (mut weights, mut diag) = (Vec::new(), Vec::new());
-        self.neighbours
+        let weights: Vec<[f64; 4]> = self
+            .neighbours
             .par_iter()
             .with_min_len(NODES_PER_TASK)
             .enumerate()
@@ -155,9 +155,14 @@ impl Topology {
                         };
                     }
                 }
-                (w, REGULARISATION + w.iter().sum::<f64>())
+                w
             })
-            .unzip_into_vecs(&mut weights, &mut diag);
+            .collect();
+        let diag = weights
+            .par_iter()
+            .with_min_len(NODES_PER_TASK)
+            .map(|w| REGULARISATION + w.iter().sum::<f64>())
+            .collect();
         GridLaplacian::new(
             self.shape,
             self.cells.clone(),
