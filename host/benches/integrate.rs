@@ -73,8 +73,8 @@
 //! hand-offs to the thread pool cost more than they save.
 //!
 //! Session 28 (callgrind, `RAYON_NUM_THREADS=1`, the whole `warm_next` profile run: loading the
-//! cache, the priming cold integration and the warm one): 1 664 M → 1 545 M instructions
-//! (−7.2 %), depth fingerprint unchanged (7364d962d85ec999, CG iterations [9, 4, 2]). The
+//! cache, the priming cold integration and the warm one): 1 664 M → 1 536 M instructions
+//! (−7.7 %), depth fingerprint unchanged (7364d962d85ec999, CG iterations [9, 4, 2]). The
 //! inpainting (pyramids, fills and sweeps of slopes, albedo and warm start) 176 M → 86 M: s_x and
 //! s_y filled together as pairs in one pass, in the grid's own storage instead of three full
 //! copies, pull and push by rows. A node's edges and the energy as plain loops, each node's side
