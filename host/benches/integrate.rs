@@ -71,6 +71,24 @@
 //! before 134 / 145 ms, red–black alone 126 / 136 ms, everything 110 / 114 ms. With
 //! `RAYON_NUM_THREADS=1` the parallel code took 141 / 197 ms: when the other core is busy, the
 //! hand-offs to the thread pool cost more than they save.
+//!
+//! Session 28 (callgrind, `RAYON_NUM_THREADS=1`, the whole `warm_next` profile run: loading the
+//! cache, the priming cold integration and the warm one): 1 664 M → 1 536 M instructions
+//! (−7.7 %), depth fingerprint unchanged (7364d962d85ec999, CG iterations [9, 4, 2]). The
+//! inpainting (pyramids, fills and sweeps of slopes, albedo and warm start) 176 M → 86 M: s_x and
+//! s_y filled together as pairs in one pass, in the grid's own storage instead of three full
+//! copies, pull and push by rows. A node's edges and the energy as plain loops, each node's side
+//! sum once: 34 M less. The warm integration's steps, as shares of its time under callgrind
+//! (wall-clock, so only roughly comparable: pixel classes, which did not change, moved too):
+//!
+//! | step                     | before | after |
+//! |--------------------------|--------|-------|
+//! | conjugate gradients      | 39 %   | 41 %  |
+//! | inpainting               | 16 %   | 9.4 % |
+//! | edge equations           | 12 %   | 14 %  |
+//! | coverage                 | 11 %   | 10 %  |
+//! | hierarchy setup          | 5.1 %  | 6.6 % |
+//! | pixel classes and slopes | 3.8 %  | 6.2 % |
 
 use criterion::{BatchSize, Criterion, criterion_group, criterion_main};
 use meb::capture::Samples;

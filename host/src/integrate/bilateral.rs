@@ -170,23 +170,25 @@ fn node_edges<'a>(
     k: usize,
 ) -> impl Iterator<Item = EdgeSides> + 'a {
     let nb = topology.neighbours[k];
-    [(0, nb[0]), (1, nb[1])]
-        .into_iter()
-        .filter(|&(_, j)| j != NONE)
-        .map(move |(d, j)| {
-            let j = j as usize;
-            let g = match d {
-                0 => (slopes[k].0, slopes[j].0),
-                _ => (-slopes[k].1, -slopes[j].1),
-            };
-            EdgeSides {
-                k,
-                d,
-                w: (sides[k][d], sides[j][d + 2]),
-                g,
-                j,
-            }
+    let (own_sides, own_slopes) = (&sides[k], slopes[k]);
+    (0..2).filter_map(move |d| {
+        let j = nb[d];
+        if j == NONE {
+            return None;
+        }
+        let j = j as usize;
+        let g = match d {
+            0 => (own_slopes.0, slopes[j].0),
+            _ => (-own_slopes.1, -slopes[j].1),
+        };
+        Some(EdgeSides {
+            k,
+            d,
+            w: (own_sides[d], sides[j][d + 2]),
+            g,
+            j,
         })
+    })
 }
 
 /// Edge equations from one-sided equations: edge k→j (right or down) has weight
@@ -199,6 +201,13 @@ pub(crate) fn side_equations(
     slopes: &[(f64, f64)],
     step: f64,
 ) -> EdgeEquations {
+    // The floor scales with both nodes' side weights summed (computed here only: the energy
+    // does not need them), once per node rather than once per edge end.
+    let side_sums: Vec<f64> = sides
+        .par_iter()
+        .with_min_len(NODES_PER_TASK)
+        .map(|s| s.iter().sum::<f64>())
+        .collect();
     let (weight, target) = (0..topology.len())
         .into_par_iter()
         .with_min_len(NODES_PER_TASK)
@@ -208,9 +217,7 @@ pub(crate) fn side_equations(
                 let (wk, wj) = e.w;
                 let (gk, gj) = e.g;
                 let total = wk + wj;
-                // The floor scales with both nodes' side weights summed (computed here only:
-                // the energy does not need them).
-                let sides_total = sides[e.k].iter().sum::<f64>() + sides[e.j].iter().sum::<f64>();
+                let sides_total = side_sums[e.k] + side_sums[e.j];
                 weight[e.d] = total.max(WEIGHT_FLOOR * sides_total).max(f64::MIN_POSITIVE);
                 target[e.d] = if total > 0.0 {
                     step * (wk * gk + wj * gj) / total
@@ -238,13 +245,16 @@ pub(crate) fn energy(
         .into_par_iter()
         .map(|band| {
             let nodes = band * NODES_PER_TASK..((band + 1) * NODES_PER_TASK).min(topology.len());
-            nodes
-                .flat_map(|k| node_edges(topology, sides, slopes, k))
-                .map(|e| {
+            // Summed in order from −0 like `Iterator::sum`.
+            let mut sum = -0.0;
+            for k in nodes {
+                for e in node_edges(topology, sides, slopes, k) {
                     let delta = x[e.j] - x[e.k];
-                    e.w.0 * (delta - step * e.g.0).powi(2) + e.w.1 * (delta - step * e.g.1).powi(2)
-                })
-                .sum::<f64>()
+                    sum += e.w.0 * (delta - step * e.g.0).powi(2)
+                        + e.w.1 * (delta - step * e.g.1).powi(2);
+                }
+            }
+            sum
         })
         .collect();
     bands.iter().sum()

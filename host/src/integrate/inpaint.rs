@@ -7,12 +7,55 @@
 //! Laplace equation over the filled pixels then smooth the seams. Everything that depends only
 //! on which pixels are known — the pyramid's weights and every filled pixel's neighbours — is
 //! worked out once in an [`Inpainting`] and shared by the channels filled over the same pixels
-//! (s_x and s_y), on flat row-major arrays.
+//! (s_x and s_y, filled together as pairs in one pass: [`Channels`]). The fill works in the
+//! grid's own row-major storage: the pull reads the known values there, the push reaches the
+//! grid only at the pixels to fill (its weights there are 0), and the sweeps update it in place.
 
 use ndarray::Array2;
+use std::borrow::Cow;
 
 /// Gauss–Seidel sweeps that smooth the push–pull interpolation.
 const SMOOTHING_SWEEPS: usize = 30;
+
+/// A pixel's values in the channels filled together: one value, or a pair (s_x, s_y) filled in
+/// one pass over the shared pyramid and stencil. Every operation acts on each channel on its
+/// own, so a pair is filled exactly as its two channels would be one by one.
+pub(crate) trait Channels: Copy {
+    /// The same value in every channel.
+    fn splat(v: f64) -> Self;
+    /// `f` of every channel.
+    fn map(self, f: impl Fn(f64) -> f64) -> Self;
+    /// `f` of every channel of `self` and the same channel of `other`.
+    fn zip(self, other: Self, f: impl Fn(f64, f64) -> f64) -> Self;
+}
+
+impl Channels for f64 {
+    fn splat(v: f64) -> Self {
+        v
+    }
+
+    fn map(self, f: impl Fn(f64) -> f64) -> Self {
+        f(self)
+    }
+
+    fn zip(self, other: Self, f: impl Fn(f64, f64) -> f64) -> Self {
+        f(self, other)
+    }
+}
+
+impl Channels for (f64, f64) {
+    fn splat(v: f64) -> Self {
+        (v, v)
+    }
+
+    fn map(self, f: impl Fn(f64) -> f64) -> Self {
+        (f(self.0), f(self.1))
+    }
+
+    fn zip(self, other: Self, f: impl Fn(f64, f64) -> f64) -> Self {
+        (f(self.0, other.0), f(self.1, other.1))
+    }
+}
 
 /// One level of the pull pyramid: its size, each cell's summed weight of known values below
 /// and that weight clipped to 1 (the cell's confidence in the next level and in the push).
@@ -31,9 +74,20 @@ pub(crate) struct Inpainting {
     levels: Vec<Level>,
     /// Row-major index of each pixel to fill, in raster order.
     free: Vec<u32>,
+    /// Cell of level 1 above each pixel to fill (the push reaches level 0 only there: its
+    /// weights are 0 or 1, so a pixel to fill takes its parent's value).
+    parent: Vec<u32>,
     /// Neighbours (up, down, left, right) of each pixel to fill that are wanted or known, and
     /// their count.
     stencil: Vec<([u32; 4], u8)>,
+}
+
+/// The values of a boolean grid in row-major order, borrowed when they are stored so.
+fn row_major(a: &Array2<bool>) -> Cow<'_, [bool]> {
+    match a.as_slice() {
+        Some(s) => Cow::Borrowed(s),
+        None => Cow::Owned(a.iter().copied().collect()),
+    }
 }
 
 impl Inpainting {
@@ -41,8 +95,8 @@ impl Inpainting {
     pub fn new(known: &Array2<bool>, wanted: &Array2<bool>) -> Self {
         let shape = known.dim();
         let (rows, cols) = shape;
-        let known: Vec<bool> = known.iter().copied().collect();
-        let wanted: Vec<bool> = wanted.iter().copied().collect();
+        assert_eq!(wanted.dim(), shape, "inpainting masks of different sizes");
+        let (known, wanted) = (row_major(known), row_major(wanted));
         let free: Vec<u32> = (0..rows * cols)
             .filter(|&i| wanted[i] && !known[i])
             .map(|i| i as u32)
@@ -83,10 +137,12 @@ impl Inpainting {
                 }
                 let (coarse_rows, coarse_cols) = (level_rows.div_ceil(2), fine.cols.div_ceil(2));
                 let mut summed = vec![0.0; coarse_rows * coarse_cols];
-                for (i, &w) in fine.weight.iter().enumerate() {
-                    if w > 0.0 {
-                        let (r, c) = (i / fine.cols, i % fine.cols);
-                        summed[(r / 2) * coarse_cols + c / 2] += w;
+                for (r, weights) in fine.weight.chunks_exact(fine.cols).enumerate() {
+                    let parents = &mut summed[(r / 2) * coarse_cols..][..coarse_cols];
+                    for (c, &w) in weights.iter().enumerate() {
+                        if w > 0.0 {
+                            parents[c / 2] += w;
+                        }
                     }
                 }
                 let weight = summed.iter().map(|&w| f64::min(w, 1.0)).collect();
@@ -99,17 +155,28 @@ impl Inpainting {
                 level_rows = coarse_rows;
             }
         }
+        let parent = match levels.get(1) {
+            Some(coarse) => free
+                .iter()
+                .map(|&i| {
+                    let (r, c) = (i as usize / cols, i as usize % cols);
+                    ((r / 2) * coarse.cols + c / 2) as u32
+                })
+                .collect(),
+            None => Vec::new(),
+        };
         Self {
             shape,
             levels,
             free,
+            parent,
             stencil,
         }
     }
 
-    /// Fills `values` (of the grid's size) at the free pixels; the values there on entry are
-    /// ignored (they may be NaN).
-    pub fn fill(&self, values: &mut Array2<f64>) {
+    /// Fills `values` (of the grid's size; one channel or several, [`Channels`]) at the free
+    /// pixels; the values there on entry are ignored (they may be NaN).
+    pub fn fill<T: Channels>(&self, values: &mut Array2<T>) {
         if self.free.is_empty() {
             return;
         }
@@ -118,59 +185,111 @@ impl Inpainting {
             self.shape,
             "inpainting a grid of another size"
         );
-        // Pull: every level's weighted mean of the known values below it.
-        let mut pyramid: Vec<Vec<f64>> = vec![values.iter().copied().collect()];
+        match values.as_slice_mut() {
+            Some(flat) => self.fill_row_major(flat),
+            None => {
+                let mut flat: Vec<T> = values.iter().copied().collect();
+                self.fill_row_major(&mut flat);
+                for (v, f) in values.iter_mut().zip(flat) {
+                    *v = f;
+                }
+            }
+        }
+    }
+
+    /// [`Self::fill`] on the grid's values in row-major order.
+    fn fill_row_major<T: Channels>(&self, values: &mut [T]) {
+        // Pull: every coarser level's weighted mean of the known values below it.
+        let mut pyramid: Vec<Vec<T>> = Vec::with_capacity(self.levels.len().saturating_sub(1));
         for pair in self.levels.windows(2) {
-            let (fine, coarse) = (&pair[0], &pair[1]);
-            let v = &pyramid[pyramid.len() - 1];
-            let mut cv = vec![0.0; coarse.len];
-            for (i, &w) in fine.weight.iter().enumerate() {
-                if w > 0.0 {
-                    let (r, c) = (i / fine.cols, i % fine.cols);
-                    cv[(r / 2) * coarse.cols + c / 2] += w * v[i];
-                }
-            }
-            for (value, &summed) in cv.iter_mut().zip(&coarse.summed) {
-                if summed > 0.0 {
-                    *value /= summed;
-                }
-            }
-            pyramid.push(cv);
+            let below: &[T] = pyramid.last().map_or(&*values, |v| v);
+            let pulled = pull(&pair[0], &pair[1], below);
+            pyramid.push(pulled);
         }
-        // Push: blend every level with its parent where it is not fully known.
-        for l in (0..self.levels.len() - 1).rev() {
-            let (upper, lower) = pyramid.split_at_mut(l + 1);
-            let (fine_v, coarse_v) = (&mut upper[l], &lower[0]);
-            let (fine, coarse) = (&self.levels[l], &self.levels[l + 1]);
-            for (i, (v, &w)) in fine_v.iter_mut().zip(&fine.weight).enumerate() {
-                if w < 1.0 {
-                    // An unknown value (w = 0) may be NaN: take the coarse level's alone.
-                    let (r, c) = (i / fine.cols, i % fine.cols);
-                    let parent = coarse_v[(r / 2) * coarse.cols + c / 2];
-                    *v = if w > 0.0 {
-                        w * *v + (1.0 - w) * parent
-                    } else {
-                        parent
-                    };
+        // Push: blend every coarser level with its parent where it is not fully known.
+        for l in (1..pyramid.len()).rev() {
+            let (upper, lower) = pyramid.split_at_mut(l);
+            push(
+                &self.levels[l],
+                &self.levels[l + 1],
+                &mut upper[l - 1],
+                &lower[0],
+            );
+        }
+        // Level 0: a pixel to fill (weight 0) takes its parent's value.
+        let finite = |v: T| v.map(|a| if a.is_finite() { a } else { 0.0 });
+        match pyramid.first() {
+            Some(level_1) => {
+                for (&i, &p) in self.free.iter().zip(&self.parent) {
+                    values[i as usize] = finite(level_1[p as usize]);
                 }
             }
-        }
-        let filled = &pyramid[0];
-        let mut flat: Vec<f64> = values.iter().copied().collect();
-        for &i in &self.free {
-            let v = filled[i as usize];
-            flat[i as usize] = if v.is_finite() { v } else { 0.0 };
+            None => {
+                for &i in &self.free {
+                    values[i as usize] = finite(values[i as usize]);
+                }
+            }
         }
         for _ in 0..SMOOTHING_SWEEPS {
             for (&i, &(nb, n)) in self.free.iter().zip(&self.stencil) {
-                if n > 0 {
-                    let sum: f64 = nb[..n as usize].iter().map(|&q| flat[q as usize]).sum();
-                    flat[i as usize] = sum / f64::from(n);
-                }
+                // Summed in order from −0 like `Iterator::sum`; an inner pixel's four
+                // neighbours without the loop.
+                let add = |s: T, q: u32| s.zip(values[q as usize], |a, b| a + b);
+                let sum = match n {
+                    0 => continue,
+                    4 => nb.iter().fold(T::splat(-0.0), |s, &q| add(s, q)),
+                    _ => nb[..n as usize]
+                        .iter()
+                        .fold(T::splat(-0.0), |s, &q| add(s, q)),
+                };
+                values[i as usize] = sum.map(|a| a / f64::from(n));
             }
         }
-        for (v, &f) in values.iter_mut().zip(&flat) {
-            *v = f;
+    }
+}
+
+/// The weighted means on `coarse` of the values `below` on `fine` (row-major) where known.
+fn pull<T: Channels>(fine: &Level, coarse: &Level, below: &[T]) -> Vec<T> {
+    let mut pulled = vec![T::splat(0.0); coarse.len];
+    let rows = fine
+        .weight
+        .chunks_exact(fine.cols)
+        .zip(below.chunks_exact(fine.cols));
+    for (r, (weights, row)) in rows.enumerate() {
+        let parents = &mut pulled[(r / 2) * coarse.cols..][..coarse.cols];
+        for (c, (&w, &v)) in weights.iter().zip(row).enumerate() {
+            if w > 0.0 {
+                let p = &mut parents[c / 2];
+                *p = p.zip(v, |sum, v| sum + w * v);
+            }
+        }
+    }
+    for (value, &summed) in pulled.iter_mut().zip(&coarse.summed) {
+        if summed > 0.0 {
+            *value = value.map(|v| v / summed);
+        }
+    }
+    pulled
+}
+
+/// Blends the values of `fine` (row-major) with their parents on `coarse` where `fine` is
+/// not fully known.
+fn push<T: Channels>(fine: &Level, coarse: &Level, values: &mut [T], parents: &[T]) {
+    let rows = values
+        .chunks_exact_mut(fine.cols)
+        .zip(fine.weight.chunks_exact(fine.cols));
+    for (r, (row, weights)) in rows.enumerate() {
+        let above = &parents[(r / 2) * coarse.cols..][..coarse.cols];
+        for (c, (v, &w)) in row.iter_mut().zip(weights).enumerate() {
+            if w < 1.0 {
+                // An unknown value (w = 0) may be NaN: take the coarse level's alone.
+                let parent = above[c / 2];
+                *v = if w > 0.0 {
+                    v.zip(parent, |v, p| w * v + (1.0 - w) * p)
+                } else {
+                    parent
+                };
+            }
         }
     }
 }
@@ -237,12 +356,42 @@ mod tests {
         let (mut a2, mut b2) = (a.clone(), b.clone());
         inpaint(&mut a2, &known, &wanted);
         inpaint(&mut b2, &known, &wanted);
-        assert_eq!((a1.clone(), b1), (a2, b2));
+        assert_eq!((a1.clone(), b1.clone()), (a2, b2));
+        // Both channels filled together as pairs, bit for bit as one by one (NaN at the
+        // pixels to fill, which must not leak in).
+        let mut pairs = Array2::from_shape_fn(shape, |p| {
+            if known[p] || !wanted[p] {
+                (a[p], b[p])
+            } else {
+                (f64::NAN, -0.0)
+            }
+        });
+        shared.fill(&mut pairs);
+        let bits = |v: &Array2<f64>| v.mapv(f64::to_bits);
+        assert_eq!(bits(&pairs.mapv(|p| p.0)), bits(&a1));
+        assert_eq!(bits(&pairs.mapv(|p| p.1)), bits(&b1));
         // Known pixels and pixels outside `wanted` keep their values.
         for ((p, &k), &w) in known.indexed_iter().zip(wanted.iter()) {
             if k || !w {
                 assert_eq!(a1[p], a[p], "{p:?}");
             }
         }
+    }
+
+    #[test]
+    fn a_grid_stored_by_columns_is_filled_as_one_stored_by_rows() {
+        use ndarray::ShapeBuilder;
+        let shape = (9, 14);
+        let known = Array2::from_shape_fn(shape, |(r, c)| !((2..6).contains(&r) && c > 3));
+        let wanted = Array2::from_shape_fn(shape, |(r, c)| r + c < 19);
+        let values = Array2::from_shape_fn(shape, |(r, c)| (r * r) as f64 - 0.5 * c as f64);
+        let inpainting = Inpainting::new(&known, &wanted);
+        let mut by_rows = values.clone();
+        inpainting.fill(&mut by_rows);
+        let mut by_columns = Array2::from_shape_fn(shape.f(), |p| values[p]);
+        assert!(by_columns.as_slice().is_none());
+        inpainting.fill(&mut by_columns);
+        assert_eq!(by_columns, by_rows);
+        assert_ne!(by_rows, values);
     }
 }

@@ -104,8 +104,7 @@ pub(super) fn solve_window(
     let step = grid.step();
     let (r0, c0) = problem.origin;
     // Fill in the slopes of two-LED pixels and holes from the measured ones.
-    let mut sx = problem.slopes.mapv(|s| s.0);
-    let mut sy = problem.slopes.mapv(|s| s.1);
+    let mut filled_slopes = problem.slopes.clone();
     let known = problem.class.mapv(|k| k == Confidence::Measured);
     // Two-LED pixels' albedo, interpolated from the measured pixels around them (at the same
     // time as the slopes: the three fills are independent).
@@ -122,8 +121,8 @@ pub(super) fn solve_window(
     rayon::join(
         || {
             if fill_slopes {
-                let inpainting = Inpainting::new(&known, &region);
-                rayon::join(|| inpainting.fill(&mut sx), || inpainting.fill(&mut sy));
+                // s_x and s_y in one pass over their shared pyramid and stencil.
+                Inpainting::new(&known, &region).fill(&mut filled_slopes);
             }
         },
         || {
@@ -134,7 +133,7 @@ pub(super) fn solve_window(
     );
     profile.add("inpainting", t);
     let t = Instant::now();
-    let mut slopes: Vec<(f64, f64)> = topology.cells.iter().map(|&p| (sx[p], sy[p])).collect();
+    let mut slopes: Vec<(f64, f64)> = topology.cells.iter().map(|&p| filled_slopes[p]).collect();
     let planes: Vec<(usize, NormalPlane)> = problem
         .planes
         .iter()
