@@ -151,6 +151,25 @@
 //! The warm window's stage profile, one run each: photometric stereo 46–53 → 30 ms,
 //! integration 124–133 → 88–102 ms, offset search 13–15 ms either way. Still ≈ 4× from the
 //! 40 ms target.
+//!
+//! Session 28 (2026-12-03), a region of interest for warm windows
+//! ([`meb::reconstruct::ROI_MARGIN_PX`]): a warm window is reconstructed inside the previous
+//! depth's bounding box grown by 32 px (here 247 × 450 of the 720 × 1280 frame) on a camera
+//! cut to it, and pasted back; an object that reaches the region's edge is reconstructed on the
+//! full frame. Criterion at a load average of 3–4 (a helper building), main fe2c89c and this
+//! code alternated: `window_warm` 198 / 182 ms → **150 / 166 ms**. Stage profile of the warm
+//! window, one run each: photometric stereo 40 / 80 → 9 / 22 ms, offset search 27 / 36 →
+//! 10 / 21 ms, integration unchanged (it already worked in the object's box), plus 0.6 ms to cut
+//! the region and 6–7 ms to paste the results back into full-frame arrays. The warm result
+//! covers the same 53 857 pixels and lies as far from the cold one as before (median 3.494 mm
+//! against 3.492 mm). `meb video` (release) on a 260-frame 1280×720 turning ellipsoid rendered
+//! with truth every 20 frames (6 windows of 40): wall 2.41 → 2.08 s, warm windows 131–376 →
+//! 147–259 ms, per-frame depth RMSE median 0.653 → 0.654 mm, the five warm windows 0.653 /
+//! 0.532 / 0.532 / 0.535 / 0.742 → 0.654 / 0.515 / 0.532 / 0.535 / 0.797 mm (the last one
+//! stopped after 1 pass instead of 2); on the 320×180 `clip820` (41 windows, `--hop 20`, 20
+//! scored) the median RMSE is 0.3790 → 0.3787 mm, worst 0.712 mm either way. Integration
+//! (≈ 88 ms warm) is now nearly all of the window; the inpainting and edge equations lost 7.7 %
+//! of its instructions this session (`benches/integrate.rs`).
 
 use criterion::{BatchSize, Criterion, criterion_group, criterion_main};
 use meb::capture::memory::MemorySource;

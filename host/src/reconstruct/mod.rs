@@ -24,8 +24,8 @@
 //! second runs only when the depth moved more than [`WARM_LIGHTS_MOVED_MM`] from the one its
 //! light vectors were computed at. A warm result that strays from its start is redone cold.
 //! A warm window is reconstructed inside the previous depth's bounding box grown by
-//! [`ROI_MARGIN_PX`] (its region of interest, [`roi`]) and pasted back into the full frame; an
-//! object that reaches the region's edge is reconstructed on the full frame instead.
+//! [`ROI_MARGIN_PX`] (its region of interest, module `roi`) and pasted back into the full
+//! frame; an object that reaches the region's edge is reconstructed on the full frame instead.
 
 use crate::demod::Decoded;
 use crate::integrate::{

@@ -2,13 +2,13 @@
 //!
 //! From one window of `meb video` to the next the object moves little, so a warm window is
 //! reconstructed inside the previous depth's bounding box grown by [`ROI_MARGIN_PX`], on LED
-//! images, noise, mask and a camera cut to that region ([`Camera::cropped`]: every pixel keeps
-//! its ray), and the result is pasted back into full-frame arrays that hold, outside the region,
-//! exactly what a full-frame reconstruction leaves outside its object (NaN normals, albedo and
-//! depth, no LEDs, no masks, no pieces). Photometric stereo, integration and the depth-offset
-//! search then visit the object's neighbourhood instead of the whole frame. An object that
-//! reaches an edge of the region that is not an edge of the frame may go on beyond it: that
-//! window is reconstructed on the full frame instead ([`Roi::reached_edge`]).
+//! images, noise, mask and a camera cut to that region ([`crate::rig::Camera::cropped`]: every
+//! pixel keeps its ray), and the result is pasted back into full-frame arrays that hold, outside
+//! the region, exactly what a full-frame reconstruction leaves outside its object (NaN normals,
+//! albedo and depth, no LEDs, no masks, no pieces). Photometric stereo, integration and the
+//! depth-offset search then visit the object's neighbourhood instead of the whole frame. An
+//! object that reaches an edge of the region that is not an edge of the frame may go on beyond
+//! it: that window is reconstructed on the full frame instead ([`Roi::reached_edge`]).
 
 use crate::integrate::{Confidence, Integration};
 use crate::photometric::PhotometricResult;
