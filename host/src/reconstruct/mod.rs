@@ -303,7 +303,8 @@ pub fn reconstruct(
 /// pass's light vectors came from. A warm result that moved more than [`WARM_MAX_MOVE_MM`]
 /// (median) from the start, clearly preferred an offset at the edge of the wider bracket
 /// ([`WARM_WIDE_BRACKET_MM`]), covers pixels the start did not know, or failed, is redone cold
-/// ([`Start::Redone`]).
+/// ([`Start::Redone`]). The warm passes run in the start's region of interest (the box of its
+/// depth and `mask` grown by [`ROI_MARGIN_PX`]) unless the object reaches that region's edge.
 pub fn reconstruct_warm(
     images: &LedImages,
     rig: &Rig,
@@ -941,15 +942,25 @@ pub fn level_noise(decoded: &Decoded) -> Array2<f32> {
 mod tests {
     use super::*;
 
-    /// LED images of a sphere of `radius_mm` on a 320×180 thesis-dynamic rig, with a flat
-    /// noise map (the decoder's σ), as `meb video` passes them.
-    fn sphere(radius_mm: f64) -> (Rig, LedImages, Array2<f32>) {
+    /// A still sphere's window as `meb video` passes it, and the warm start its cold
+    /// reconstruction leaves.
+    struct StillSphere {
+        rig: Rig,
+        images: LedImages,
+        noise: Array2<f32>,
+        config: ReconstructConfig,
+        warm: WarmStart,
+    }
+
+    /// LED images of a sphere of radius 30 mm on a 320×180 thesis-dynamic rig with a flat
+    /// noise map (the decoder's σ), reconstructed cold for the warm start.
+    fn still_sphere() -> StillSphere {
         use crate::simulate::geometry::SurfaceMap;
         use crate::simulate::lighting::led_images;
         use crate::simulate::scene::{Scene, SceneObject, Shape};
         let mut rig = Rig::preset("thesis-dynamic").expect("preset");
         (rig.camera.width, rig.camera.height) = (320, 180);
-        let scene = Scene::single(SceneObject::new(Shape::Sphere { radius_mm }));
+        let scene = Scene::single(SceneObject::new(Shape::Sphere { radius_mm: 30.0 }));
         let map = SurfaceMap::render(&scene, &rig.camera, 0.0);
         let mut images = led_images(&map, &rig, 1.0);
         // Brightest reading 0.5 of full scale.
@@ -959,31 +970,43 @@ mod tests {
         }
         let images = LedImages { images };
         let noise = Array2::from_elem((180, 320), 1e-4);
-        (rig, images, noise)
+        let config = ReconstructConfig::default();
+        let cold =
+            reconstruct_warm(&images, &rig, None, Some(&noise), &config, None).expect("cold");
+        StillSphere {
+            warm: WarmStart::of(&cold),
+            rig,
+            images,
+            noise,
+            config,
+        }
     }
 
     /// A warm window reconstructed in its region of interest and pasted back is the one the
     /// full frame gives: the same pixels, the same depth to float rounding.
     #[test]
     fn a_warm_window_in_its_region_equals_the_full_frames() {
-        let (rig, images, noise) = sphere(30.0);
-        let config = ReconstructConfig::default();
-        let cold =
-            reconstruct_warm(&images, &rig, None, Some(&noise), &config, None).expect("cold");
-        let warm = WarmStart::of(&cold);
+        let sphere = still_sphere();
         let (full_ps, full, start) = passes(
-            &images,
-            &rig,
+            &sphere.images,
+            &sphere.rig,
             None,
-            Some(&noise),
-            &config,
-            Some(&warm),
+            Some(&sphere.noise),
+            &sphere.config,
+            Some(&sphere.warm),
             &mut Vec::new(),
         )
         .expect("full frame");
         assert!(start.is_ok(), "{start:?}");
-        let region = reconstruct_warm(&images, &rig, None, Some(&noise), &config, Some(&warm))
-            .expect("in the region");
+        let region = reconstruct_warm(
+            &sphere.images,
+            &sphere.rig,
+            None,
+            Some(&sphere.noise),
+            &sphere.config,
+            Some(&sphere.warm),
+        )
+        .expect("in the region");
         assert!(
             matches!(region.start, Start::Warm { .. }),
             "{:?}",
@@ -1020,24 +1043,20 @@ mod tests {
     /// result is not used.
     #[test]
     fn an_object_beyond_its_region_is_left_to_the_full_frame() {
-        let (rig, images, noise) = sphere(30.0);
-        let config = ReconstructConfig::default();
-        let cold =
-            reconstruct_warm(&images, &rig, None, Some(&noise), &config, None).expect("cold");
-        let warm = WarmStart::of(&cold);
+        let sphere = still_sphere();
         // A region around the sphere's middle alone.
-        let mut middle = Array2::from_elem(warm.depth_mm.dim(), f32::NAN);
+        let mut middle = Array2::from_elem(sphere.warm.depth_mm.dim(), f32::NAN);
         middle[(90, 160)] = 0.0;
         let roi = Roi::around(&middle, None, 10).expect("a small region");
         let mut timings = Vec::new();
         let result = warm_in_region(
             &roi,
-            &images,
-            &rig,
+            &sphere.images,
+            &sphere.rig,
             None,
-            Some(&noise),
-            &config,
-            &warm,
+            Some(&sphere.noise),
+            &sphere.config,
+            &sphere.warm,
             &mut timings,
         );
         assert!(result.is_none(), "a cut-off object was pasted back");
