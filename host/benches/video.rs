@@ -172,6 +172,7 @@
 //! of its instructions this session (`benches/integrate.rs`).
 
 use criterion::{BatchSize, Criterion, criterion_group, criterion_main};
+use meb::capture::binning::Binning;
 use meb::capture::memory::MemorySource;
 use meb::capture::{Frame, FrameFormat, FrameSource, Samples};
 use meb::demod::DecodeConfig;
@@ -279,7 +280,89 @@ fn bench(c: &mut Criterion) {
             black_box(from_decoded_warm(&second, &rig, None, &config.reconstruct, Some(&warm)).ok())
         })
     });
+    binned(&mut group, &rig, &format, &frames, &config);
     group.finish();
+}
+
+/// The same window with every frame binned 2×2 (`meb video --bin 2`: 640×360 3-D frames):
+/// `bin_frames` bins the 40 frames of a window (the reader thread's extra work),
+/// `decode_bin2` decodes 32 binned frames with carried timing, `window_warm_bin2` reconstructs
+/// the binned second window warm-started from the binned first, and `window_bin2` is the whole
+/// pipeline over one window as `window` is.
+fn binned(
+    group: &mut criterion::BenchmarkGroup<'_, criterion::measurement::WallTime>,
+    rig: &Rig,
+    format: &FrameFormat,
+    frames: &[Frame],
+    config: &VideoConfig,
+) {
+    let Ok(binning) = Binning::new(format, 2) else {
+        eprintln!("cannot bin the clip");
+        return;
+    };
+    let bin = |f: &Frame| {
+        let mut out = Samples::U8(Vec::new());
+        binning.bin(&f.samples, f.index, &mut out).map(|_| out)
+    };
+    let Ok(binned) = frames.iter().map(bin).collect::<Result<Vec<Samples>, _>>() else {
+        eprintln!("cannot bin the clip");
+        return;
+    };
+    let (binned_rig, binned_format) = (rig.binned(2), binning.format().clone());
+    let Ok(first) = decode_frames(&binned[4..36], &binned_format, &config.decode) else {
+        eprintln!("the binned clip does not decode");
+        return;
+    };
+    let carried = DecodeConfig {
+        rate_ratio: Some(first.report.rate_ratio),
+        exposure: Some(first.report.exposure),
+        ..config.decode.clone()
+    };
+    let (Ok(second), Ok(first)) = (
+        decode_frames(&binned[44..76], &binned_format, &carried),
+        from_decoded(&first, &binned_rig, None, &config.reconstruct),
+    ) else {
+        eprintln!("the binned clip does not reconstruct");
+        return;
+    };
+    let warm = WarmStart::of(&first);
+    if let Ok(warm_second) =
+        from_decoded_warm(&second, &binned_rig, None, &config.reconstruct, Some(&warm))
+    {
+        eprintln!("second window binned 2x2, warm: {:?}", warm_second.start);
+        for stage in &warm_second.timings {
+            eprintln!("stage {:>8.1} ms  {}", stage.ms, stage.stage);
+        }
+    }
+    group.bench_function("bin_frames", |b| {
+        b.iter(|| black_box(frames[..40].iter().map(bin).count()))
+    });
+    group.bench_function("decode_bin2", |b| {
+        b.iter(|| black_box(decode_frames(&binned[4..36], &binned_format, &carried).ok()))
+    });
+    group.bench_function("window_warm_bin2", |b| {
+        b.iter(|| {
+            black_box(
+                from_decoded_warm(&second, &binned_rig, None, &config.reconstruct, Some(&warm))
+                    .ok(),
+            )
+        })
+    });
+    let binned_config = VideoConfig {
+        bin: 2,
+        ..config.clone()
+    };
+    group.bench_function("window_bin2", |b| {
+        b.iter_batched(
+            || -> Box<dyn FrameSource> {
+                Box::new(
+                    MemorySource::new(format.clone(), frames[..40].to_vec()).expect("frames fit"),
+                )
+            },
+            |source| black_box(process(source, rig, &binned_config, None, &mut |_| Ok(())).ok()),
+            BatchSize::PerIteration,
+        )
+    });
 }
 
 criterion_group!(benches, bench);

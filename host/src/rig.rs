@@ -370,6 +370,42 @@ impl Camera {
         camera
     }
 
+    /// The camera of this camera's image binned into `factor`×`factor` blocks
+    /// ([`crate::capture::binning`]): pixel (r, c) is the block of rows r·k .. r·k + k and
+    /// columns c·k .. c·k + k, and its ray is the one through the block's centre, the
+    /// continuous position (r·k + (k − 1)/2, c·k + (k − 1)/2) here. Rows and columns that do
+    /// not fill a block are dropped. A pinhole camera's focal lengths are divided by k and its
+    /// principal point moved to the binned grid (radial distortion is in normalised
+    /// coordinates, so it is kept); an orthographic camera's pitch is multiplied by k and its
+    /// optical axis divided by k. A factor of 0 or 1 returns the camera unchanged.
+    pub fn binned(&self, factor: usize) -> Camera {
+        if factor <= 1 {
+            return self.clone();
+        }
+        let k = factor as f64;
+        let mut camera = Camera {
+            width: self.width / factor,
+            height: self.height / factor,
+            ..self.clone()
+        };
+        match (&mut camera.intrinsics, self.projection()) {
+            (Some(intrinsics), _) => {
+                let centre = (k - 1.0) / 2.0;
+                intrinsics.fx /= k;
+                intrinsics.fy /= k;
+                intrinsics.cx = (intrinsics.cx - centre) / k;
+                intrinsics.cy = (intrinsics.cy - centre) / k;
+            }
+            (None, Projection::Orthographic { pitch_mm, axis }) => {
+                camera.pixel_pitch_mm = Some(pitch_mm * k);
+                camera.fov_deg = None;
+                camera.axis_px = Some([axis.0 / k, axis.1 / k]);
+            }
+            (None, Projection::Perspective { .. }) => {}
+        }
+        camera
+    }
+
     /// Whether the camera is a pinhole (perspective) camera.
     pub fn is_perspective(&self) -> bool {
         self.intrinsics.is_some()
@@ -602,6 +638,14 @@ impl TofCamera {
 }
 
 impl Rig {
+    /// This rig with its camera binned by `factor` ([`Camera::binned`]).
+    pub fn binned(&self, factor: usize) -> Rig {
+        Rig {
+            camera: self.camera.binned(factor),
+            ..self.clone()
+        }
+    }
+
     /// Parses and validates a rig from TOML text; `origin` names it in errors.
     pub fn from_toml_str(text: &str, origin: &str) -> Result<Self, RigError> {
         let rig: Rig = toml::from_str(text).map_err(|source| RigError::Parse {
@@ -1007,6 +1051,44 @@ mod tests {
             ..perspective()
         };
         assert!(rig.validate().is_err());
+    }
+
+    /// Each pixel of a binned camera sees along the ray through the centre of its block, for
+    /// a field-of-view, a pitch and a distorted pinhole camera, and a binned rig is valid and
+    /// round-trips through TOML.
+    #[test]
+    fn a_binned_camera_sees_through_each_blocks_centre() {
+        let mut by_fov = Camera::test_64x48(None, None);
+        by_fov.fov_deg = Some(40.0);
+        for full in [by_fov, Camera::test_64x48(Some(0.7), None), perspective()] {
+            for k in [2usize, 3] {
+                let binned = full.binned(k);
+                assert_eq!(
+                    (binned.width, binned.height),
+                    (full.width / k, full.height / k)
+                );
+                let rig = Rig {
+                    camera: full.clone(),
+                    ..Rig::preset("thesis-dynamic").expect("preset")
+                }
+                .binned(k);
+                rig.validate().expect("a valid binned camera");
+                assert_eq!(rig.camera, binned);
+                let text = rig.to_toml_string();
+                assert_eq!(Rig::from_toml_str(&text, "binned").unwrap(), rig);
+                let centre = (k as f64 - 1.0) / 2.0;
+                for (row, col) in [(0.0, 0.0), (4.0, 7.0), (12.0, 17.0)] {
+                    let (r, c) = (row * k as f64 + centre, col * k as f64 + centre);
+                    let (a, b) = (binned.ray(row, col), full.ray(r, c));
+                    assert!(
+                        (a.at(7.0) - b.at(7.0)).norm() < 1e-9
+                            && (a.at(-5.0) - b.at(-5.0)).norm() < 1e-9,
+                        "{full:?} by {k} at {row}, {col}"
+                    );
+                }
+            }
+            assert_eq!(full.binned(1), full);
+        }
     }
 
     /// Every third pixel of an orthographic camera sees along the ray of its full-grid pixel.

@@ -279,6 +279,7 @@ fn fill(
     )
 }
 
+pub mod binning;
 pub mod ffmpeg;
 pub mod images;
 pub mod memory;

@@ -71,6 +71,11 @@ pub struct VideoArgs {
     /// when the stream ends; an interrupt discards it, as for every command).
     #[arg(long)]
     max_frames: Option<usize>,
+    /// Bin every camera frame into BIN×BIN pixel blocks before decoding: 3-D frames of 1/BIN
+    /// the width and height at about 1/BIN² of the cost (a live preview). --roi and
+    /// --ground-truth stay in camera pixels; codes must be linear (no --linearize).
+    #[arg(long, default_value_t = 1, value_parser = clap::value_parser!(u16).range(1..=64))]
+    bin: u16,
     /// Normal integrator.
     #[arg(long, value_enum, default_value = "least-squares")]
     integrator: IntegratorArg,
@@ -130,11 +135,13 @@ pub fn run(args: &VideoArgs) -> Result<()> {
         .with_context(|| format!("cannot open {}", args.input.display()))?;
     let fps = config.decode.fps.unwrap_or(source.format().fps);
     let rate = config.schedule.rate(fps);
+    // The 3-D frames are seen by the binned camera.
+    let frame_camera = rig.binned(config.bin).camera;
     let output = VideoOutput::create(
         folder.path(),
-        rig.camera.width,
-        rig.camera.height,
-        rig.camera.pitch_mm(),
+        frame_camera.width,
+        frame_camera.height,
+        frame_camera.pitch_mm(),
         OutputOptions {
             normals: args.save.contains(&SaveArg::Normals),
             albedo: args.save.contains(&SaveArg::Albedo),
@@ -186,6 +193,7 @@ pub fn run(args: &VideoArgs) -> Result<()> {
         "input": args.input.display().to_string(),
         "rig": args.rig,
         "camera_fps": fps,
+        "bin": config.bin,
         "rate_3d_fps": rate,
         "schedule": config.schedule,
         "motion": config.motion,
@@ -274,6 +282,7 @@ fn video_config(args: &VideoArgs, rig: &Rig) -> Result<VideoConfig> {
     config.max_frames = max_frames;
     config.carry_timing = !args.fit_every_window;
     config.warm_start = !args.cold_start;
+    config.bin = usize::from(args.bin);
     config.schedule = WindowSchedule::new(
         args.window,
         args.drop,

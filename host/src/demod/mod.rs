@@ -88,7 +88,7 @@ use crate::capture::{FrameFormat, FrameSource, Samples};
 use crate::types::LedImages;
 use config::FitLimits;
 use fit::{TimingFit, fit_timing, refit_timing};
-use matched::CodeLimits;
+pub(crate) use matched::CodeLimits;
 use nalgebra::DMatrix;
 use ndarray::Array2;
 use rayon::prelude::*;

@@ -17,6 +17,11 @@
 //! the reconstruction of window k on the caller's thread; the CLI's writer is a fourth. Each
 //! hand-over is a bounded queue, so memory stays bounded by a few windows.
 //!
+//! With [`VideoConfig::bin`] every camera frame is binned into k×k pixel blocks as it is read
+//! ([`crate::capture::binning`]) and the 3-D frames are reconstructed for the binned camera
+//! ([`crate::rig::Rig::binned`]) and scored against the truth's block means
+//! ([`truth::BinnedTruth`]): a live preview at 1/k² of the cost.
+//!
 //! A window that cannot be decoded or reconstructed (the object left the view, a dark moment)
 //! is recorded as failed with the reason and the video goes on; a run in which no window
 //! succeeds is an error. A stream that ends inside a frame ends the video after the windows
@@ -39,10 +44,13 @@ pub use judge::WindowVerdict;
 pub use motion::{MotionConfig, MotionEstimate, MotionPolicy, PeriodFrames, detect_motion};
 pub use schedule::{ScheduleError, WindowSchedule};
 pub use stream::{FrameStream, StreamEnd};
-pub use truth::{TruthDepth, TruthSource};
+pub use truth::{BinnedTruth, TruthDepth, TruthSource};
 
+use crate::capture::binning::BinnedSource;
 use crate::capture::{CaptureError, FrameSource};
-use crate::demod::{CodeMap, DecodeConfig, Decoded, DemodError, OnImplausible, VerdictStatus};
+use crate::demod::{
+    CodeMap, DecodeConfig, Decoded, DemodError, Linearize, OnImplausible, Roi, VerdictStatus,
+};
 use crate::metrics::{MetricsError, compare_depth};
 use crate::reconstruct::{ReconstructConfig, Reconstruction, Start, WarmStart, from_decoded_warm};
 use crate::rig::Rig;
@@ -77,6 +85,11 @@ pub struct VideoConfig {
     /// Start each window's reconstruction from the previous reconstructed window's depth
     /// ([`crate::reconstruct::WarmStart`]); `false` reconstructs every window cold.
     pub warm_start: bool,
+    /// Bin every camera frame into `bin`×`bin` blocks before decoding
+    /// ([`crate::capture::binning`]): the 3-D frames have 1/`bin` of the camera's width and
+    /// height (the camera of [`crate::rig::Rig::binned`]) and cost about 1/`bin`² as much;
+    /// 1 keeps the camera's resolution.
+    pub bin: usize,
 }
 
 impl VideoConfig {
@@ -95,6 +108,7 @@ impl VideoConfig {
             max_frames: None,
             carry_timing: true,
             warm_start: true,
+            bin: 1,
         }
     }
 }
@@ -381,7 +395,7 @@ pub fn process(
     source: Box<dyn FrameSource>,
     rig: &Rig,
     config: &VideoConfig,
-    mut truth: Option<&mut dyn TruthSource>,
+    truth: Option<&mut dyn TruthSource>,
     sink: &mut dyn FnMut(&VideoFrame) -> Result<(), VideoError>,
 ) -> Result<VideoSummary, VideoError> {
     let started = Instant::now();
@@ -397,6 +411,37 @@ pub fn process(
         config.schedule.hop,
         1usize << (rig.leds.len() + 1),
     )?;
+    // Binned frames are seen by the binned camera and scored against binned truth.
+    if config.bin > 1 && config.decode.linearize != Linearize::None {
+        return Err(VideoError::Decode(DemodError::InvalidConfig(format!(
+            "binning by {} sums code values, which is exact only for linear codes: decode with \
+             no linearisation, or do not bin",
+            config.bin
+        ))));
+    }
+    let source: Box<dyn FrameSource> = if config.bin > 1 {
+        Box::new(BinnedSource::new(source, config.bin)?)
+    } else {
+        source
+    };
+    let binned_rig = rig.binned(config.bin);
+    let rig = &binned_rig;
+    // A decoding region is given in camera pixels.
+    let binned_config = VideoConfig {
+        decode: DecodeConfig {
+            roi: config.decode.roi.map(|r| Roi {
+                x: r.x / config.bin.max(1),
+                y: r.y / config.bin.max(1),
+                width: r.width / config.bin.max(1),
+                height: r.height / config.bin.max(1),
+            }),
+            ..config.decode.clone()
+        },
+        ..config.clone()
+    };
+    let config = &binned_config;
+    let mut binned_truth = truth.map(|inner| BinnedTruth::new(inner, config.bin));
+    let mut truth = binned_truth.as_mut().map(|t| t as &mut dyn TruthSource);
     let mut format = source.format().clone();
     if let Some(fps) = config.decode.fps {
         format.fps = fps;

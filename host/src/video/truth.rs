@@ -113,6 +113,43 @@ impl TruthSource for TruthFolder {
     }
 }
 
+/// Ground truth for frames binned by a factor ([`crate::capture::binning`]): each block's
+/// mean depth, NaN where any pixel of the block is off the object (the block's ray passes
+/// through its centre, where a smooth surface's depth is the block's mean to second order).
+pub struct BinnedTruth<'a> {
+    inner: &'a mut dyn TruthSource,
+    factor: usize,
+}
+
+impl<'a> BinnedTruth<'a> {
+    /// The truth of `inner` binned by `factor` (1 or 0: unchanged).
+    pub fn new(inner: &'a mut dyn TruthSource, factor: usize) -> Self {
+        Self { inner, factor }
+    }
+}
+
+impl TruthSource for BinnedTruth<'_> {
+    fn depth_for(&mut self, decoded: Range<usize>) -> Result<Option<TruthDepth>, VideoError> {
+        let truth = self.inner.depth_for(decoded)?;
+        if self.factor <= 1 {
+            return Ok(truth);
+        }
+        Ok(truth.map(|t| TruthDepth {
+            depth_mm: block_mean(&t.depth_mm, self.factor),
+            frame: t.frame,
+        }))
+    }
+}
+
+/// The mean of every whole `k`×`k` block of `depth` (NaN when the block has a NaN).
+fn block_mean(depth: &Array2<f32>, k: usize) -> Array2<f32> {
+    let (rows, cols) = (depth.nrows() / k, depth.ncols() / k);
+    Array2::from_shape_fn((rows, cols), |(r, c)| {
+        let block = depth.slice(ndarray::s![r * k..(r + 1) * k, c * k..(c + 1) * k]);
+        block.iter().map(|&d| f64::from(d)).sum::<f64>() as f32 / (k * k) as f32
+    })
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -141,5 +178,30 @@ mod tests {
             .unwrap_err();
         assert!(wrong.to_string().contains("depth_00020.npy"), "{wrong}");
         assert!(TruthFolder::open(&dir.path().join("nothing"), (2, 3)).is_err());
+    }
+
+    /// Binned truth is the block mean, NaN on blocks that leave the object; factor 1 passes
+    /// the truth through.
+    #[test]
+    fn binned_truth_is_the_mean_of_whole_blocks() {
+        let dir = tempfile::tempdir().unwrap();
+        let file = dir.path().join("depth.npy");
+        let mut depth = Array2::from_shape_fn((4, 5), |(r, c)| (r * 10 + c) as f32);
+        depth[(3, 3)] = f32::NAN;
+        write_npy(&file, &depth).unwrap();
+        let mut folder = TruthFolder::open(&file, (4, 5)).unwrap();
+        let binned = BinnedTruth::new(&mut folder, 2)
+            .depth_for(0..8)
+            .unwrap()
+            .unwrap();
+        assert_eq!(binned.depth_mm.dim(), (2, 2));
+        assert_eq!(binned.depth_mm[(0, 0)], 5.5);
+        assert_eq!(binned.depth_mm[(1, 0)], 25.5);
+        assert!(binned.depth_mm[(1, 1)].is_nan());
+        let same = BinnedTruth::new(&mut folder, 1)
+            .depth_for(0..8)
+            .unwrap()
+            .unwrap();
+        assert_eq!(same.depth_mm.dim(), (4, 5));
     }
 }
