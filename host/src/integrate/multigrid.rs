@@ -27,8 +27,10 @@
 //! neighbours are all still zero) is just b_k / a_kk, with no clearing of the solution first,
 //! and the finest level works in the caller's r and z without copying them. The residual is
 //! restricted from the even nodes alone: the forward sweep relaxes the odd ones last, so theirs
-//! is zero but for rounding (the same preconditioner in exact arithmetic, for half the
-//! residual's cost; since session 29).
+//! is zero but for rounding; and the coarse correction is prolongated to the even nodes alone:
+//! the backward sweep relaxes the odd ones first, from their even neighbours, and overwrites
+//! them. (The same preconditioner in exact arithmetic, for half the cost of residual and
+//! prolongation; since session 29.)
 
 use super::band_cholesky::BandCholesky;
 use rayon::prelude::*;
@@ -573,8 +575,14 @@ impl Multigrid {
             } else {
                 (&self.levels[l - 1].a, &self.rhs[l], &mut fine_part[l])
             };
-            for (xi, &p) in x.iter_mut().zip(&self.levels[l].parent) {
-                *xi += OVER_CORRECTION * xc[p as usize];
+            // The backward sweep relaxes the odd nodes first, from their even neighbours (their
+            // own value is read only with weight 0), so the correction goes to the even ones.
+            for (children, &c) in self.levels[l].even_children.iter().zip(xc) {
+                for &k in children {
+                    if k != NONE {
+                        x[k as usize] += OVER_CORRECTION * c;
+                    }
+                }
             }
             for _ in 0..SMOOTHING_SWEEPS {
                 a.gauss_seidel(b, x, false, &mut self.residual[l]);
