@@ -22,7 +22,7 @@
 
 use super::least_squares::Topology;
 use super::multigrid::{GridLaplacian, Multigrid, NONE};
-use super::pcg::{Stop, preconditioned_cg};
+use super::pcg::{CgVectors, Stop, preconditioned_cg};
 use super::{IntegrateError, SurfaceGradients};
 use crate::types::{DepthMap, NormalField};
 use ndarray::Array2;
@@ -316,6 +316,7 @@ fn solve(
         x,
         Stop::PreconditionedResidual(config.tolerance),
         config.max_iterations,
+        &mut CgVectors::default(),
     )
 }
 

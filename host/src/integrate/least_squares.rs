@@ -11,7 +11,7 @@
 //! mask's size.
 
 use super::multigrid::{GridLaplacian, Multigrid, NONE, PARALLEL_BAND as NODES_PER_TASK};
-use super::pcg::{Stop, preconditioned_cg};
+use super::pcg::{CgVectors, Stop, preconditioned_cg};
 use super::{IntegrateConfig, IntegrateError, SurfaceGradients};
 use ndarray::Array2;
 use rayon::prelude::*;
@@ -134,16 +134,47 @@ impl Topology {
         (label, count as usize)
     }
 
-    /// The weighted Laplacian of edge weights `weight[k]` = (right, down) edges of node k; every
-    /// node's row is gathered on its own, in parallel.
+    /// The weighted Laplacian of edge weights `weight[k]` = (right, down) edges of node k.
     pub fn laplacian(&self, weight: &[[f64; 2]]) -> GridLaplacian {
-        let weights: Vec<[f64; 4]> = self
-            .neighbours
-            .par_iter()
+        let n = self.len();
+        let (mut weights, mut diag) = (vec![[0.0; 4]; n], vec![0.0; n]);
+        self.laplacian_weights(weight, &mut weights, &mut diag);
+        GridLaplacian::new(
+            self.shape,
+            self.cells.clone(),
+            self.neighbours.clone(),
+            weights,
+            diag,
+        )
+    }
+
+    /// Gives `lap`, a Laplacian of this graph ([`Self::laplacian`]), the edge weights `weight`
+    /// in place: equal to `self.laplacian(weight)` without copying the graph again.
+    pub fn reweight_laplacian(&self, lap: &mut GridLaplacian, weight: &[[f64; 2]]) {
+        assert!(
+            lap.len() == self.len() && lap.shape == self.shape,
+            "a Laplacian of another graph"
+        );
+        debug_assert!(lap.neighbours == self.neighbours);
+        lap.update(|weights, diag| self.laplacian_weights(weight, weights, diag));
+    }
+
+    /// The Laplacian's edge weights towards each neighbour (right, down, left, up) and its
+    /// diagonal for edge weights `weight`; every node's row is gathered on its own, in
+    /// parallel.
+    fn laplacian_weights(&self, weight: &[[f64; 2]], weights: &mut [[f64; 4]], diag: &mut [f64]) {
+        assert!(
+            weight.len() == self.len(),
+            "one (right, down) weight pair per node"
+        );
+        weights
+            .par_iter_mut()
             .with_min_len(NODES_PER_TASK)
+            .zip(diag.par_iter_mut())
+            .zip(&self.neighbours)
             .enumerate()
-            .map(|(k, nb)| {
-                let mut w = [0.0; 4];
+            .for_each(|(k, ((w, dk), nb))| {
+                *w = [0.0; 4];
                 for d in 0..4 {
                     let j = nb[d];
                     if j != NONE {
@@ -155,21 +186,8 @@ impl Topology {
                         };
                     }
                 }
-                w
-            })
-            .collect();
-        let diag = weights
-            .par_iter()
-            .with_min_len(NODES_PER_TASK)
-            .map(|w| REGULARISATION + w.iter().sum::<f64>())
-            .collect();
-        GridLaplacian::new(
-            self.shape,
-            self.cells.clone(),
-            self.neighbours.clone(),
-            weights,
-            diag,
-        )
+                *dk = REGULARISATION + w.iter().sum::<f64>();
+            });
     }
 }
 
@@ -298,6 +316,7 @@ pub(crate) fn conjugate_gradients(
         x,
         Stop::ResidualNorm(tolerance),
         max_iterations,
+        &mut CgVectors::default(),
     )
 }
 

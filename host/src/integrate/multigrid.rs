@@ -19,8 +19,18 @@
 //!
 //! The aggregation (coarse grids, node maps, components) depends on the mask's graph only, so
 //! solves on the same mask with new edge weights (the coverage passes of one integration, the
-//! passes of one reconstruction) keep it and recompute only the Galerkin operators and the
-//! coarsest factor ([`Multigrid::reweight`], identical to a fresh hierarchy).
+//! passes of one reconstruction) keep it and recompute only the Galerkin operators' weights, in
+//! place, and the coarsest factor ([`Multigrid::reweight`], identical to a fresh hierarchy);
+//! the fine operator itself takes new weights in place too ([`GridLaplacian::update`]).
+//!
+//! Each V-cycle starts from zero on every level, so its first half-sweep (the even nodes, whose
+//! neighbours are all still zero) is just b_k / a_kk, with no clearing of the solution first,
+//! and the finest level works in the caller's r and z without copying them. The residual is
+//! restricted from the even nodes alone: the forward sweep relaxes the odd ones last, so theirs
+//! is zero but for rounding; and the coarse correction is prolongated to the even nodes alone:
+//! the backward sweep relaxes the odd ones first, from their even neighbours, and overwrites
+//! them. (The same preconditioner in exact arithmetic, for half the cost of residual and
+//! prolongation; since session 29.)
 
 use super::band_cholesky::BandCholesky;
 use rayon::prelude::*;
@@ -36,6 +46,8 @@ const COARSEST_SIZE: usize = 256;
 const COARSE_SHIFT: f64 = 1e-8;
 /// Gauss–Seidel sweeps before and after each coarse-grid correction.
 const SMOOTHING_SWEEPS: usize = 1;
+// The V-cycle's first pre-smoothing sweep is the one from zero.
+const _: () = assert!(SMOOTHING_SWEEPS >= 1);
 /// Operators (or colours) with fewer nodes run on the calling thread: handing a smaller one to
 /// the thread pool costs more than it saves.
 const PARALLEL_NODES: usize = 16_384;
@@ -93,25 +105,24 @@ impl GridLaplacian {
             neighbours.len() == n && weights.len() == n && diag.len() == n,
             "a Laplacian's parts must all have one entry per node"
         );
-        let stencil = neighbours
+        let mut stencil: Vec<Stencil> = neighbours
             .par_iter()
             .with_min_len(PARALLEL_BAND)
-            .zip(&weights)
-            .zip(&diag)
             .enumerate()
-            .map(|(k, ((nb, w), &d))| {
+            .map(|(k, nb)| {
                 assert!(
                     nb.iter().all(|&j| j == NONE || (j as usize) < n),
                     "node {k} has a neighbour outside the {n} nodes"
                 );
                 Stencil {
-                    weights: [0, 1, 2, 3].map(|d| if nb[d] == NONE { 0.0 } else { w[d] }),
-                    diag: d,
-                    inverse_diag: 1.0 / d,
+                    weights: [0.0; 4],
+                    diag: 0.0,
+                    inverse_diag: 0.0,
                     neighbours: nb.map(|j| if j == NONE { k as u32 } else { j }),
                 }
             })
             .collect();
+        fill_stencil_weights(&mut stencil, &neighbours, &weights, &diag);
         let colour = |k: usize| (cells[k].0 + cells[k].1) % 2;
         let mut colours = [Vec::new(), Vec::new()];
         for (k, nb) in neighbours.iter().enumerate() {
@@ -137,6 +148,20 @@ impl GridLaplacian {
     /// Number of unknowns.
     pub fn len(&self) -> usize {
         self.cells.len()
+    }
+
+    /// Sets new edge weights and diagonal on the same graph: `set` receives the weights and the
+    /// diagonal to overwrite (one entry per node, as [`Self::new`] takes them), then the
+    /// kernels' stencils follow them. The cells, neighbours and colour lists are kept, so the
+    /// result equals [`Self::new`] with the new weights bit for bit without rebuilding them.
+    pub fn update(&mut self, set: impl FnOnce(&mut [[f64; 4]], &mut [f64])) {
+        set(&mut self.weights, &mut self.diag);
+        fill_stencil_weights(
+            &mut self.stencil,
+            &self.neighbours,
+            &self.weights,
+            &self.diag,
+        );
     }
 
     /// y = A x (in parallel bands on a large operator; every entry is one node's own sum, so
@@ -171,31 +196,72 @@ impl GridLaplacian {
         assert!(b.len() == self.stencil.len() && x.len() == self.stencil.len());
         let order = if forward { [0, 1] } else { [1, 0] };
         for colour in order {
-            let nodes = &self.colours[colour];
-            let relaxed = &mut scratch[..nodes.len()];
-            let x_now: &[f64] = x;
-            let band = |(out, ks): (&mut [f64], &[u32])| {
-                for (o, &k) in out.iter_mut().zip(ks) {
-                    let st = &self.stencil[k as usize];
-                    *o = (b[k as usize] + off_diagonal_sum(st, x_now)) * st.inverse_diag;
-                }
-            };
-            if nodes.len() < PARALLEL_NODES {
-                band((relaxed, nodes));
-            } else {
-                relaxed
-                    .par_chunks_mut(PARALLEL_BAND)
-                    .zip(nodes.par_chunks(PARALLEL_BAND))
-                    .for_each(band);
-            }
-            for (&k, &v) in nodes.iter().zip(relaxed.iter()) {
-                x[k as usize] = v;
-            }
+            self.relax_colour(colour, b, x, scratch);
         }
     }
 
-    /// The Galerkin coarsening by 2×2 aggregation and the fine → coarse node map.
-    fn coarsen(&self, regularisation: f64) -> (GridLaplacian, Vec<u32>) {
+    /// The forward sweep of [`Self::gauss_seidel`] from x = 0, without reading `x`: the even
+    /// nodes' neighbours are all zero, so their update is b_k / a_kk (computed as
+    /// (b_k + 0)·(1/a_kk), which is what the sweep from zero computes bit for bit when the
+    /// weights are finite and non-negative); the odd nodes are set to 0 in the same pass (a
+    /// missing neighbour is a zero-weight reference to the node itself) and then relaxed as
+    /// usual. Equals `x.fill(0.0)` followed by a forward sweep, and saves its first half-sweep.
+    fn gauss_seidel_from_zero(&self, b: &[f64], x: &mut [f64], scratch: &mut [f64]) {
+        assert!(b.len() == self.stencil.len() && x.len() == self.stencil.len());
+        let band = |x: &mut [f64], stencil: &[Stencil], b: &[f64], cells: &[(usize, usize)]| {
+            for (((xk, st), &bk), &(r, c)) in x.iter_mut().zip(stencil).zip(b).zip(cells) {
+                *xk = if (r + c) % 2 == 0 {
+                    (bk + 0.0) * st.inverse_diag
+                } else {
+                    0.0
+                };
+            }
+        };
+        if x.len() < PARALLEL_NODES {
+            band(x, &self.stencil, b, &self.cells);
+        } else {
+            x.par_chunks_mut(PARALLEL_BAND)
+                .zip(self.stencil.par_chunks(PARALLEL_BAND))
+                .zip(b.par_chunks(PARALLEL_BAND))
+                .zip(self.cells.par_chunks(PARALLEL_BAND))
+                .for_each(|(((x, st), b), cells)| band(x, st, b, cells));
+        }
+        self.relax_colour(1, b, x, scratch);
+    }
+
+    /// Relaxes the nodes of one colour of the checkerboard (their updates are independent; see
+    /// [`Self::gauss_seidel`]).
+    fn relax_colour(&self, colour: usize, b: &[f64], x: &mut [f64], scratch: &mut [f64]) {
+        let nodes = &self.colours[colour];
+        if nodes.len() < PARALLEL_NODES {
+            // On the calling thread the updates go straight into `x`: a node reads only the
+            // other colour's entries.
+            for &k in nodes {
+                let st = &self.stencil[k as usize];
+                x[k as usize] = (b[k as usize] + off_diagonal_sum(st, x)) * st.inverse_diag;
+            }
+            return;
+        }
+        let relaxed = &mut scratch[..nodes.len()];
+        let x_now: &[f64] = x;
+        let band = |(out, ks): (&mut [f64], &[u32])| {
+            for (o, &k) in out.iter_mut().zip(ks) {
+                let st = &self.stencil[k as usize];
+                *o = (b[k as usize] + off_diagonal_sum(st, x_now)) * st.inverse_diag;
+            }
+        };
+        relaxed
+            .par_chunks_mut(PARALLEL_BAND)
+            .zip(nodes.par_chunks(PARALLEL_BAND))
+            .for_each(band);
+        for (&k, &v) in nodes.iter().zip(relaxed.iter()) {
+            x[k as usize] = v;
+        }
+    }
+
+    /// The Galerkin coarsening by 2×2 aggregation: the coarse operator and how this level's
+    /// nodes map to it.
+    fn coarsen(&self, regularisation: f64) -> CoarseLevel {
         let (rows, cols) = (self.shape.0.div_ceil(2), self.shape.1.div_ceil(2));
         let mut index = vec![NONE; rows * cols];
         for &(r, c) in &self.cells {
@@ -213,50 +279,153 @@ impl GridLaplacian {
             .iter()
             .map(|&(r, c)| index[(r / 2) * cols + c / 2])
             .collect();
-        let coarse = self.galerkin((rows, cols), cells, &parent, regularisation);
-        (coarse, parent)
-    }
-
-    /// The Galerkin operator PᵀAP on the aggregates `cells` (grid `shape`) that `parent` maps
-    /// this operator's nodes to: the coarse edge weights sum the fine edges joining two
-    /// aggregates.
-    fn galerkin(
-        &self,
-        shape: (usize, usize),
-        cells: Vec<(usize, usize)>,
-        parent: &[u32],
-        regularisation: f64,
-    ) -> GridLaplacian {
+        // The coarse graph: two aggregates are neighbours where a fine edge joins them.
         let n = cells.len();
         let mut neighbours = vec![[NONE; 4]; n];
-        let mut weights = vec![[0.0; 4]; n];
-        let mut count = vec![0usize; n];
+        let mut children = vec![0u32; n];
+        let mut even_children = vec![[NONE; 2]; n];
         for (k, nb) in self.neighbours.iter().enumerate() {
             let pk = parent[k] as usize;
-            count[pk] += 1;
+            children[pk] += 1;
+            let (r, c) = self.cells[k];
+            if (r + c) % 2 == 0 {
+                // A 2×2 block holds two even cells, its top-left and bottom-right ones.
+                let slot = usize::from(even_children[pk][0] != NONE);
+                even_children[pk][slot] = k as u32;
+            }
             // Right (0) and down (1) edges cover every fine edge once.
             for d in 0..2 {
                 if nb[d] == NONE {
                     continue;
                 }
                 let pj = parent[nb[d] as usize] as usize;
-                if pj == pk {
-                    continue;
+                if pj != pk {
+                    neighbours[pk][d] = pj as u32;
+                    neighbours[pj][d + 2] = pk as u32;
                 }
-                let w = self.weights[k][d];
-                neighbours[pk][d] = pj as u32;
-                weights[pk][d] += w;
-                neighbours[pj][d + 2] = pk as u32;
-                weights[pj][d + 2] += w;
             }
         }
-        let diag = weights
-            .iter()
-            .zip(&count)
-            .map(|(w, &m)| w.iter().sum::<f64>() + regularisation * m as f64)
-            .collect();
-        GridLaplacian::new(shape, cells, neighbours, weights, diag)
+        let mut coarse = GridLaplacian::new(
+            (rows, cols),
+            cells,
+            neighbours,
+            vec![[0.0; 4]; n],
+            vec![0.0; n],
+        );
+        self.galerkin(&mut coarse, &parent, &children, regularisation);
+        CoarseLevel {
+            a: coarse,
+            parent,
+            children,
+            even_children,
+        }
     }
+
+    /// The restriction Pᵀ(b − A x) after a forward sweep, from the even nodes alone: the odd
+    /// nodes were relaxed last, from the even values that are still in `x`, so their residual
+    /// is zero but for rounding. `even_children[p]` holds the even nodes of aggregate p (its
+    /// top-left and bottom-right cells, [`NONE`] where absent) and `coarse_b[p]` gets the sum of
+    /// their residuals; each aggregate's sum is its own, so a large level is restricted in
+    /// parallel bands, with no clearing of `coarse_b` and without storing the residual.
+    fn restrict_even_residual(
+        &self,
+        b: &[f64],
+        x: &[f64],
+        even_children: &[[u32; 2]],
+        coarse_b: &mut [f64],
+    ) {
+        assert!(b.len() == self.stencil.len() && x.len() == self.stencil.len());
+        assert!(even_children.len() == coarse_b.len());
+        let residual = |k: u32| {
+            let k = k as usize;
+            let st = &self.stencil[k];
+            b[k] - (st.diag * x[k] - off_diagonal_sum(st, x))
+        };
+        let band = |(out, blocks): (&mut [f64], &[[u32; 2]])| {
+            for (o, &[first, second]) in out.iter_mut().zip(blocks) {
+                let mut sum = 0.0;
+                if first != NONE {
+                    sum += residual(first);
+                }
+                if second != NONE {
+                    sum += residual(second);
+                }
+                *o = sum;
+            }
+        };
+        if self.len() < PARALLEL_NODES {
+            band((coarse_b, even_children));
+        } else {
+            // About PARALLEL_BAND fine nodes per task.
+            coarse_b
+                .par_chunks_mut(PARALLEL_BAND / 4)
+                .zip(even_children.par_chunks(PARALLEL_BAND / 4))
+                .for_each(band);
+        }
+    }
+
+    /// Sets the weights of the Galerkin operator PᵀAP, `coarse`, on the aggregates that
+    /// `parent` maps this operator's nodes to (`children` fine nodes each; the graph as
+    /// [`Self::coarsen`] built it): the coarse edge weights sum the fine edges joining two
+    /// aggregates, and each fine node brings its `regularisation` to its aggregate's diagonal.
+    fn galerkin(
+        &self,
+        coarse: &mut GridLaplacian,
+        parent: &[u32],
+        children: &[u32],
+        regularisation: f64,
+    ) {
+        assert!(parent.len() == self.len() && children.len() == coarse.len());
+        coarse.update(|weights, diag| {
+            weights.fill([0.0; 4]);
+            for (k, nb) in self.neighbours.iter().enumerate() {
+                let pk = parent[k] as usize;
+                for d in 0..2 {
+                    if nb[d] == NONE {
+                        continue;
+                    }
+                    let pj = parent[nb[d] as usize] as usize;
+                    if pj == pk {
+                        continue;
+                    }
+                    let w = self.weights[k][d];
+                    weights[pk][d] += w;
+                    weights[pj][d + 2] += w;
+                }
+            }
+            for ((dk, w), &m) in diag.iter_mut().zip(weights.iter()).zip(children) {
+                *dk = w.iter().sum::<f64>() + regularisation * m as f64;
+            }
+        });
+    }
+}
+
+/// Every node's stencil weights (0 towards a missing neighbour), diagonal and inverse diagonal
+/// from the operator's parts; the stencil's neighbour indices, checked once by
+/// [`GridLaplacian::new`], are left as they are.
+fn fill_stencil_weights(
+    stencil: &mut [Stencil],
+    neighbours: &[[u32; 4]],
+    weights: &[[f64; 4]],
+    diag: &[f64],
+) {
+    assert!(
+        neighbours.len() == stencil.len()
+            && weights.len() == stencil.len()
+            && diag.len() == stencil.len(),
+        "a Laplacian's parts must all have one entry per node"
+    );
+    stencil
+        .par_iter_mut()
+        .with_min_len(PARALLEL_BAND)
+        .zip(neighbours)
+        .zip(weights)
+        .zip(diag)
+        .for_each(|(((st, nb), w), &d)| {
+            st.weights = [0, 1, 2, 3].map(|i| if nb[i] == NONE { 0.0 } else { w[i] });
+            st.diag = d;
+            st.inverse_diag = 1.0 / d;
+        });
 }
 
 /// Σ_j w_kj x_j over the neighbours of one node's stencil, where `x` has one entry per node of
@@ -273,10 +442,13 @@ fn off_diagonal_sum(st: &Stencil, x: &[f64]) -> f64 {
     (w0 * at(j0) + w1 * at(j1)) + (w2 * at(j2) + w3 * at(j3))
 }
 
-/// One level below the finest: its operator and the map from the next finer level's nodes.
+/// One level below the finest: its operator, the map from the next finer level's nodes, the
+/// number of them in each of its nodes and which of them are even on the finer checkerboard.
 struct CoarseLevel {
     a: GridLaplacian,
     parent: Vec<u32>,
+    children: Vec<u32>,
+    even_children: Vec<[u32; 2]>,
 }
 
 /// The multigrid V-cycle preconditioner of a [`GridLaplacian`].
@@ -287,7 +459,8 @@ pub(crate) struct Multigrid {
     /// Connected component of each coarsest-level node and the component sizes.
     component: Vec<usize>,
     component_size: Vec<f64>,
-    /// Per level (finest first): right-hand side, solution and residual scratch.
+    /// Per level (finest first): right-hand side and solution (empty on the finest level, whose
+    /// are the caller's r and z), and residual scratch.
     rhs: Vec<Vec<f64>>,
     solution: Vec<Vec<f64>>,
     residual: Vec<Vec<f64>>,
@@ -302,68 +475,74 @@ impl Multigrid {
             if finer.len() <= COARSEST_SIZE {
                 break;
             }
-            let (a, parent) = finer.coarsen(regularisation);
-            if a.len() * 10 > finer.len() * 9 {
+            let level = finer.coarsen(regularisation);
+            if level.a.len() * 10 > finer.len() * 9 {
                 break; // Coarsening stalled (e.g. a one-pixel-wide mask).
             }
-            levels.push(CoarseLevel { a, parent });
+            levels.push(level);
         }
         let coarsest = levels.last().and_then(|l| coarsest_factor(&l.a));
         let (component, component_size) = components(levels.last().map_or(fine, |l| &l.a));
         let sizes: Vec<usize> = std::iter::once(fine.len())
             .chain(levels.iter().map(|l| l.a.len()))
             .collect();
-        let zeros = || sizes.iter().map(|&n| vec![0.0; n]).collect::<Vec<_>>();
+        let coarse_zeros = || {
+            std::iter::once(Vec::new())
+                .chain(sizes[1..].iter().map(|&n| vec![0.0; n]))
+                .collect::<Vec<_>>()
+        };
         Self {
             levels,
             coarsest,
             component,
             component_size,
-            rhs: zeros(),
-            solution: zeros(),
-            residual: zeros(),
+            rhs: coarse_zeros(),
+            solution: coarse_zeros(),
+            residual: sizes.iter().map(|&n| vec![0.0; n]).collect(),
         }
     }
 
     /// Recomputes the coarse operators for new edge weights of `fine`, which must have the
     /// graph of the operator the hierarchy was built for (the same mask): the aggregates, the
-    /// node maps, the components and the scratch are kept, so the result equals
-    /// [`Self::new`]`(fine, regularisation)` bit for bit at a fraction of its cost.
+    /// node maps, the components, the coarse graphs and the scratch are kept and the coarse
+    /// weights overwritten in place, so the result equals [`Self::new`]`(fine, regularisation)`
+    /// bit for bit at a fraction of its cost.
     pub fn reweight(&mut self, fine: &GridLaplacian, regularisation: f64) {
         for l in 0..self.levels.len() {
             let (finer_levels, rest) = self.levels.split_at_mut(l);
             let finer = finer_levels.last().map_or(fine, |f| &f.a);
             let level = &mut rest[0];
-            let cells = std::mem::take(&mut level.a.cells);
-            level.a = finer.galerkin(level.a.shape, cells, &level.parent, regularisation);
+            finer.galerkin(&mut level.a, &level.parent, &level.children, regularisation);
         }
         self.coarsest = self.levels.last().and_then(|l| coarsest_factor(&l.a));
     }
 
-    /// z = B⁻¹ r: one symmetric V-cycle from z = 0 on the finest operator `fine`.
+    /// z = B⁻¹ r: one symmetric V-cycle from z = 0 on the finest operator `fine` (every entry
+    /// of `z` is overwritten; the finest level works in `r` and `z` directly).
     pub fn precondition(&mut self, fine: &GridLaplacian, r: &[f64], z: &mut [f64]) {
+        assert!(r.len() == fine.len() && z.len() == fine.len());
         let depth = self.levels.len();
-        let op = |l: usize| if l == 0 { fine } else { &self.levels[l - 1].a };
-        self.rhs[0].copy_from_slice(r);
-        // Down: pre-smooth, restrict the residual.
+        // Down: pre-smooth from zero, restrict the residual.
         for l in 0..depth {
-            let a = op(l);
             let (finer_rhs, coarser_rhs) = self.rhs.split_at_mut(l + 1);
-            let (b, x, res) = (&finer_rhs[l], &mut self.solution[l], &mut self.residual[l]);
-            x.fill(0.0);
-            for _ in 0..SMOOTHING_SWEEPS {
+            let (a, b, x): (&GridLaplacian, &[f64], &mut [f64]) = if l == 0 {
+                (fine, r, &mut *z)
+            } else {
+                (&self.levels[l - 1].a, &finer_rhs[l], &mut self.solution[l])
+            };
+            let res = &mut self.residual[l];
+            a.gauss_seidel_from_zero(b, x, res);
+            for _ in (0..SMOOTHING_SWEEPS).skip(1) {
                 a.gauss_seidel(b, x, true, res);
             }
-            a.apply(x, res);
-            let coarse_b = &mut coarser_rhs[0];
-            coarse_b.fill(0.0);
-            for ((ri, bi), &p) in res.iter().zip(b).zip(&self.levels[l].parent) {
-                coarse_b[p as usize] += bi - ri;
-            }
+            a.restrict_even_residual(b, x, &self.levels[l].even_children, &mut coarser_rhs[0]);
         }
         // Coarsest solve.
-        let (b, x) = (&self.rhs[depth], &mut self.solution[depth]);
-        x.fill(0.0);
+        let (b, x): (&[f64], &mut [f64]) = if depth == 0 {
+            (r, &mut *z)
+        } else {
+            (&self.rhs[depth], &mut self.solution[depth])
+        };
         match (&self.coarsest, depth) {
             (Some(chol), d) if d > 0 => {
                 // Pseudo-inverse: no constant per component in or out (the Neumann null space).
@@ -373,9 +552,14 @@ impl Multigrid {
                 remove_component_means(x, &self.component, &self.component_size);
             }
             _ => {
-                let a = op(depth);
+                let a = if depth == 0 {
+                    fine
+                } else {
+                    &self.levels[depth - 1].a
+                };
                 let sweeps = if depth == 0 { 1 } else { 50 };
                 let scratch = &mut self.residual[depth];
+                x.fill(0.0);
                 for _ in 0..sweeps {
                     a.gauss_seidel(b, x, true, scratch);
                     a.gauss_seidel(b, x, false, scratch);
@@ -385,16 +569,25 @@ impl Multigrid {
         // Up: prolongate the correction, post-smooth.
         for l in (0..depth).rev() {
             let (fine_part, coarse_part) = self.solution.split_at_mut(l + 1);
-            let (x, xc) = (&mut fine_part[l], &coarse_part[0]);
-            for (xi, &p) in x.iter_mut().zip(&self.levels[l].parent) {
-                *xi += OVER_CORRECTION * xc[p as usize];
+            let xc = &coarse_part[0];
+            let (a, b, x): (&GridLaplacian, &[f64], &mut [f64]) = if l == 0 {
+                (fine, r, &mut *z)
+            } else {
+                (&self.levels[l - 1].a, &self.rhs[l], &mut fine_part[l])
+            };
+            // The backward sweep relaxes the odd nodes first, from their even neighbours (their
+            // own value is read only with weight 0), so the correction goes to the even ones.
+            for (children, &c) in self.levels[l].even_children.iter().zip(xc) {
+                for &k in children {
+                    if k != NONE {
+                        x[k as usize] += OVER_CORRECTION * c;
+                    }
+                }
             }
-            let a = if l == 0 { fine } else { &self.levels[l - 1].a };
             for _ in 0..SMOOTHING_SWEEPS {
-                a.gauss_seidel(&self.rhs[l], x, false, &mut self.residual[l]);
+                a.gauss_seidel(b, x, false, &mut self.residual[l]);
             }
         }
-        z.copy_from_slice(&self.solution[0]);
     }
 }
 
@@ -474,8 +667,9 @@ mod tests {
         topology.laplacian(&vec![[1.0; 2]; topology.len()])
     }
 
-    /// A hierarchy reweighted for new edge weights preconditions exactly as one built afresh
-    /// for them, and differently from the one it was built for (the weights reached it).
+    /// A Laplacian and a hierarchy reweighted in place for new edge weights precondition
+    /// exactly as ones built afresh for them, and differently from the ones they were built for
+    /// (the weights reached them); what `z` held before does not matter.
     #[test]
     fn a_reweighted_hierarchy_equals_a_fresh_one() {
         let mask = ndarray::Array2::from_shape_fn((60, 75), |(r, c)| {
@@ -485,24 +679,102 @@ mod tests {
         let topology = super::super::least_squares::Topology::new(&mask);
         let n = topology.len();
         let weight = |k: usize, d: usize| [1.0 + ((k * 31 + d * 7) % 13) as f64, 0.5][d % 2];
-        let first = topology.laplacian(&(0..n).map(|_| [1.0; 2]).collect::<Vec<_>>());
-        let second = topology.laplacian(
-            &(0..n)
-                .map(|k| [weight(k, 0), weight(k, 1)])
-                .collect::<Vec<_>>(),
-        );
-        let mut kept = Multigrid::new(&first, 1e-10);
+        let second_weights: Vec<[f64; 2]> = (0..n).map(|k| [weight(k, 0), weight(k, 1)]).collect();
+        let mut reused = topology.laplacian(&(0..n).map(|_| [1.0; 2]).collect::<Vec<_>>());
+        let mut kept = Multigrid::new(&reused, 1e-10);
         let r: Vec<f64> = (0..n).map(|k| ((k * 7919) % 101) as f64 - 50.0).collect();
         let mut before = vec![0.0; n];
-        kept.precondition(&first, &r, &mut before);
-        kept.reweight(&second, 1e-10);
+        kept.precondition(&reused, &r, &mut before);
+        topology.reweight_laplacian(&mut reused, &second_weights);
+        kept.reweight(&reused, 1e-10);
+        let second = topology.laplacian(&second_weights);
+        assert_eq!(reused.weights, second.weights);
+        assert_eq!(reused.diag, second.diag);
         let mut fresh = Multigrid::new(&second, 1e-10);
-        let (mut a, mut b) = (vec![0.0; n], vec![0.0; n]);
-        kept.precondition(&second, &r, &mut a);
+        let (mut a, mut b) = (vec![f64::NAN; n], vec![0.0; n]);
+        kept.precondition(&reused, &r, &mut a);
         fresh.precondition(&second, &r, &mut b);
         assert!(kept.levels.len() >= 2, "{} levels", kept.levels.len());
         assert_eq!(a, b);
         assert_ne!(a, before);
+        let (mut ya, mut yb) = (vec![0.0; n], vec![0.0; n]);
+        reused.apply(&r, &mut ya);
+        second.apply(&r, &mut yb);
+        assert_eq!(ya, yb);
+    }
+
+    /// The first pre-smoothing sweep from zero equals zeroing x and sweeping forward, bit for
+    /// bit, whatever x held (NaN included), on a Laplacian with uneven weights and isolated
+    /// nodes (whose stencils refer to themselves).
+    #[test]
+    fn the_sweep_from_zero_equals_a_forward_sweep_after_zeroing() {
+        let mask = ndarray::Array2::from_shape_fn((30, 41), |(r, c)| {
+            let (y, x) = (r as f64 - 15.0, c as f64 - 20.0);
+            (x * x + y * y < 13.0 * 13.0 && c != 20) || (r % 7 == 3 && c == 39)
+        });
+        let topology =
+            super::super::least_squares::Topology::with_isolated(&mask, |(_, c)| c == 39);
+        let n = topology.len();
+        assert!(
+            topology
+                .neighbours
+                .iter()
+                .any(|nb| nb.iter().all(|&j| j == NONE))
+        );
+        let weights: Vec<[f64; 2]> = (0..n)
+            .map(|k| [0.25 + (k % 5) as f64, 1.0 + (k % 3) as f64 * 0.3])
+            .collect();
+        let a = topology.laplacian(&weights);
+        let b: Vec<f64> = (0..n).map(|k| ((k * 7919) % 101) as f64 - 50.3).collect();
+        let mut scratch = vec![0.0; n];
+        let mut reference = vec![0.0; n];
+        a.gauss_seidel(&b, &mut reference, true, &mut scratch);
+        let mut from_zero = vec![f64::NAN; n];
+        a.gauss_seidel_from_zero(&b, &mut from_zero, &mut scratch);
+        let bits = |v: &[f64]| v.iter().map(|x| x.to_bits()).collect::<Vec<_>>();
+        assert_eq!(bits(&from_zero), bits(&reference));
+        assert!(reference.iter().all(|x| x.is_finite() && *x != 0.0));
+    }
+
+    /// After a forward sweep, the restriction from the even nodes alone equals the full
+    /// restriction Pᵀ(b − A x) but for rounding (the odd nodes' residual is zero), and the
+    /// residual it leaves out is that small while the even nodes' is not.
+    #[test]
+    fn the_even_restriction_equals_the_full_one_after_a_forward_sweep() {
+        let mask = ndarray::Array2::from_shape_fn((37, 45), |(r, c)| {
+            let (y, x) = (r as f64 - 18.0, c as f64 - 21.0);
+            x * x + y * y < 17.0 * 17.0 && !(r == 18 && c > 10)
+        });
+        let topology = super::super::least_squares::Topology::new(&mask);
+        let n = topology.len();
+        let weights: Vec<[f64; 2]> = (0..n)
+            .map(|k| [0.5 + (k % 7) as f64, 1.0 + (k % 4) as f64 * 0.25])
+            .collect();
+        let a = topology.laplacian(&weights);
+        let level = a.coarsen(1e-10);
+        let b: Vec<f64> = (0..n).map(|k| ((k * 7919) % 101) as f64 - 50.3).collect();
+        let (mut x, mut res) = (vec![0.0; n], vec![0.0; n]);
+        a.gauss_seidel_from_zero(&b, &mut x, &mut res);
+        a.apply(&x, &mut res);
+        let mut full = vec![0.0; level.a.len()];
+        let (mut odd, mut even) = (0.0f64, 0.0f64);
+        for (k, &p) in level.parent.iter().enumerate() {
+            let r = b[k] - res[k];
+            full[p as usize] += r;
+            let (row, col) = a.cells[k];
+            if (row + col) % 2 == 0 {
+                even = even.max(r.abs());
+            } else {
+                odd = odd.max(r.abs());
+            }
+        }
+        let mut from_even = vec![f64::NAN; level.a.len()];
+        a.restrict_even_residual(&b, &x, &level.even_children, &mut from_even);
+        let scale = b.iter().fold(0.0f64, |m, v| m.max(v.abs()));
+        assert!(even > 0.1 * scale && odd < 1e-13 * scale, "{even} {odd}");
+        for (p, (e, f)) in from_even.iter().zip(&full).enumerate() {
+            assert!((e - f).abs() <= 1e-13 * scale, "aggregate {p}: {e} vs {f}");
+        }
     }
 
     #[test]

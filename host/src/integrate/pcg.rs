@@ -15,10 +15,23 @@ pub(crate) enum Stop {
     PreconditionedResidual(f64),
 }
 
+/// The vectors of a conjugate-gradient solve (residual r, preconditioned residual z, search
+/// direction p and its image Ap), kept between solves so that a sequence of solves allocates
+/// them once. Every entry is written before it is read, so what a previous solve left in them
+/// does not matter.
+#[derive(Debug, Default)]
+pub(crate) struct CgVectors {
+    r: Vec<f64>,
+    z: Vec<f64>,
+    p: Vec<f64>,
+    ap: Vec<f64>,
+}
+
 /// Solves A x = b from the given `x` (warm start) with the operator `apply` (y = A x) and
-/// the preconditioner `precondition` (z = M⁻¹ r); returns the iterations run (`max_iterations`
-/// when the stopping rule was not met). Stops early, without a step, when the curvature pᵀAp is
-/// not positive (A singular along p: the system is solved as far as it can be).
+/// the preconditioner `precondition` (z = M⁻¹ r; both must set every entry of their output)
+/// in the scratch `vectors`; returns the iterations run (`max_iterations` when the stopping
+/// rule was not met). Stops early, without a step, when the curvature pᵀAp is not positive (A
+/// singular along p: the system is solved as far as it can be).
 pub(crate) fn preconditioned_cg(
     apply: impl Fn(&[f64], &mut [f64]),
     mut precondition: impl FnMut(&[f64], &mut [f64]),
@@ -26,48 +39,55 @@ pub(crate) fn preconditioned_cg(
     x: &mut [f64],
     stop: Stop,
     max_iterations: usize,
+    vectors: &mut CgVectors,
 ) -> usize {
     let n = b.len();
+    assert!(x.len() == n, "x and b must have the same length");
     let dot = |u: &[f64], v: &[f64]| u.iter().zip(v).map(|(p, q)| p * q).sum::<f64>();
-    let mut z = vec![0.0; n];
+    let CgVectors { r, z, p, ap } = vectors;
+    for v in [&mut *r, &mut *z, &mut *p, &mut *ap] {
+        v.resize(n, 0.0);
+    }
     let threshold = match stop {
         Stop::ResidualNorm(t) => t * dot(b, b).sqrt().max(f64::MIN_POSITIVE),
         Stop::PreconditionedResidual(t) => {
-            precondition(b, &mut z);
-            t * t * dot(b, &z).max(f64::MIN_POSITIVE)
+            precondition(b, z);
+            t * t * dot(b, z).max(f64::MIN_POSITIVE)
         }
     };
-    let mut r = vec![0.0; n];
-    apply(x, &mut r);
+    apply(x, r);
     r.iter_mut().zip(b).for_each(|(ri, bi)| *ri = bi - *ri);
-    precondition(&r, &mut z);
-    let mut p = z.clone();
-    let mut rz = dot(&r, &z);
-    let mut ap = vec![0.0; n];
+    precondition(r, z);
+    p.copy_from_slice(z);
+    let mut rz = dot(r, z);
+    // ‖r‖², summed in the same order as `dot` (here and in the update below).
+    let mut rr = dot(r, r);
     for iteration in 0..max_iterations {
         let converged = match stop {
-            Stop::ResidualNorm(_) => dot(&r, &r).sqrt() <= threshold,
+            Stop::ResidualNorm(_) => rr.sqrt() <= threshold,
             Stop::PreconditionedResidual(_) => rz <= threshold,
         };
         if converged {
             return iteration;
         }
-        apply(&p, &mut ap);
-        let curvature = dot(&p, &ap);
+        apply(p, ap);
+        let curvature = dot(p, ap);
         if curvature.is_nan() || curvature <= 0.0 {
             return iteration;
         }
         let alpha = rz / curvature;
-        for k in 0..n {
-            x[k] += alpha * p[k];
-            r[k] -= alpha * ap[k];
+        rr = 0.0;
+        for ((xk, rk), (pk, apk)) in x.iter_mut().zip(r.iter_mut()).zip(p.iter().zip(ap.iter())) {
+            *xk += alpha * pk;
+            *rk -= alpha * apk;
+            rr += *rk * *rk;
         }
-        precondition(&r, &mut z);
-        let rz_next = dot(&r, &z);
+        precondition(r, z);
+        let rz_next = dot(r, z);
         let beta = rz_next / rz;
         rz = rz_next;
         p.iter_mut()
-            .zip(&z)
+            .zip(z.iter())
             .for_each(|(pk, zk)| *pk = zk + beta * *pk);
     }
     max_iterations
@@ -111,6 +131,7 @@ mod tests {
                 &mut x,
                 stop,
                 1000,
+                &mut CgVectors::default(),
             );
             assert!(iterations <= n + 1, "{stop:?}: {iterations}");
             let worst = x
@@ -124,13 +145,66 @@ mod tests {
         let mut x = truth.clone();
         let none = |r: &[f64], z: &mut [f64]| z.copy_from_slice(r);
         assert_eq!(
-            preconditioned_cg(laplacian_1d, none, &b, &mut x, Stop::ResidualNorm(1e-9), 50),
+            preconditioned_cg(
+                laplacian_1d,
+                none,
+                &b,
+                &mut x,
+                Stop::ResidualNorm(1e-9),
+                50,
+                &mut CgVectors::default()
+            ),
             0
         );
         let mut x = vec![0.0; n];
         assert_eq!(
-            preconditioned_cg(laplacian_1d, none, &b, &mut x, Stop::ResidualNorm(1e-15), 3),
+            preconditioned_cg(
+                laplacian_1d,
+                none,
+                &b,
+                &mut x,
+                Stop::ResidualNorm(1e-15),
+                3,
+                &mut CgVectors::default()
+            ),
             3
         );
+    }
+
+    /// Vectors kept from a solve of another size (and left full of its values) give the same
+    /// solution, bit for bit, as fresh ones.
+    #[test]
+    fn kept_vectors_give_the_same_solution_as_fresh_ones() {
+        let jacobi = |r: &[f64], z: &mut [f64]| z.iter_mut().zip(r).for_each(|(z, r)| *z = r / 2.0);
+        let b_of = |n: usize| -> Vec<f64> { (0..n).map(|i| (i as f64 * 0.7).cos()).collect() };
+        let mut kept = CgVectors::default();
+        let mut other = vec![0.0; 57];
+        let used = preconditioned_cg(
+            laplacian_1d,
+            jacobi,
+            &b_of(57),
+            &mut other,
+            Stop::ResidualNorm(1e-10),
+            1000,
+            &mut kept,
+        );
+        assert!(used > 0 && kept.r.len() == 57);
+        for n in [30, 80] {
+            let b = b_of(n);
+            let (mut x_kept, mut x_fresh) = (vec![0.0; n], vec![0.0; n]);
+            let stop = Stop::PreconditionedResidual(1e-10);
+            let a = preconditioned_cg(laplacian_1d, jacobi, &b, &mut x_kept, stop, 1000, &mut kept);
+            let f = preconditioned_cg(
+                laplacian_1d,
+                jacobi,
+                &b,
+                &mut x_fresh,
+                stop,
+                1000,
+                &mut CgVectors::default(),
+            );
+            assert_eq!((a, &x_kept), (f, &x_fresh));
+            assert!(a > 0);
+        }
     }
 }

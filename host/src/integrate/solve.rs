@@ -6,7 +6,7 @@
 use super::grid::DepthGrid;
 use super::inpaint::{Inpainting, inpaint};
 use super::least_squares::{self, EdgeEquations, Topology};
-use super::multigrid::Multigrid;
+use super::multigrid::{GridLaplacian, Multigrid};
 use super::parts::{absorb_small_parts, anchor};
 use super::pcg::{Stop, preconditioned_cg};
 use super::warm::warm_start;
@@ -91,9 +91,9 @@ pub(super) fn solve_window(
         .take()
         .filter(|c| c.origin == problem.origin && c.region == region);
     profile.reused_graph = cached.is_some();
-    let (topology, mut hierarchy) = match cached {
-        Some(c) => (c.topology, c.hierarchy),
-        None => (Topology::new(&region), None),
+    let (topology, mut laplacian, mut hierarchy) = match cached {
+        Some(c) => (c.topology, c.laplacian, c.hierarchy),
+        None => (Topology::new(&region), None, None),
     };
     profile.add("graph", t);
     if topology.len() == 0 {
@@ -235,7 +235,14 @@ pub(super) fn solve_window(
             bilateral::uniform(&confidence, &slopes, &estimated)
         };
         let equations: EdgeEquations = bilateral::side_equations(&topology, &sides, &slopes, step);
-        let lap = topology.laplacian(&equations.weight);
+        // The graph's Laplacian is built once and then takes each pass's weights in place.
+        let lap: &GridLaplacian = match laplacian.as_mut() {
+            Some(l) => {
+                topology.reweight_laplacian(l, &equations.weight);
+                l
+            }
+            None => laplacian.insert(topology.laplacian(&equations.weight)),
+        };
         let b = equations.right_hand_side(&topology);
         profile.add("edge equations", t);
         let t = Instant::now();
@@ -245,20 +252,21 @@ pub(super) fn solve_window(
         // on the graph only, so it is kept across solves (and calls) on the same mask.
         let multigrid = match hierarchy.as_mut() {
             Some(m) => {
-                m.reweight(&lap, least_squares::REGULARISATION);
+                m.reweight(lap, least_squares::REGULARISATION);
                 m
             }
-            None => hierarchy.insert(Multigrid::new(&lap, least_squares::REGULARISATION)),
+            None => hierarchy.insert(Multigrid::new(lap, least_squares::REGULARISATION)),
         };
         profile.add("hierarchy setup", t);
         let t = Instant::now();
         let solved = preconditioned_cg(
             |u, v| lap.apply(u, v),
-            |r, z| multigrid.precondition(&lap, r, z),
+            |r, z| multigrid.precondition(lap, r, z),
             &b,
             &mut x,
             Stop::ResidualNorm(solve_tolerance),
             config.max_iterations,
+            &mut workspace.cg,
         );
         profile.add("conjugate gradients", t);
         profile.solve_iterations.push(solved);
@@ -407,6 +415,7 @@ pub(super) fn solve_window(
         origin: problem.origin,
         region,
         topology,
+        laplacian,
         hierarchy,
     });
     Ok(out)

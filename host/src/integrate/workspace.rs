@@ -8,10 +8,12 @@
 //! operators themselves are recomputed for every solve ([`Multigrid::reweight`]): the two-LED
 //! pixels' edge weights follow their slopes, and operators built for the first coverage pass
 //! doubled the conjugate-gradient iterations of the later ones on the turning ellipsoid (75
-//! instead of 36).
+//! instead of 36). The graph's Laplacian is kept too and takes each solve's edge weights in
+//! place, and the conjugate-gradient vectors are allocated once per workspace.
 
 use super::least_squares::Topology;
-use super::multigrid::Multigrid;
+use super::multigrid::{GridLaplacian, Multigrid};
+use super::pcg::CgVectors;
 use crate::timing::StageTiming;
 use ndarray::Array2;
 use std::time::Instant;
@@ -62,6 +64,8 @@ pub(crate) struct CachedSystem {
     pub region: Array2<bool>,
     /// Their graph.
     pub topology: Topology,
+    /// The Laplacian of that graph, with the last solve's edge weights.
+    pub laplacian: Option<GridLaplacian>,
     /// The multigrid aggregation on that graph, with the last solve's coarse operators.
     pub hierarchy: Option<Multigrid>,
 }
@@ -73,6 +77,8 @@ pub(crate) struct CachedSystem {
 pub struct IntegrationWorkspace {
     pub(crate) cached: Option<CachedSystem>,
     pub(crate) profile: IntegrationProfile,
+    /// Scratch vectors of the conjugate-gradient solves.
+    pub(crate) cg: CgVectors,
 }
 
 impl std::fmt::Debug for IntegrationWorkspace {
