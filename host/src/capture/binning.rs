@@ -150,7 +150,7 @@ impl Binning {
     /// Sums (or averages) each block of `codes` into `out` (one entry per binned pixel): by
     /// rows for the common factors (the block's columns a fixed-size array the compiler
     /// unrolls), block by block otherwise.
-    fn bin_codes<C: Copy + Into<u32>>(&self, codes: &[C], out: &mut [u16]) {
+    fn bin_codes<C: Copy + Ord + Into<u32>>(&self, codes: &[C], out: &mut [u16]) {
         match self.factor {
             2 => self.bin_rows::<C, 2>(codes, out),
             3 => self.bin_rows::<C, 3>(codes, out),
@@ -179,7 +179,7 @@ impl Binning {
     /// its `K` source rows column by column (a loop the compiler vectorises), then sums the
     /// columns of each block. Saturation is rare, so the brightest sample of each block is
     /// looked for only when a source row's brightest sample saturates.
-    fn bin_rows<C: Copy + Into<u32>, const K: usize>(&self, codes: &[C], out: &mut [u16]) {
+    fn bin_rows<C: Copy + Ord + Into<u32>, const K: usize>(&self, codes: &[C], out: &mut [u16]) {
         let (width, binned_width) = (self.source.width, self.binned.width);
         let used = binned_width * K;
         let mut columns = vec![0u32; used];
@@ -192,7 +192,8 @@ impl Binning {
                 for (column, &c) in columns.iter_mut().zip(source_row) {
                     *column += c.into();
                 }
-                let row_max = source_row.iter().map(|&c| c.into()).fold(0, u32::max);
+                // The maximum in the samples' own width (16 or 8 lanes per instruction).
+                let row_max = source_row.iter().copied().max().map_or(0, Into::into);
                 saturated |= row_max >= self.saturated_from;
             }
             if saturated {
