@@ -54,11 +54,11 @@ impl Binning {
                 source.width, source.height
             )));
         }
-        if !(source.black_level.is_finite()
+        let usable = source.black_level.is_finite()
             && source.white_level.is_finite()
-            && source.black_level < source.white_level)
-            || !(1..=16).contains(&source.bit_depth)
-        {
+            && source.black_level < source.white_level
+            && (1..=16).contains(&source.bit_depth);
+        if !usable {
             return Err(CaptureError::Other(format!(
                 "cannot bin a stream of {} bits with black level {} and white level {}",
                 source.bit_depth, source.black_level, source.white_level
