@@ -29,6 +29,8 @@ use std::sync::{Mutex, MutexGuard};
 pub const MARKER: &str = ".meb-output.json";
 /// Name of the lock file inside a temporary folder while it is being written.
 const LOCK: &str = ".meb-writing.lock";
+/// Name of the lock file before it is locked (only [`LOCK`] is ever probed by other runs).
+const LOCK_STARTING: &str = ".meb-writing.lock.starting";
 /// Infix of temporary folder names: `.NAME.meb-partial-PID-RANDOM`.
 const PARTIAL: &str = ".meb-partial-";
 
@@ -127,15 +129,20 @@ impl OutputFolder {
             lock: None,
             committed: false,
         };
-        let lock_path = folder.temp.join(LOCK);
-        let lock = File::create(&lock_path).map_err(|e| FilesError::write(&lock_path, e))?;
+        // The lock file is locked under a private name and only then renamed to LOCK: a
+        // concurrent run that looks for stale folders must never find it unlocked (it would
+        // take this folder for a dead writer's and delete it, or hold the lock while this one
+        // tries to take it).
+        let (unlocked, lock_path) = (folder.temp.join(LOCK_STARTING), folder.temp.join(LOCK));
+        let lock = File::create(&unlocked).map_err(|e| FilesError::write(&unlocked, e))?;
         lock.try_lock().map_err(|e| {
             let source = match e {
                 std::fs::TryLockError::Error(e) => e,
                 std::fs::TryLockError::WouldBlock => std::io::ErrorKind::WouldBlock.into(),
             };
-            FilesError::write(&lock_path, source)
+            FilesError::write(&unlocked, source)
         })?;
+        std::fs::rename(&unlocked, &lock_path).map_err(|e| FilesError::write(&lock_path, e))?;
         folder.lock = Some(lock);
         Ok(folder)
     }
