@@ -67,26 +67,23 @@ impl Binning {
         let block = (factor * factor) as u32;
         let extra_bits = block.next_power_of_two().trailing_zeros() as u8;
         let max_code = (1u32 << source.bit_depth) - 1;
-        let (combine, binned) = if source.bit_depth + extra_bits <= 16 {
-            let k2 = block as f32;
-            let binned = FrameFormat {
-                width: source.width / factor,
-                height: source.height / factor,
-                bit_depth: source.bit_depth + extra_bits,
-                black_level: source.black_level * k2,
-                white_level: source.white_level * k2,
-                fps: source.fps,
-            };
-            (Combine::Sum, binned)
+        let combine = if source.bit_depth + extra_bits <= 16 {
+            Combine::Sum
         } else {
-            let binned = FrameFormat {
-                width: source.width / factor,
-                height: source.height / factor,
-                ..source.clone()
-            };
-            (Combine::Mean, binned)
+            Combine::Mean
         };
-        let saturated_from = (f64::from(source.white_level) - 0.5).ceil().max(0.0) as u32;
+        let mut binned = FrameFormat {
+            width: source.width / factor,
+            height: source.height / factor,
+            ..source.clone()
+        };
+        if combine == Combine::Sum {
+            let k2 = block as f32;
+            binned.bit_depth += extra_bits;
+            binned.black_level *= k2;
+            binned.white_level *= k2;
+        }
+        let saturated_from = source.saturated_from();
         let saturated_code = match combine {
             Combine::Sum => max_code * block,
             Combine::Mean => max_code,
@@ -99,11 +96,6 @@ impl Binning {
             saturated_from,
             saturated_code,
         })
-    }
-
-    /// The binning factor k.
-    pub fn factor(&self) -> usize {
-        self.factor
     }
 
     /// The binned frames' format.

@@ -37,6 +37,13 @@ impl FrameFormat {
         }
     }
 
+    /// The first saturated code: the last code that rounds to white, ⌈white − ½⌉ (u32::MAX
+    /// when white is beyond the code range).
+    pub fn saturated_from(&self) -> u32 {
+        let white = (f64::from(self.white_level) - 0.5).ceil().max(0.0);
+        white.min(f64::from(u32::MAX)) as u32
+    }
+
     /// Converts a code value to a fraction of full scale.
     pub fn to_fraction(&self, code: f32) -> f32 {
         (code - self.black_level) / (self.white_level - self.black_level)

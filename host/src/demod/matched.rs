@@ -53,14 +53,13 @@ impl CodeLimits {
     /// Limits for a stream: saturated from `white_level − ½` (the last code that rounds to
     /// white), under-exposed below `black + below·(white − black)`.
     pub fn new(format: &crate::capture::FrameFormat, underexposed_below: f32) -> Self {
-        let white = (f64::from(format.white_level) - 0.5).ceil().max(0.0);
         let black = f64::from(format.black_level);
         let dark = (black
             + f64::from(underexposed_below) * (f64::from(format.white_level) - black))
             .ceil()
             .max(0.0);
         Self {
-            white: white.min(f64::from(u32::MAX)) as u32,
+            white: format.saturated_from(),
             dark: dark.min(f64::from(u32::MAX)) as u32,
         }
     }
