@@ -9,7 +9,10 @@
 //! piece of the mask, and per part the bilateral integrator cut off along a depth discontinuity.
 //! The light vectors depend on it: after each integration every part's constant is chosen by a
 //! golden-section search that minimises the Lambertian misfit of its pixels lit by more than
-//! three LEDs ([`ModelMisfit`]), bracketed to ±`offset_search_mm` around the integrated depth.
+//! three LEDs ([`ModelMisfit`]), bracketed to ±`offset_search_mm` around the integrated depth
+//! in the first pass, and to ±[`REFINE_OFFSET_BRACKET_MM`] around the offset that puts it back
+//! on the previous pass's depth in the later ones (the whole range again when the minimum lies
+//! at that bracket's edge).
 //!
 //! [`from_decoded`] is the one path from a decoded capture to a reconstruction: `meb
 //! reconstruct`, `meb demo` and the hardware-in-the-loop tests all call it, with the
@@ -524,21 +527,9 @@ fn passes(
                 (None, Some(before)) => OffsetPrior::Previous(before),
                 (_, None) => OffsetPrior::None,
             };
-            let cap = if warm.is_some() {
-                WARM_MISFIT_PIXELS
-            } else {
-                MISFIT_PIXELS
-            };
-            if let Err(reason) = place_parts(
-                images,
-                rig,
-                noise,
-                &ps,
-                &mut integration,
-                config,
-                prior,
-                cap,
-            ) {
+            if let Err(reason) =
+                place_parts(images, rig, noise, &ps, &mut integration, config, prior)
+            {
                 verdict = Err(reason);
             }
             time("depth offset search", pass, start);
@@ -657,7 +648,8 @@ enum OffsetPrior<'a> {
 }
 
 /// Moves every part of the integrated depth to the offset that minimises the Lambertian
-/// misfit of (at most about `cap` of) its pixels lit by more than three LEDs (module docs);
+/// misfit of its pixels lit by more than three LEDs (module docs; at most about
+/// [`MISFIT_PIXELS`] of them, [`WARM_MISFIT_PIXELS`] from a warm start);
 /// parts with too few such pixels stay where the integrator put them. After a previous pass
 /// ([`OffsetPrior::Previous`]) the minimum is searched within ±[`REFINE_OFFSET_BRACKET_MM`] of
 /// the offset that puts the part back on that pass's depth, and over the whole range only
@@ -666,7 +658,6 @@ enum OffsetPrior<'a> {
 /// around it; a clearly preferred offset at the edge of that bracket is searched for once more
 /// in the wider ±[`WARM_WIDE_BRACKET_MM`] one, and at that one's edge too is an error (the
 /// object moved further than a warm start can follow).
-#[allow(clippy::too_many_arguments)]
 fn place_parts(
     images: &LedImages,
     rig: &Rig,
@@ -675,9 +666,12 @@ fn place_parts(
     integration: &mut Integration,
     config: &ReconstructConfig,
     prior: OffsetPrior,
-    cap: usize,
 ) -> Result<(), String> {
     let projection = rig.camera.projection();
+    let cap = match prior {
+        OffsetPrior::Warm(_) => WARM_MISFIT_PIXELS,
+        OffsetPrior::None | OffsetPrior::Previous(_) => MISFIT_PIXELS,
+    };
     for part in 0..integration.parts as u32 {
         let depth = &integration.depth.depth_mm;
         let pixels = constraining_pixels(ps, depth, cap, |p| integration.part[p] == part);
