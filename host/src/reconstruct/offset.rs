@@ -1,0 +1,511 @@
+//! The depth offset of every separately integrated part (module docs of [`super`]): the
+//! constant integration leaves free is chosen by the Lambertian misfit of the part's pixels lit
+//! by more than three LEDs ([`ModelMisfit`]), by a coarse scan and golden-section refinement
+//! in a cold first pass, near the offset carried from the previous pass in later ones, and
+//! around the offset carried from the previous window from a warm start (kept unless a t-test
+//! clearly prefers another, [`OFFSET_PREFERENCE_T`], then damped by [`WARM_OFFSET_GAIN`]).
+
+use super::ReconstructConfig;
+use crate::integrate::Integration;
+use crate::photometric::lights::moved_depth;
+use crate::photometric::{Lights, ModelMisfit, PhotometricResult};
+use crate::rig::{Projection, Rig};
+use crate::types::LedImages;
+use ndarray::{Array2, Zip};
+
+/// Width in mm of the bracket at which the golden-section search for a part's depth offset
+/// stops (far below the depth accuracy; each step costs one misfit evaluation).
+const OFFSET_TOLERANCE_MM: f64 = 0.01;
+
+/// Pixels whose misfit places a part (cold start; evenly spread over the part). Fewer in the
+/// passes before the last cost accuracy: 5 000 there moved `meb demo`'s depth RMSE from 0.15
+/// to 0.25 mm (sphere) and 0.26 to 0.14 mm (cube) for 25 ms less per pass on a 1280×720
+/// capture.
+const MISFIT_PIXELS: usize = 20_000;
+
+/// Pixels whose misfit places a part from a warm start, where the bracket is narrow.
+const WARM_MISFIT_PIXELS: usize = 5_000;
+
+/// Half-width in mm of the bracket around the offset carried from the previous pass in which a
+/// cold reconstruction's later passes search first: those passes' integration starts from the
+/// previous pass's placed depth and their light vectors moved by a few mm at most (on the
+/// 1280×720 still ellipsoid, thesis-dynamic: 1.6, 0.04 and 0.004 mm median from pass to pass),
+/// so the minimum lies close to the carried offset. A minimum at this bracket's edge falls back
+/// to the full ±[`ReconstructConfig::offset_search_mm`] scan. On that capture the search fell
+/// from 55 to 27 ms per later pass with the same depth (RMSE 0.613 mm), and `meb demo` kept its
+/// results (sphere 0.15 mm, cube 0.26 mm).
+const REFINE_OFFSET_BRACKET_MM: f64 = 4.0;
+
+/// Half-width in mm of a warm start's offset bracket around the carried offset. The turning
+/// ellipsoid (7.5 rpm, 40 ms windows) moves its surface by at most ~2 mm between windows.
+pub const WARM_OFFSET_BRACKET_MM: f64 = 4.0;
+
+/// Half-width in mm of the wider bracket a warm start searches once when the misfit's minimum
+/// lies at the edge of the ±[`WARM_OFFSET_BRACKET_MM`] one; only a minimum at this bracket's
+/// edge too (an object that really moved in depth) redoes the window cold. On the 1280×720
+/// turning ellipsoid (thesis-dynamic rig, 19 windows of 40 frames) the absolute depth offset
+/// of the per-window minimum scattered with a standard deviation of 2.2 mm (−2.5 to +4.7 mm
+/// from the truth) and one warm window in three hit the ±4 mm edge, each then redone cold at
+/// ~4× a warm window's cost without a lower depth RMSE; ±12 mm is > 5 of those standard
+/// deviations.
+pub const WARM_WIDE_BRACKET_MM: f64 = 12.0;
+
+/// Bands of a part over which [`clearly_better`] compares two offsets' misfits.
+const OFFSET_TEST_BANDS: usize = 20;
+
+/// Student's t (19 degrees of freedom, one-sided) above which the misfit clearly prefers
+/// another offset to the carried one: a false alarm about once in 300 parts when the two fit
+/// equally well. The misfit's minimum jitters by millimetres from window to window while the
+/// object moves by a fraction of that; a plain minimum made successive offsets differ by a
+/// median 3–4 mm and one window in five leave the warm bracket.
+pub const OFFSET_PREFERENCE_T: f64 = 3.0;
+
+/// Share of the way from the carried offset to a clearly preferred one that a warm start
+/// moves: the steady-state gain K of a constant-position Kalman filter across windows,
+/// K = P⁻/(P⁻ + r) with P⁻ = P + q and P = (−q + √(q² + 4qr))/2. Process noise: the turning
+/// ellipsoid's surface moves by at most ~2 mm between windows, σ_q ≈ 1 mm (q = 1 mm²).
+/// Measurement noise: the misfit's minimum jumps between windows (successive windows' offsets
+/// differed by a median 3–4 mm, so σ_r ≈ 3.5 / (0.674 √2) ≈ 3.7 mm, r ≈ 13.7 mm²), which gives
+/// P ≈ 3.2 mm², K ≈ 0.24. A within-window test cannot see that jitter (the minimum is sharp in
+/// every window); the prior across windows damps it, and a move of at most K times the ±4 mm
+/// bracket (< [`WARM_LIGHTS_MOVED_MM`](super::WARM_LIGHTS_MOVED_MM)) lets a warm window stop after one pass.
+pub const WARM_OFFSET_GAIN: f64 = 0.24;
+
+/// `depth` with the pixels of `part` moved by `offset` mm towards the camera
+/// ([`moved_depth`]).
+fn moved_part(
+    depth: &Array2<f32>,
+    parts: &Array2<u32>,
+    part: u32,
+    offset: f64,
+    projection: &Projection,
+) -> Array2<f32> {
+    let mut out = depth.clone();
+    Zip::from(&mut out).and(parts).for_each(|z, &p| {
+        if p == part && z.is_finite() {
+            *z = moved_depth(f64::from(*z), offset, projection) as f32;
+        }
+    });
+    out
+}
+
+/// What a pass knows of its parts' offsets before it searches ([`place_parts`]).
+#[derive(Debug, Clone, Copy)]
+pub(super) enum OffsetPrior<'a> {
+    /// Nothing: the first pass of a cold reconstruction scans the whole search range.
+    None,
+    /// The previous pass's placed depth, in a later pass of one reconstruction: the offset that
+    /// puts each part back on it is where the minimum is searched first.
+    Previous(&'a Array2<f32>),
+    /// The previous window's depth (a warm start).
+    Warm(&'a Array2<f32>),
+}
+
+/// Moves every part of the integrated depth to the offset that minimises the Lambertian
+/// misfit of its pixels lit by more than three LEDs (module docs; at most about
+/// [`MISFIT_PIXELS`] of them, [`WARM_MISFIT_PIXELS`] from a warm start);
+/// parts with too few such pixels stay where the integrator put them. After a previous pass
+/// ([`OffsetPrior::Previous`]) the minimum is searched within ±[`REFINE_OFFSET_BRACKET_MM`] of
+/// the offset that puts the part back on that pass's depth, and over the whole range only
+/// when it lies at that bracket's edge. From a warm start each part keeps the offset that puts
+/// it back on the start's depth unless the misfit clearly prefers another within the bracket
+/// around it; a clearly preferred offset at the edge of that bracket is searched for once more
+/// in the wider ±[`WARM_WIDE_BRACKET_MM`] one, and at that one's edge too is an error (the
+/// object moved further than a warm start can follow).
+pub(super) fn place_parts(
+    images: &LedImages,
+    rig: &Rig,
+    noise: Option<&Array2<f32>>,
+    ps: &PhotometricResult,
+    integration: &mut Integration,
+    config: &ReconstructConfig,
+    prior: OffsetPrior,
+) -> Result<(), String> {
+    let projection = rig.camera.projection();
+    let cap = match prior {
+        OffsetPrior::Warm(_) => WARM_MISFIT_PIXELS,
+        OffsetPrior::None | OffsetPrior::Previous(_) => MISFIT_PIXELS,
+    };
+    for part in 0..integration.parts as u32 {
+        let depth = &integration.depth.depth_mm;
+        let pixels = constraining_pixels(ps, depth, cap, |p| integration.part[p] == part);
+        let scan = Bracket::Scan(config.offset_search_mm);
+        let bracket = match prior {
+            OffsetPrior::None => scan,
+            // A part the previous pass did not place is scanned for.
+            OffsetPrior::Previous(before) => {
+                match carried_offset(depth, before, &pixels, &projection) {
+                    Some(centre) => Bracket::Near {
+                        centre,
+                        half: REFINE_OFFSET_BRACKET_MM.min(config.offset_search_mm),
+                    },
+                    None => scan,
+                }
+            }
+            OffsetPrior::Warm(before) => {
+                match carried_offset(depth, before, &pixels, &projection) {
+                    Some(centre) => Bracket::Around {
+                        centre,
+                        half: WARM_OFFSET_BRACKET_MM,
+                        wider: WARM_WIDE_BRACKET_MM,
+                    },
+                    None => return Err(format!("part {part} has no depth in the warm start")),
+                }
+            }
+        };
+        let Some((offset, at_edge)) =
+            best_offset(images, rig, noise, depth, &pixels, ps, config, bracket)
+        else {
+            continue;
+        };
+        if at_edge {
+            return Err(format!(
+                "part {part}'s depth offset lies at the edge of the warm start's ±{WARM_WIDE_BRACKET_MM} mm bracket"
+            ));
+        }
+        if offset != 0.0 {
+            integration.depth.depth_mm =
+                moved_part(depth, &integration.part, part, offset, &projection);
+        }
+    }
+    Ok(())
+}
+
+/// The offset (mm towards the camera, [`moved_depth`]) that best puts the integrated `depth`
+/// of `pixels` on the `carried` depth: the median of the per-pixel offsets (closed form of
+/// [`moved_depth`] solved for the offset); `None` when no pixel has both.
+fn carried_offset(
+    depth: &Array2<f32>,
+    carried: &Array2<f32>,
+    pixels: &[(usize, usize)],
+    projection: &Projection,
+) -> Option<f64> {
+    let mut offsets: Vec<f64> = pixels
+        .iter()
+        .filter_map(|&p| {
+            let (z, target) = (f64::from(depth[p]), f64::from(carried[p]));
+            if !(z.is_finite() && target.is_finite()) {
+                return None;
+            }
+            match projection {
+                Projection::Orthographic { .. } => Some(target - z),
+                Projection::Perspective { distance_mm, .. } => {
+                    let d = *distance_mm;
+                    (d - z > 0.0).then(|| d * (1.0 - (d - target) / (d - z)))
+                }
+            }
+        })
+        .collect();
+    if offsets.is_empty() {
+        return None;
+    }
+    let middle = offsets.len() / 2;
+    let (_, median, _) = offsets.select_nth_unstable_by(middle, f64::total_cmp);
+    Some(*median)
+}
+
+/// The pixels chosen by `inside` that constrain absolute depth: lit by more than three LEDs,
+/// with a depth; at most about `cap`, evenly spread.
+fn constraining_pixels(
+    ps: &PhotometricResult,
+    depth: &Array2<f32>,
+    cap: usize,
+    inside: impl Fn((usize, usize)) -> bool,
+) -> Vec<(usize, usize)> {
+    let pixels: Vec<(usize, usize)> = ps
+        .lit_count
+        .indexed_iter()
+        .filter(|(p, n)| **n > 3 && depth[*p].is_finite() && inside(*p))
+        .map(|(p, _)| p)
+        .collect();
+    let step = pixels.len().div_ceil(cap).max(1);
+    pixels.into_iter().step_by(step).collect()
+}
+
+/// Where [`best_offset`] looks.
+#[derive(Debug, Clone, Copy)]
+enum Bracket {
+    /// A coarse scan of ±this many mm, then golden-section refinement around its best sample.
+    Scan(f64),
+    /// Golden-section search of `centre` ± `half` mm; a minimum at its edge is replaced by a
+    /// [`Bracket::Scan`] of the whole range (±[`ReconstructConfig::offset_search_mm`]).
+    Near {
+        /// The offset carried from the previous pass (mm).
+        centre: f64,
+        /// Half-width of the bracket (mm).
+        half: f64,
+    },
+    /// Golden-section search of `centre` ± `half` mm, and once more of `centre` ± `wider` mm
+    /// when the minimum lies at the first one's edge (it may lie just beyond).
+    Around {
+        /// The carried offset (mm).
+        centre: f64,
+        /// Half-width of the first bracket (mm).
+        half: f64,
+        /// Half-width of the wider one (mm).
+        wider: f64,
+    },
+}
+
+/// The offset (mm towards the camera, within the `bracket`) of the depth of `pixels` that
+/// minimises their Lambertian misfit (module docs) — around a carried offset, that offset
+/// unless the misfit clearly prefers the minimum ([`clearly_better`]) — and whether it lies at
+/// the (wider) bracket's edge; `None` with fewer than 16 pixels. The light vectors and the
+/// pixels' rays and values are gathered once ([`ModelMisfit`]) for every bracket searched, and
+/// the carried offset's misfit once for both.
+#[allow(clippy::too_many_arguments)]
+fn best_offset(
+    images: &LedImages,
+    rig: &Rig,
+    noise: Option<&Array2<f32>>,
+    depth: &Array2<f32>,
+    pixels: &[(usize, usize)],
+    ps: &PhotometricResult,
+    config: &ReconstructConfig,
+    bracket: Bracket,
+) -> Option<(f64, bool)> {
+    if pixels.len() < 16 {
+        return None;
+    }
+    let lights = Lights::near_field(rig, Some(depth));
+    let model = ModelMisfit::new(
+        images,
+        &lights,
+        pixels,
+        noise,
+        &ps.noise_gains,
+        &config.photometric,
+    );
+    let misfit = |offset: f64| model.at(offset);
+    // Coarse scan of ±half, then golden-section refinement around the best sample.
+    let scan = |half: f64| {
+        let samples = 13;
+        let step = 2.0 * half / (samples - 1) as f64;
+        let (mut best, mut best_value) = (0.0, misfit(0.0));
+        for i in 0..samples {
+            let o = -half + step * i as f64;
+            let v = misfit(o);
+            if v < best_value {
+                (best, best_value) = (o, v);
+            }
+        }
+        let refined = golden_section(&misfit, best - step, best + step);
+        if misfit(refined) <= best_value {
+            refined
+        } else {
+            best
+        }
+    };
+    match bracket {
+        Bracket::Scan(half) => Some((scan(half), false)),
+        Bracket::Near { centre, half } => {
+            let refined = golden_section(&misfit, centre - half, centre + half);
+            if at_edge(refined, centre, half) {
+                Some((scan(config.offset_search_mm), false))
+            } else {
+                Some((refined, false))
+            }
+        }
+        // A warm start keeps the carried offset unless the misfit clearly prefers the best.
+        Bracket::Around {
+            centre,
+            half,
+            wider,
+        } => {
+            let centre_value = misfit(centre);
+            let mut centre_terms: Option<Vec<(f64, f64)>> = None;
+            let mut search = |half: f64| {
+                let refined = golden_section(&misfit, centre - half, centre + half);
+                let lower = misfit(refined) <= centre_value;
+                if refined == centre || !lower {
+                    return (centre, false);
+                }
+                let kept = centre_terms.get_or_insert_with(|| model.terms(centre));
+                if !clearly_better(kept, &model.terms(refined)) {
+                    return (centre, false);
+                }
+                // The minimum is one window's measurement: blend it with the carried offset
+                // (WARM_OFFSET_GAIN). Whether it left the bracket is judged on the measurement.
+                (
+                    centre + WARM_OFFSET_GAIN * (refined - centre),
+                    at_edge(refined, centre, half),
+                )
+            };
+            match search(half) {
+                (_, true) => Some(search(wider)),
+                found => Some(found),
+            }
+        }
+    }
+}
+
+/// Whether the per-pixel misfit `terms` (weighted misfit, energy; [`ModelMisfit::terms`]) of a
+/// `candidate` offset are clearly lower than those of the `kept` one: the pixels (in image
+/// order) are split into [`OFFSET_TEST_BANDS`] bands, each band's share of the relative misfit
+/// difference is summed, and the mean over bands must exceed [`OFFSET_PREFERENCE_T`] standard
+/// errors (a paired one-sided t-test; bands rather than pixels because neighbouring pixels'
+/// residuals are correlated).
+fn clearly_better(kept: &[(f64, f64)], candidate: &[(f64, f64)]) -> bool {
+    let energy = |terms: &[(f64, f64)]| terms.iter().map(|t| t.1).sum::<f64>();
+    let (kept_energy, candidate_energy) = (energy(kept), energy(candidate));
+    if candidate_energy <= 0.0 || kept.len() != candidate.len() {
+        return false;
+    }
+    if kept_energy <= 0.0 {
+        return true;
+    }
+    let bands = OFFSET_TEST_BANDS.min(kept.len());
+    if bands < 2 {
+        return false;
+    }
+    let size = kept.len().div_ceil(bands);
+    let sums: Vec<f64> = kept
+        .chunks(size)
+        .zip(candidate.chunks(size))
+        .map(|(k, c)| {
+            k.iter()
+                .zip(c)
+                .map(|(k, c)| k.0 / kept_energy - c.0 / candidate_energy)
+                .sum()
+        })
+        .collect();
+    let n = sums.len() as f64;
+    let mean = sums.iter().sum::<f64>() / n;
+    let variance = sums.iter().map(|d| (d - mean).powi(2)).sum::<f64>() / (n - 1.0);
+    if variance <= 0.0 {
+        return mean > 0.0;
+    }
+    mean / (variance / n).sqrt() > OFFSET_PREFERENCE_T
+}
+
+/// Whether a golden-section minimum `found` in `centre` ± `half` lies at the bracket's edge
+/// (within two tolerances of it: the minimum may lie beyond).
+fn at_edge(found: f64, centre: f64, half: f64) -> bool {
+    half - (found - centre).abs() < 2.0 * OFFSET_TOLERANCE_MM
+}
+
+/// The minimum of `f` on [a, b] by golden-section search, to [`OFFSET_TOLERANCE_MM`].
+fn golden_section(f: &impl Fn(f64) -> f64, mut a: f64, mut b: f64) -> f64 {
+    let ratio = 0.5 * (5f64.sqrt() - 1.0);
+    let mut c = b - ratio * (b - a);
+    let mut d = a + ratio * (b - a);
+    let (mut fc, mut fd) = (f(c), f(d));
+    while b - a > OFFSET_TOLERANCE_MM {
+        if fc < fd {
+            (b, d, fd) = (d, c, fc);
+            c = b - ratio * (b - a);
+            fc = f(c);
+        } else {
+            (a, c, fc) = (c, d, fd);
+            d = a + ratio * (b - a);
+            fd = f(d);
+        }
+    }
+    0.5 * (a + b)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::photometric::estimate_normals;
+    use crate::reconstruct::tests::still_sphere;
+
+    /// A later pass searches near the offset carried from the previous one, and scans the
+    /// whole range when the minimum lies at that bracket's edge.
+    #[test]
+    fn a_later_pass_searches_near_the_carried_offset_and_scans_beyond_it() {
+        let sphere = still_sphere();
+        let depth = &sphere.warm.depth_mm;
+        let lights = Lights::near_field(&sphere.rig, Some(depth));
+        let ps = estimate_normals(
+            &sphere.images,
+            &lights,
+            None,
+            Some(&sphere.noise),
+            &sphere.config.photometric,
+        )
+        .expect("photometric stereo");
+        let pixels = constraining_pixels(&ps, depth, WARM_MISFIT_PIXELS, |_| true);
+        let find = |bracket| {
+            let found = best_offset(
+                &sphere.images,
+                &sphere.rig,
+                Some(&sphere.noise),
+                depth,
+                &pixels,
+                &ps,
+                &sphere.config,
+                bracket,
+            );
+            found.expect("enough pixels").0
+        };
+        let scanned = find(Bracket::Scan(60.0));
+        // The cold reconstruction placed its depth at this minimum already.
+        assert!(scanned.abs() < 0.5, "scanned offset {scanned} mm");
+        assert_eq!(sphere.config.offset_search_mm, 60.0);
+        let near = |centre| Bracket::Near {
+            centre,
+            half: REFINE_OFFSET_BRACKET_MM,
+        };
+        let found = find(near(scanned + 1.5));
+        assert!(
+            (found - scanned).abs() < 0.05,
+            "within the bracket: {found} vs {scanned} mm"
+        );
+        // 10 mm off: the bracket's minimum lies at its edge, and the scan takes over.
+        assert_eq!(find(near(scanned + 10.0)), scanned);
+        assert_eq!(find(near(scanned - 10.0)), scanned);
+    }
+
+    #[test]
+    fn the_carried_offset_undoes_a_move_for_either_camera() {
+        let rig = Rig::preset("thesis-dynamic").expect("preset");
+        let perspective = rig.camera.projection();
+        let orthographic = Projection::centred(0.5, (8, 6));
+        let depth = Array2::from_shape_fn((6, 8), |(r, c)| (r as f32 - 2.5) * (c as f32 + 1.0));
+        let pixels: Vec<(usize, usize)> = depth.indexed_iter().map(|(p, _)| p).collect();
+        for projection in [&perspective, &orthographic] {
+            for offset in [-3.25, 0.0, 7.5] {
+                let moved = depth.mapv(|z| moved_depth(f64::from(z), offset, projection) as f32);
+                let carried = carried_offset(&depth, &moved, &pixels, projection).expect("pixels");
+                assert!((carried - offset).abs() < 1e-3, "{carried} vs {offset}");
+            }
+        }
+        let unknown = Array2::from_elem((6, 8), f32::NAN);
+        assert_eq!(
+            carried_offset(&depth, &unknown, &pixels, &perspective),
+            None
+        );
+    }
+
+    /// A candidate offset whose misfit is lower in every band is clearly better; one that
+    /// differs from the kept offset only by noise (fixed-seed sweep of zero-mean differences,
+    /// even where the noise happens to favour it in total) is not.
+    #[test]
+    fn only_a_clearly_lower_misfit_moves_a_carried_offset() {
+        use rand::{RngExt, SeedableRng};
+        let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(3);
+        let kept: Vec<(f64, f64)> = (0..5000)
+            .map(|_| (rng.random_range(0.5..1.5), 1.0))
+            .collect();
+        let better: Vec<(f64, f64)> = kept.iter().map(|&(m, e)| (0.8 * m, e)).collect();
+        assert!(clearly_better(&kept, &better));
+        assert!(!clearly_better(&better, &kept));
+        let mut false_alarms = 0;
+        let mut lower_in_total = 0;
+        for _ in 0..200 {
+            let noisy: Vec<(f64, f64)> = kept
+                .iter()
+                .map(|&(m, e)| (m + rng.random_range(-0.3..0.3), e))
+                .collect();
+            let total = |t: &[(f64, f64)]| t.iter().map(|t| t.0).sum::<f64>();
+            lower_in_total += usize::from(total(&noisy) < total(&kept));
+            false_alarms += usize::from(clearly_better(&kept, &noisy));
+        }
+        assert!(lower_in_total > 50, "{lower_in_total}");
+        assert!(false_alarms <= 3, "{false_alarms} of 200");
+        // Too few pixels to split, or nothing solved at the candidate: no preference.
+        assert!(!clearly_better(&kept[..1], &better[..1]));
+        assert!(!clearly_better(&kept, &vec![(0.0, 0.0); 5000]));
+    }
+}
