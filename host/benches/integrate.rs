@@ -116,6 +116,7 @@
 
 use criterion::{BatchSize, Criterion, criterion_group, criterion_main};
 use meb::capture::Samples;
+use meb::demod::decode_frames;
 use meb::integrate::{
     IntegrateConfig, Integration, IntegrationWorkspace, NormalPlane, SurfaceEvidence,
     integrate_surface, integrate_surface_with,
@@ -125,7 +126,6 @@ use meb::reconstruct::{Reconstruction, from_decoded};
 use meb::rig::{Projection, Rig};
 use meb::types::NormalField;
 use meb::video::VideoConfig;
-use meb::video::decode::decode_frames;
 use nalgebra::Vector3;
 use ndarray::Array2;
 use ndarray_npy::{read_npy, write_npy};

@@ -193,9 +193,9 @@ use meb::capture::binning::Binning;
 use meb::capture::memory::MemorySource;
 use meb::capture::{Frame, FrameFormat, FrameSource, Samples};
 use meb::demod::DecodeConfig;
+use meb::demod::decode_frames;
 use meb::reconstruct::{WarmStart, from_decoded, from_decoded_warm};
 use meb::rig::Rig;
-use meb::video::decode::decode_frames;
 use meb::video::{VideoConfig, process};
 use std::hint::black_box;
 

@@ -133,7 +133,7 @@ pub fn decode(
     config: &DecodeConfig,
     progress: &mut dyn FnMut(usize, usize),
 ) -> Result<Decoded, DemodError> {
-    let format = stream_format(source, config)?;
+    let format = stream_format(source.format(), config)?;
     let decoder = WindowDecoder::new(&format, config)?;
     skip_start(source, config.start)?;
     if config.start > 0 && source.frame_count_hint() == Some(0) {
@@ -156,35 +156,7 @@ pub fn decode(
             progress(read, plan.progress_total.max(read));
         })?;
         let got = window.frames.len();
-        let sample = decoder.sample(&window.frames);
-        let (leds, seed) = match state.leds {
-            Some(n) => (n, None),
-            None => {
-                let count = decoder.count_leds(&sample, config.leds, config.check_led_count)?;
-                state.leds = Some(count.leds);
-                state.detected = count.detected;
-                (count.leds, count.fit)
-            }
-        };
-        if got < 1usize << (leds + 1) {
-            if state.windows == 0 && got == 0 && config.start > 0 {
-                // The start skipped exactly every frame.
-                return Err(DemodError::StartBeyondEnd {
-                    start: config.start,
-                    available: config.start,
-                });
-            }
-            if state.windows == 0 {
-                return Err(DemodError::TooFewFrames {
-                    got,
-                    need: 1 << (leds + 1),
-                    leds,
-                });
-            }
-            break;
-        }
-        state.add(decoder.decode(&window.frames, &sample, leds, seed.as_ref()));
-        if got < want {
+        if !add_window(&decoder, &window.frames, config, &mut state)? || got < want {
             break;
         }
     }
@@ -192,12 +164,103 @@ pub fn decode(
     apply_verdict(decoded, config.on_implausible)
 }
 
-/// The stream's format with the configured frame-rate override.
-fn stream_format(
-    source: &dyn FrameSource,
+/// Decodes `frames` already in memory (each of `format`'s size) as one window with `config`,
+/// as [`decode`] decodes a source of those frames in one window; the frame range settings
+/// (`start`, `frames`) are ignored. The frames are read where they lie (copied only when
+/// `config.roi` cuts them): `meb video` decodes each window of its stream this way.
+pub fn decode_frames(
+    frames: &[Samples],
+    format: &FrameFormat,
     config: &DecodeConfig,
-) -> Result<FrameFormat, DemodError> {
-    let mut format = source.format().clone();
+) -> Result<Decoded, DemodError> {
+    let format = stream_format(format, config)?;
+    let decoder = WindowDecoder::new(&format, config)?;
+    if frames.len() > MAX_WINDOW_FRAMES {
+        return Err(DemodError::InvalidConfig(format!(
+            "{} frames are more than one window holds ({MAX_WINDOW_FRAMES})",
+            frames.len()
+        )));
+    }
+    if let Some((index, frame)) = frames
+        .iter()
+        .enumerate()
+        .find(|(_, f)| f.len() != format.pixels())
+    {
+        return Err(crate::capture::CaptureError::Other(format!(
+            "frame {index} has {} samples, expected {}x{}",
+            frame.len(),
+            format.width,
+            format.height
+        ))
+        .into());
+    }
+    let cropped: std::borrow::Cow<'_, [Samples]> = if decoder.roi.x == 0
+        && decoder.roi.y == 0
+        && (decoder.roi.width, decoder.roi.height) == (format.width, format.height)
+    {
+        std::borrow::Cow::Borrowed(frames)
+    } else {
+        std::borrow::Cow::Owned(
+            frames
+                .iter()
+                .map(|f| window::crop(f.clone(), format.width, decoder.roi))
+                .collect(),
+        )
+    };
+    let mut state = Accumulated::default();
+    let config = DecodeConfig {
+        start: 0,
+        ..config.clone()
+    };
+    add_window(&decoder, &cropped, &config, &mut state)?;
+    let decoded = finish(&config, &format, decoder.roi, state)?;
+    apply_verdict(decoded, config.on_implausible)
+}
+
+/// Adds one window of `frames` (cropped to the decoder's region) to `state`: `Ok(false)` when
+/// it holds too few frames for one carrier period after an earlier window (the stream's end),
+/// an error when it is the first.
+fn add_window(
+    decoder: &WindowDecoder,
+    frames: &[Samples],
+    config: &DecodeConfig,
+    state: &mut Accumulated,
+) -> Result<bool, DemodError> {
+    let got = frames.len();
+    let sample = decoder.sample(frames);
+    let (leds, seed) = match state.leds {
+        Some(n) => (n, None),
+        None => {
+            let count = decoder.count_leds(&sample, config.leds, config.check_led_count)?;
+            state.leds = Some(count.leds);
+            state.detected = count.detected;
+            (count.leds, count.fit)
+        }
+    };
+    if got < 1usize << (leds + 1) {
+        if state.windows == 0 && got == 0 && config.start > 0 {
+            // The start skipped exactly every frame.
+            return Err(DemodError::StartBeyondEnd {
+                start: config.start,
+                available: config.start,
+            });
+        }
+        if state.windows == 0 {
+            return Err(DemodError::TooFewFrames {
+                got,
+                need: 1 << (leds + 1),
+                leds,
+            });
+        }
+        return Ok(false);
+    }
+    state.add(decoder.decode(frames, &sample, leds, seed.as_ref()));
+    Ok(true)
+}
+
+/// The stream's format with the configured frame-rate override.
+fn stream_format(format: &FrameFormat, config: &DecodeConfig) -> Result<FrameFormat, DemodError> {
+    let mut format = format.clone();
     if let Some(fps) = config.fps {
         if !(fps.is_finite() && fps > 0.0) {
             return Err(DemodError::InvalidConfig(format!(

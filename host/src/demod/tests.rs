@@ -175,3 +175,63 @@ fn saturated_capture_is_an_error() {
     let err = decode(&mut source, &config, &mut |_, _| {}).unwrap_err();
     assert!(matches!(err, DemodError::NothingToDecode(_)), "{err}");
 }
+
+/// Frames already in memory decode where they lie ([`decode_frames`]) exactly as a source of
+/// the same frames in one window does, whole or cut to a region of interest; a frame of the
+/// wrong size, or too few frames, is an error rather than a panic.
+#[test]
+fn frames_in_memory_decode_as_their_source_does() {
+    use crate::capture::Frame;
+    use crate::capture::memory::MemorySource;
+    let scene = Scene::default();
+    let (mut source, _, _) = render(&scene);
+    let format = source.format().clone();
+    let mut frames = Vec::new();
+    while let Some(frame) = source.next_frame().expect("a frame") {
+        frames.push(frame.samples);
+    }
+    let region = Roi {
+        x: 5,
+        y: 3,
+        width: 40,
+        height: 30,
+    };
+    for roi in [None, Some(region)] {
+        let config = DecodeConfig {
+            leds: LedCount::Fixed(scene.leds),
+            roi,
+            ..DecodeConfig::default()
+        };
+        let owned: Vec<Frame> = frames
+            .iter()
+            .enumerate()
+            .map(|(index, samples)| Frame {
+                index,
+                samples: samples.clone(),
+            })
+            .collect();
+        let mut again = MemorySource::new(format.clone(), owned).expect("frames fit");
+        let streamed = decode(&mut again, &config, &mut |_, _| {}).expect("decodes");
+        let in_place = decode_frames(&frames, &format, &config).expect("decodes");
+        assert_eq!(in_place.report, streamed.report, "region {roi:?}");
+        assert_eq!(in_place.leds.images, streamed.leds.images, "region {roi:?}");
+        assert_eq!(in_place.noise, streamed.noise);
+        assert_eq!(in_place.saturated, streamed.saturated);
+        assert_eq!(in_place.underexposed, streamed.underexposed);
+        let shape = (roi.map_or(48, |r| r.height), roi.map_or(64, |r| r.width));
+        assert_eq!(in_place.noise.dim(), shape);
+    }
+    let config = DecodeConfig {
+        leds: LedCount::Fixed(scene.leds),
+        ..DecodeConfig::default()
+    };
+    let mut cut = frames.clone();
+    cut[7] = Samples::U16(vec![0; 10]);
+    let error = decode_frames(&cut, &format, &config).expect_err("a short frame");
+    assert!(error.to_string().contains("frame 7"), "{error}");
+    let error = decode_frames(&frames[..5], &format, &config).expect_err("too few frames");
+    assert!(
+        matches!(error, DemodError::TooFewFrames { got: 5, .. }),
+        "{error}"
+    );
+}

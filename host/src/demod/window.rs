@@ -154,7 +154,7 @@ pub fn read_window(
 }
 
 /// Cuts the region of interest out of a full frame (no copy when it is the whole frame).
-fn crop(samples: Samples, width: usize, roi: Roi) -> Samples {
+pub(super) fn crop(samples: Samples, width: usize, roi: Roi) -> Samples {
     if roi.x == 0 && roi.width == width && roi.y == 0 && roi.height * width == samples.len() {
         return samples;
     }

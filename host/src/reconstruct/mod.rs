@@ -8,7 +8,7 @@
 //! only up to a constant per separate part of the object (a scale for a perspective camera): per
 //! piece of the mask, and per part the bilateral integrator cut off along a depth discontinuity.
 //! The light vectors depend on it: after each integration every part's constant is chosen by a
-//! golden-section search that minimises the Lambertian misfit of its pixels lit by more than
+//! one-dimensional search (Brent's method) that minimises the Lambertian misfit of its pixels lit by more than
 //! three LEDs ([`ModelMisfit`](crate::photometric::ModelMisfit), module `offset`), bracketed to ±`offset_search_mm` around the integrated depth
 //! in the first pass, and to a few mm around the offset that puts it back
 //! on the previous pass's depth in the later ones (the whole range again when the minimum lies

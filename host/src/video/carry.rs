@@ -90,7 +90,7 @@ impl TimingCarry {
         self.windows += 1;
         let carried = match self.best.filter(|_| self.enabled && !given) {
             None => {
-                let decoded = super::decode::decode_frames(frames, format, config);
+                let decoded = crate::demod::decode_frames(frames, format, config);
                 let source = if given {
                     TimingSource::Given
                 } else {
@@ -106,7 +106,7 @@ impl TimingCarry {
             exposure: config.exposure.or(Some(carried.exposure)),
             ..config.clone()
         };
-        let first = super::decode::decode_frames(frames, format, &with_carried);
+        let first = crate::demod::decode_frames(frames, format, &with_carried);
         let trusted = self.windows > FREE_WINDOWS
             && first
                 .as_ref()
@@ -114,7 +114,7 @@ impl TimingCarry {
         if trusted {
             return (first, TimingSource::Carried);
         }
-        let free = super::decode::decode_frames(frames, format, config);
+        let free = crate::demod::decode_frames(frames, format, config);
         self.offer(&free);
         match (&first, &free) {
             (Ok(a), Ok(b)) if b.report.median_noise < a.report.median_noise => {

@@ -1,15 +1,16 @@
 //! Dynamic imaging: 3-D video from long or live captures (thesis Ch. 5).
 //!
-//! The thesis filmed a turning ellipsoid at 1 kfps and decoded 32 of every 40 frames into one
-//! 3-D frame (25 3-D frames per second), about three minutes of processing each. Here a clip or
-//! a live stream is cut into windows ([`schedule`]: thesis windows, or sliding ones), read on
-//! its own thread with memory bounded by the window whatever its length ([`stream`]), each
-//! window decoded by the demodulator ([`decode`]), checked for motion ([`motion`]) and
-//! reconstructed by the one decoded → reconstruction path ([`crate::reconstruct::from_decoded`]),
-//! warm-started from the previous reconstructed window ([`crate::reconstruct::WarmStart`]: the
-//! object moves little in 40 ms; a warm result that strays is redone cold); with ground truth ([`truth`]) each 3-D frame is scored. The caller gets every window's
-//! [`VideoFrame`] as soon as it is done (the CLI writes it with [`output`] on its own thread,
-//! [`writer`]: per-frame arrays, a colour-mapped depth video and a shaded-render video,
+//! The thesis filmed a turning ellipsoid at 1 kfps and decoded 32 of every 40 frames into one 3-D
+//! frame (25 3-D frames per second), about three minutes of processing each. Here a clip or a live
+//! stream is cut into windows ([`schedule`]: thesis windows, or sliding ones), read on its own
+//! thread with memory bounded by the window whatever its length ([`stream`]), each window decoded
+//! by the demodulator where it lies in that ring ([`crate::demod::decode_frames`]), checked for
+//! motion ([`motion`]) and reconstructed by the one decoded → reconstruction path
+//! ([`crate::reconstruct::from_decoded`]), warm-started from the previous reconstructed window
+//! ([`crate::reconstruct::WarmStart`]: the object moves little in 40 ms; a warm result that strays
+//! is redone cold); with ground truth ([`truth`]) each 3-D frame is scored. The caller gets every
+//! window's [`VideoFrame`] as soon as it is done (the CLI writes it with [`output`] on its own
+//! thread, [`writer`]: per-frame arrays, a colour-mapped depth video and a shaded-render video,
 //! `video.json`).
 //!
 //! Three threads overlap so that only the reconstruction sets the pace: the reader (frames
@@ -28,7 +29,6 @@
 //! before the cut, and [`VideoSummary::input_error`] says where.
 
 pub mod carry;
-pub mod decode;
 pub mod encode;
 pub mod judge;
 pub mod motion;
