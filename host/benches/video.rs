@@ -187,6 +187,28 @@
 //! 7.4 3-D frames/s. The target of 25 is not reached: at 640×360 the integration's fixed costs
 //! (its passes, set-up and output) and the offset search, whose cost does not fall with the
 //! pixel count, dominate.
+//!
+//! Session 31 (2026-12-04, quiet machine, load < 0.1): the decoder reads a window where it lies in
+//! the stream's ring ([`meb::demod::decode_frames`]; it copied all 32 frames into a frame source
+//! first, 17 % of `decode_bin2`'s samples were that `memmove`), and the offset search refines by
+//! Brent's method (golden-section and parabolic steps: a median 8 evaluations of the misfit instead
+//! of 16–22). Criterion, main ea733ad and this code alternated, two runs each (medians):
+//! `decode_carried_timing` 12.9 / 12.4 → **8.5 / 10.1 ms**, `decode_bin2` 6.3 / 5.9 → **4.2 /
+//! 4.3 ms**, `window_warm` 64.8 / 61.3 → **58.7 / 59.4 ms** (warm offset search 8.0 / 8.2 → 4.9 /
+//! 6.8 ms), `window_warm_bin2` 33.6 / 33.9 → **29.2 / 30.7 ms**. One full-resolution 3-D frame from
+//! frames in memory is thus ≈ 67 ms (decode + warm reconstruction), a binned one ≈ 41 ms (binning
+//! 32 frames ≈ 7 ms on the reader thread, decode, reconstruction). `meb video` (release) on a
+//! continuously rendered 2000-frame 1280×720 turning ellipsoid (not a looped one: the loop's jump
+//! back made every fourth window take 2 passes, so s29's looped clip understated the rate): `--bin
+//! 2` 24.6 / 24.7 → **26.2 / 27.2 3-D frames/s** (1.95 s wall, 2.7 s user, 105 MB peak), full
+//! resolution 7.6 → 8.4 3-D frames/s (300–340 MB). Per-frame depth RMSE against truth every 20
+//! frames (400-frame clip, 10 windows) is unchanged to 0.1 µm: full resolution 0.515–0.797 mm
+//! (median 0.645), binned 0.201–0.575 mm (median 0.330); `meb demo` unchanged (sphere 0.15 mm /
+//! 1.54°, cube 0.26 mm / 0.79°). Where the binned pipeline's CPU went before (perf, a whole `meb
+//! video --bin 2` run): the decode thread and the rayon workers 49 % (the per-pixel photometric
+//! solve of the offset search's misfit alone 10.6 %, light vectors 4.2 %, the matched filter
+//! 3.2 %), the reconstruction's own thread 17 %, the reader 16 % (binning 9 %, the kernel's copy
+//! 3 %), FFmpeg 12 % (x264 4 %, its start-up 2.5 %), the writer 5.5 %.
 
 use criterion::{BatchSize, Criterion, criterion_group, criterion_main};
 use meb::capture::binning::Binning;

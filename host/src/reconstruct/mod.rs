@@ -1,18 +1,18 @@
 //! The reconstruction stage: LED images + rig → normals, albedo and depth, with near-field
 //! refinement (SPEC §5–§6).
 //!
-//! The first pass uses light vectors at the plane z = 0; every further pass recomputes each
-//! pixel's light vectors L_i(X(p)) at the point X(p) of its ray at the previous depth, re-solves
-//! the normals and re-integrates (warm-started). Pixels lit by two LEDs and holes inside the
-//! object are integrated with the rest ([`crate::integrate::coverage`]). Integration fixes depth
-//! only up to a constant per separate part of the object (a scale for a perspective camera): per
-//! piece of the mask, and per part the bilateral integrator cut off along a depth discontinuity.
-//! The light vectors depend on it: after each integration every part's constant is chosen by a
-//! one-dimensional search (Brent's method) that minimises the Lambertian misfit of its pixels lit by more than
-//! three LEDs ([`ModelMisfit`](crate::photometric::ModelMisfit), module `offset`), bracketed to ±`offset_search_mm` around the integrated depth
-//! in the first pass, and to a few mm around the offset that puts it back
-//! on the previous pass's depth in the later ones (the whole range again when the minimum lies
-//! at that bracket's edge).
+//! The first pass uses light vectors at the plane z = 0; every further pass recomputes each pixel's
+//! light vectors L_i(X(p)) at the point X(p) of its ray at the previous depth, re-solves the
+//! normals and re-integrates (warm-started). Pixels lit by two LEDs and holes inside the object are
+//! integrated with the rest ([`crate::integrate::coverage`]). Integration fixes depth only up to a
+//! constant per separate part of the object (a scale for a perspective camera): per piece of the
+//! mask, and per part the bilateral integrator cut off along a depth discontinuity. The light
+//! vectors depend on it: after each integration every part's constant is chosen by a
+//! one-dimensional search (Brent's method) that minimises the Lambertian misfit of its pixels lit
+//! by more than three LEDs ([`ModelMisfit`](crate::photometric::ModelMisfit), module `offset`),
+//! bracketed to ±`offset_search_mm` around the integrated depth in the first pass, and to a few mm
+//! around the offset that puts it back on the previous pass's depth in the later ones (the whole
+//! range again when the minimum lies at that bracket's edge).
 //!
 //! [`from_decoded`] is the one path from a decoded capture to a reconstruction: `meb
 //! reconstruct`, `meb demo` and the hardware-in-the-loop tests all call it, with the
