@@ -209,6 +209,14 @@
 //! solve of the offset search's misfit alone 10.6 %, light vectors 4.2 %, the matched filter
 //! 3.2 %), the reconstruction's own thread 17 %, the reader 16 % (binning 9 %, the kernel's copy
 //! 3 %), FFmpeg 12 % (x264 4 %, its start-up 2.5 %), the writer 5.5 %.
+//!
+//! Then the usable LED images (the decoder's flagged pixels as NaN, made for every window on the
+//! full frame) in one pass per image instead of a copy overwritten, the images in parallel:
+//! `window_warm` 61.5 / 62.2 → 57.7 / 61.6 ms (within the noise), `window_warm_bin2` unchanged;
+//! `meb video` on the 2000-frame clip, alternated, two runs each: full resolution 9.2 / 8.9 →
+//! **10.0 / 9.7 3-D frames/s**, `--bin 2` 28.3 / 26.2 → 28.0 / 28.5 (the same within the noise).
+//! With `--hop 8` (246 3-D frames): **29.8 3-D frames/s** binned (8.3 s, 91 MB), 12.5 at full
+//! resolution (19.6 s, 275 MB).
 
 use criterion::{BatchSize, Criterion, criterion_group, criterion_main};
 use meb::capture::binning::Binning;

@@ -69,7 +69,7 @@ mod seed;
 mod spectrum;
 mod stats;
 #[cfg(test)]
-mod synthetic;
+pub(crate) mod synthetic;
 mod template;
 #[cfg(test)]
 mod tests;

@@ -42,6 +42,7 @@ use crate::rig::Rig;
 pub use crate::timing::StageTiming;
 use crate::types::{LedImages, NormalField};
 use ndarray::{Array2, Zip};
+use rayon::prelude::*;
 use std::time::Instant;
 use thiserror::Error;
 
@@ -598,18 +599,19 @@ pub fn from_decoded_warm(
 /// The decoded LED images with the pixels the decoder flagged as saturated or under-exposed
 /// set to NaN, so photometric stereo leaves them out.
 pub fn usable_led_images(decoded: &Decoded) -> LedImages {
-    let mut images = decoded.leds.clone();
-    for image in &mut images.images {
-        Zip::from(image)
-            .and(&decoded.saturated)
-            .and(&decoded.underexposed)
-            .for_each(|v, &sat, &under| {
-                if sat || under {
-                    *v = f32::NAN;
-                }
-            });
-    }
-    images
+    // One pass per image (no copy to overwrite), the images side by side.
+    let images = decoded
+        .leds
+        .images
+        .par_iter()
+        .map(|image| {
+            Zip::from(image)
+                .and(&decoded.saturated)
+                .and(&decoded.underexposed)
+                .map_collect(|&v, &sat, &under| if sat || under { f32::NAN } else { v })
+        })
+        .collect();
+    LedImages { images }
 }
 
 /// Per-pixel noise σ_A of the decoded on-levels A_i. The decoder reports σ of one frame
@@ -742,6 +744,38 @@ mod tests {
             &mut timings,
         );
         assert!(result.is_none(), "a cut-off object was pasted back");
+    }
+
+    /// The decoder's saturated and under-exposed pixels become NaN in every LED image; the
+    /// other readings are kept as decoded.
+    #[test]
+    fn flagged_pixels_are_left_out_of_every_led_image() {
+        use crate::demod::synthetic::{Scene, render};
+        use crate::demod::{DecodeConfig, LedCount, decode};
+        let scene = Scene::default();
+        let (mut source, _, _) = render(&scene);
+        let config = DecodeConfig {
+            leds: LedCount::Fixed(scene.leds),
+            ..DecodeConfig::default()
+        };
+        let mut decoded = decode(&mut source, &config, &mut |_, _| {}).expect("decodes");
+        decoded.saturated[(3, 4)] = true;
+        decoded.underexposed[(10, 20)] = true;
+        decoded.underexposed[(47, 63)] = true;
+        let usable = usable_led_images(&decoded);
+        assert_eq!(usable.images.len(), scene.leds);
+        for (image, original) in usable.images.iter().zip(&decoded.leds.images) {
+            for ((p, v), o) in image.indexed_iter().zip(original) {
+                let flagged = decoded.saturated[p] || decoded.underexposed[p];
+                if flagged {
+                    assert!(v.is_nan(), "pixel {p:?} kept");
+                } else {
+                    assert_eq!(v.to_bits(), o.to_bits(), "pixel {p:?}");
+                }
+            }
+        }
+        let nans = usable.images[0].iter().filter(|v| v.is_nan()).count();
+        assert_eq!(nans, 3);
     }
 
     #[test]
