@@ -167,20 +167,35 @@ pub fn decode(
 /// Decodes `frames` already in memory (each of `format`'s size) as one window with `config`,
 /// as [`decode`] decodes a source of those frames in one window; the frame range settings
 /// (`start`, `frames`) are ignored. The frames are read where they lie (copied only when
-/// `config.roi` cuts them): `meb video` decodes each window of its stream this way.
+/// `config.roi` cuts them): `meb video` decodes each window of its stream this way. More
+/// frames than one window holds (256) are copied into a source and cut into windows by
+/// [`decode`].
 pub fn decode_frames(
     frames: &[Samples],
     format: &FrameFormat,
     config: &DecodeConfig,
 ) -> Result<Decoded, DemodError> {
+    if frames.len() > MAX_WINDOW_FRAMES {
+        // More than one window holds: cut into windows as `decode` cuts a source of them.
+        let owned = frames
+            .iter()
+            .enumerate()
+            .map(|(index, samples)| crate::capture::Frame {
+                index,
+                samples: samples.clone(),
+            })
+            .collect();
+        let mut source = crate::capture::memory::MemorySource::new(format.clone(), owned)?;
+        let config = DecodeConfig {
+            start: 0,
+            frames: None,
+            window_bytes: usize::MAX,
+            ..config.clone()
+        };
+        return decode(&mut source, &config, &mut |_, _| {});
+    }
     let format = stream_format(format, config)?;
     let decoder = WindowDecoder::new(&format, config)?;
-    if frames.len() > MAX_WINDOW_FRAMES {
-        return Err(DemodError::InvalidConfig(format!(
-            "{} frames are more than one window holds ({MAX_WINDOW_FRAMES})",
-            frames.len()
-        )));
-    }
     if let Some((index, frame)) = frames
         .iter()
         .enumerate()

@@ -229,6 +229,17 @@ fn frames_in_memory_decode_as_their_source_does() {
     cut[7] = Samples::U16(vec![0; 10]);
     let error = decode_frames(&cut, &format, &config).expect_err("a short frame");
     assert!(error.to_string().contains("frame 7"), "{error}");
+    let long = Scene {
+        frames: 300,
+        ..Scene::default()
+    };
+    let (mut source, _, _) = render(&long);
+    let mut long_frames = Vec::new();
+    while let Some(frame) = source.next_frame().expect("a frame") {
+        long_frames.push(frame.samples);
+    }
+    let decoded = decode_frames(&long_frames, &format, &config).expect("decodes");
+    assert_eq!(decoded.report.windows, 2, "{:?}", decoded.report);
     let error = decode_frames(&frames[..5], &format, &config).expect_err("too few frames");
     assert!(
         matches!(error, DemodError::TooFewFrames { got: 5, .. }),
