@@ -13,8 +13,9 @@ use crate::rig::{Projection, Rig};
 use crate::types::LedImages;
 use ndarray::{Array2, Zip};
 
-/// Precision in mm to which the search for a part's depth offset ([`brent_minimum`]) knows the
-/// minimum (±half of it) (far below the depth accuracy; each step costs one misfit evaluation).
+/// Width in mm of the interval to which the search for a part's depth offset
+/// ([`brent_minimum`]) narrows the minimum, which it then knows to ±half of it: far below the
+/// depth accuracy (each step costs one misfit evaluation).
 const OFFSET_TOLERANCE_MM: f64 = 0.01;
 
 /// Pixels whose misfit places a part (cold start; evenly spread over the part). Fewer in the
@@ -68,7 +69,8 @@ pub const OFFSET_PREFERENCE_T: f64 = 3.0;
 /// differed by a median 3–4 mm, so σ_r ≈ 3.5 / (0.674 √2) ≈ 3.7 mm, r ≈ 13.7 mm²), which gives
 /// P ≈ 3.2 mm², K ≈ 0.24. A within-window test cannot see that jitter (the minimum is sharp in
 /// every window); the prior across windows damps it, and a move of at most K times the ±4 mm
-/// bracket (< [`WARM_LIGHTS_MOVED_MM`](super::WARM_LIGHTS_MOVED_MM)) lets a warm window stop after one pass.
+/// bracket (< [`WARM_LIGHTS_MOVED_MM`](super::WARM_LIGHTS_MOVED_MM)) lets a warm window stop
+/// after one pass.
 pub const WARM_OFFSET_GAIN: f64 = 0.24;
 
 /// `depth` with the pixels of `part` moved by `offset` mm towards the camera
