@@ -119,7 +119,8 @@ impl Roi {
 
     /// The results of the region as full-frame ones: pixel indices moved by the region's
     /// corner, arrays pasted into the frame, and the depth's perspective projection replaced by
-    /// the full frame's `projection`.
+    /// the full frame's `projection`. The photometric and the integration arrays (≈ 20 MB each
+    /// at 1280×720, bound by memory bandwidth) are pasted side by side.
     pub fn paste(
         &self,
         mut photometric: PhotometricResult,
@@ -128,24 +129,31 @@ impl Roi {
     ) -> (PhotometricResult, Integration) {
         let (top, left) = (self.rows.start, self.cols.start);
         let ps = &mut photometric;
-        ps.field.normals = self.paste3(&ps.field.normals, f32::NAN);
-        ps.field.albedo = self.paste2(&ps.field.albedo, f32::NAN);
-        ps.field.mask = self.paste2(&ps.field.mask, false);
-        ps.lit_count = self.paste2(&ps.lit_count, 0);
-        ps.object_mask = self.paste2(&ps.object_mask, false);
-        ps.fill = self.paste2(&ps.fill, false);
-        for plane in &mut ps.planes {
-            plane.pixel = (plane.pixel.0 + top, plane.pixel.1 + left);
-        }
-        integration.depth.depth_mm = self.paste2(&integration.depth.depth_mm, f32::NAN);
-        if integration.depth.perspective.is_some() {
-            integration.depth.perspective = Some(*projection);
-        }
-        integration.kept = self.paste2(&integration.kept, false);
-        integration.piece = self.paste2(&integration.piece, u32::MAX);
-        integration.part = self.paste2(&integration.part, u32::MAX);
-        integration.confidence = self.paste2(&integration.confidence, Confidence::None);
-        integration.completed_normals = self.paste3(&integration.completed_normals, f32::NAN);
+        let it = &mut integration;
+        rayon::join(
+            || {
+                ps.field.normals = self.paste3(&ps.field.normals, f32::NAN);
+                ps.field.albedo = self.paste2(&ps.field.albedo, f32::NAN);
+                ps.field.mask = self.paste2(&ps.field.mask, false);
+                ps.lit_count = self.paste2(&ps.lit_count, 0);
+                ps.object_mask = self.paste2(&ps.object_mask, false);
+                ps.fill = self.paste2(&ps.fill, false);
+                for plane in &mut ps.planes {
+                    plane.pixel = (plane.pixel.0 + top, plane.pixel.1 + left);
+                }
+            },
+            || {
+                it.depth.depth_mm = self.paste2(&it.depth.depth_mm, f32::NAN);
+                if it.depth.perspective.is_some() {
+                    it.depth.perspective = Some(*projection);
+                }
+                it.kept = self.paste2(&it.kept, false);
+                it.piece = self.paste2(&it.piece, u32::MAX);
+                it.part = self.paste2(&it.part, u32::MAX);
+                it.confidence = self.paste2(&it.confidence, Confidence::None);
+                it.completed_normals = self.paste3(&it.completed_normals, f32::NAN);
+            },
+        );
         (photometric, integration)
     }
 }
