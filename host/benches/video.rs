@@ -247,6 +247,8 @@ fn clip() -> Option<(Rig, FrameFormat, Vec<Frame>)> {
 }
 
 fn bench(c: &mut Criterion) {
+    // As `meb` does first thing: windows reuse their arrays' pages.
+    meb::memory::keep_freed_memory();
     let Some((rig, format, frames)) = clip() else {
         eprintln!("cannot simulate the clip");
         return;

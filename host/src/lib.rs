@@ -14,6 +14,7 @@ pub mod export;
 pub mod flicker;
 pub mod integrate;
 pub mod led_waveform;
+pub mod memory;
 pub mod mesh;
 pub mod metrics;
 pub mod photometric;
