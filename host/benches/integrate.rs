@@ -1,7 +1,9 @@
 //! Integration of one 3-D video frame: the photometric-stereo result of the thesis-dynamic
 //! turning ellipsoid (1280×720, frames 4..36 decoded, near-field PS from `from_decoded`)
-//! integrated by `integrate_surface` with the settings of a warm window's passes (at most 8
-//! two-LED alternations, relative residual 10⁻⁵; `reconstruct.rs::passes`).
+//! integrated by `integrate_surface` with the settings `reconstruct` gives a pass
+//! ([`meb::reconstruct::pass_integration`]): an early pass of a cold window (at most 8 two-LED
+//! alternations, relative residual 10⁻⁵) for `cold` and `warm_same`, a warm window's pass (one
+//! alternation, 10⁻⁴; before session 32 the early-pass settings) for `warm_next`.
 //!
 //! Cases: `cold` (no depth, as the first pass of a cold window); `warm_same` (this window's
 //! depth moved 2 mm away, as a later pass of the same window sees it after the offset search);
@@ -122,7 +124,7 @@ use meb::integrate::{
     integrate_surface, integrate_surface_with,
 };
 use meb::photometric::PhotometricResult;
-use meb::reconstruct::{Reconstruction, from_decoded};
+use meb::reconstruct::{Reconstruction, from_decoded, pass_integration};
 use meb::rig::{Projection, Rig};
 use meb::types::NormalField;
 use meb::video::VideoConfig;
@@ -240,16 +242,6 @@ fn simulated_windows(rig: &Rig, config: &VideoConfig) -> Option<(WindowResult, W
     Some((WindowResult::of(first), WindowResult::of(second)))
 }
 
-/// The integration settings of a warm window's passes (`reconstruct.rs::passes`: at most
-/// `EARLY_PASS_REWEIGHTINGS` = 8 alternations, `EARLY_PASS_TOLERANCE` = 10⁻⁵).
-fn warm_pass_settings(config: &VideoConfig) -> IntegrateConfig {
-    let mut integrate = config.reconstruct.integrate.clone();
-    integrate.bilateral.max_iterations = integrate.bilateral.max_iterations.min(8);
-    integrate.coverage.iterations = integrate.coverage.iterations.min(8);
-    integrate.tolerance = integrate.tolerance.max(1e-5);
-    integrate
-}
-
 fn evidence(ps: &PhotometricResult) -> SurfaceEvidence<'_> {
     SurfaceEvidence {
         field: &ps.field,
@@ -305,12 +297,17 @@ fn report(name: &str, out: &Integration, workspace: &IntegrationWorkspace) {
 }
 
 fn bench(c: &mut Criterion) {
+    // As `meb` does first thing: repeated integrations reuse their arrays' pages.
+    meb::memory::keep_freed_memory();
     let Some((rig, config, first, second)) = windows() else {
         eprintln!("cannot simulate, decode or reconstruct the turning ellipsoid");
         return;
     };
     let projection: Projection = rig.camera.projection();
-    let settings = warm_pass_settings(&config);
+    // An early pass of a cold window (`cold`, `warm_same`) and a warm window's pass
+    // (`warm_next`), as `reconstruct` sets them.
+    let early = pass_integration(&config.reconstruct, false, false);
+    let warm_window = pass_integration(&config.reconstruct, false, true);
     let shifted = first.depth.mapv(|z| z + 2.0);
     let previous = &first.depth;
     let (one, two) = (evidence(&first.photometric), evidence(&second.photometric));
@@ -329,21 +326,26 @@ fn bench(c: &mut Criterion) {
         Some(_) => None,
         None => integrate_surface(&one, &projection, &config.reconstruct.integrate, None).ok(),
     };
-    let cases: [(&str, &SurfaceEvidence, Option<&Array2<f32>>); 3] = [
-        ("cold", &one, None),
-        ("warm_same", &one, Some(&shifted)),
-        ("warm_next", &two, Some(previous)),
+    let cases: [(
+        &str,
+        &SurfaceEvidence,
+        Option<&Array2<f32>>,
+        &IntegrateConfig,
+    ); 3] = [
+        ("cold", &one, None, &early),
+        ("warm_same", &one, Some(&shifted), &early),
+        ("warm_next", &two, Some(previous), &warm_window),
     ];
-    for (name, evidence, depth) in cases {
+    for (name, evidence, depth, settings) in cases {
         if only.as_ref().is_some_and(|o| o != name) {
             continue;
         }
         let mut workspace = IntegrationWorkspace::new();
         if name == "warm_next" {
-            let _ = integrate_surface_with(&one, &projection, &settings, None, &mut workspace);
+            let _ = integrate_surface_with(&one, &projection, &early, None, &mut workspace);
         }
         for round in ["", "_workspace"] {
-            match integrate_surface_with(evidence, &projection, &settings, depth, &mut workspace) {
+            match integrate_surface_with(evidence, &projection, settings, depth, &mut workspace) {
                 Ok(out) => {
                     report(&format!("{name}{round}"), &out, &workspace);
                     if let (Some(exact), true) = (&exact, name != "warm_next") {
@@ -364,23 +366,17 @@ fn bench(c: &mut Criterion) {
     }
     let mut group = c.benchmark_group("integrate_1280x720");
     group.sample_size(10);
-    for (name, evidence, depth) in cases {
+    for (name, evidence, depth, settings) in cases {
         group.bench_function(name, |b| {
-            b.iter(|| black_box(integrate_surface(evidence, &projection, &settings, depth).ok()))
+            b.iter(|| black_box(integrate_surface(evidence, &projection, settings, depth).ok()))
         });
     }
     group.bench_function("warm_same_workspace", |b| {
         let mut workspace = IntegrationWorkspace::new();
         b.iter(|| {
             black_box(
-                integrate_surface_with(
-                    &one,
-                    &projection,
-                    &settings,
-                    Some(&shifted),
-                    &mut workspace,
-                )
-                .ok(),
+                integrate_surface_with(&one, &projection, &early, Some(&shifted), &mut workspace)
+                    .ok(),
             )
         })
     });
@@ -388,7 +384,7 @@ fn bench(c: &mut Criterion) {
         b.iter_batched(
             || {
                 let mut workspace = IntegrationWorkspace::new();
-                let _ = integrate_surface_with(&one, &projection, &settings, None, &mut workspace);
+                let _ = integrate_surface_with(&one, &projection, &early, None, &mut workspace);
                 workspace
             },
             |mut workspace| {
@@ -396,7 +392,7 @@ fn bench(c: &mut Criterion) {
                     integrate_surface_with(
                         &two,
                         &projection,
-                        &settings,
+                        &warm_window,
                         Some(previous),
                         &mut workspace,
                     )

@@ -456,29 +456,7 @@ fn passes(
             planes: &ps.planes,
             fill: Some(&ps.fill),
         };
-        // Early passes only feed the light vectors of the next: a few reweightings (or
-        // two-LED alternations) and a looser solve suffice. A warm start begins next to the
-        // answer, so its passes take the same settings, with one alternation and a looser
-        // solve still (WARM_COVERAGE_ALTERNATIONS, WARM_SOLVE_TOLERANCE).
-        let mut integrate_config = config.integrate.clone();
-        if pass + 1 < passes || warm.is_some() {
-            integrate_config.bilateral.max_iterations = integrate_config
-                .bilateral
-                .max_iterations
-                .min(EARLY_PASS_REWEIGHTINGS);
-            integrate_config.coverage.iterations = integrate_config
-                .coverage
-                .iterations
-                .min(EARLY_PASS_REWEIGHTINGS);
-            integrate_config.tolerance = integrate_config.tolerance.max(EARLY_PASS_TOLERANCE);
-        }
-        if warm.is_some() {
-            integrate_config.coverage.iterations = integrate_config
-                .coverage
-                .iterations
-                .min(WARM_COVERAGE_ALTERNATIONS);
-            integrate_config.tolerance = integrate_config.tolerance.max(WARM_SOLVE_TOLERANCE);
-        }
+        let integrate_config = pass_integration(config, pass + 1 == passes, warm.is_some());
         let mut integration = integrate_surface_with(
             &evidence,
             &projection,
@@ -546,6 +524,32 @@ fn passes(
         }
     });
     Ok((photometric, integration, start))
+}
+
+/// The integration settings of a pass: the configured ones for the last pass of a cold
+/// reconstruction. Early passes only feed the light vectors of the next, so a few reweightings
+/// (or two-LED alternations) and a looser solve suffice ([`EARLY_PASS_REWEIGHTINGS`],
+/// [`EARLY_PASS_TOLERANCE`]); a warm pass begins next to the answer and takes those, with one
+/// alternation and a looser solve still ([`WARM_COVERAGE_ALTERNATIONS`],
+/// [`WARM_SOLVE_TOLERANCE`]).
+pub fn pass_integration(config: &ReconstructConfig, last: bool, warm: bool) -> IntegrateConfig {
+    let mut integrate = config.integrate.clone();
+    if !last || warm {
+        integrate.bilateral.max_iterations = integrate
+            .bilateral
+            .max_iterations
+            .min(EARLY_PASS_REWEIGHTINGS);
+        integrate.coverage.iterations = integrate.coverage.iterations.min(EARLY_PASS_REWEIGHTINGS);
+        integrate.tolerance = integrate.tolerance.max(EARLY_PASS_TOLERANCE);
+    }
+    if warm {
+        integrate.coverage.iterations = integrate
+            .coverage
+            .iterations
+            .min(WARM_COVERAGE_ALTERNATIONS);
+        integrate.tolerance = integrate.tolerance.max(WARM_SOLVE_TOLERANCE);
+    }
+    integrate
 }
 
 /// How far one depth map lies from another over the pixels where both are finite.
