@@ -225,6 +225,42 @@
 //! 84.0 / 81.4 / 77.5 ms at full resolution (`window_warm` alone 68 ms and `decode_carried_timing`
 //! 9.5 ms in the same hour); `frame_warm_bin2` (binning the 32 frames too) 39.1 / 50.1 / 48.1 /
 //! 44.8 ms. The ≤ 40 ms target is met only once, binned.
+//!
+//! Session 32 (2026-12-04, quiet machine but for one build): a warm pass integrates with one
+//! two-LED alternation and a 10⁻⁴ solve ([`meb::reconstruct::pass_integration`]; the warm start
+//! already takes the two-LED slopes from the previous depth: CG iterations per warm window, 400
+//! frames, median 13 → 6); `meb` keeps freed memory for reuse ([`meb::memory`]: glibc handed
+//! every window's ≈ 45 MB of pasted full-frame arrays back to the kernel and faulted them in
+//! afresh, 566 000 → 126 000 page faults over the 2000-frame clip; this bench calls it too); the
+//! region's results are pasted into the frame side by side; and a warm window stops once its
+//! depth lies within 1.5 mm of the one its light vectors came from (was 1 mm: 10 of the 49 warm
+//! windows of the 2000-frame clip ran 2–3 passes, now none). Criterion, main 27fe128 and this
+//! code alternated, two runs each (the last change not included): `window_warm` 64.6 / 67.3 →
+//! **46.0 / 44.8 ms**, `frame_warm` 71.6 / 72.4 → **51.6 / 54.3 ms**, `window_warm_bin2` 31.7 /
+//! 31.8 → **19.2 / 18.7 ms**, `frame_warm_bin2` 43.2 / 42.5 → **33.2 / 33.7 ms** (the ≤ 40 ms
+//! target is met binned, not at full resolution). The warm window's stages now: photometric
+//! stereo 7.6–13 ms, integration 22.6 ms (was 35–52), offset search 4.5 ms, paste 4.4 ms (was 6).
+//! `meb video`, the continuously rendered 2000-frame 1280×720 ellipsoid, alternated: with truth
+//! scoring every 20 frames, full resolution 8.3 / 8.2 → **11.3 / 11.0 3-D frames/s** (peak memory
+//! 305 → 372 MB: freed pages are kept), `--bin 2` 15.9 / 18.4 → **21.2 / 20.6**; without truth,
+//! full resolution 6.1 / 5.3 s → **4.4 / 4.3 s** wall (≈ 12 3-D frames/s), `--bin 2` 2.05 / 2.31 →
+//! 1.81 / 2.09 s (24.9–28.6 3-D frames/s). Per-frame depth RMSE over all 50 windows (truth every
+//! 20 frames): full resolution median 0.678 → 0.669 mm (0.419–1.195 mm; before 0.432–1.291), binned
+//! 0.427 → 0.422 mm (0.145–1.102 mm); a turning blobby object (640×360, 10 windows) is unchanged
+//! to the µm (median 0.434 mm). Where the full-resolution run's CPU goes now (perf, threads): the
+//! rayon workers (decode and the reconstruction's parallel parts) 50 %, the reader 22 % (15 % is the
+//! kernel copying the file's pages into the window ring), the reconstruction's own thread 14 %, the
+//! writer 8 %, FFmpeg 7 %. In `frame_warm`: the matched filter 10 %, the per-pixel photometric
+//! solve 9.5 % and its light vectors 4.7 %, the inpainting of two-LED and hole slopes 7.4 %, the
+//! usable LED images 2.6 % (now made for the warm window's region alone: `from_decoded_warm`).
+//! With every change of the session (the machine noisier by then: `frame_warm` 56–76 ms before
+//! and 58–78 ms after the region-only images, four alternated runs each), `meb video` on the
+//! 2000-frame clip without truth: full resolution **14.1 / 12.8 3-D frames/s** (3.7 / 4.0 s,
+//! 346 MB), `--bin 2` **27.6 / 24.4**; `--hop 8` (246 3-D frames) **33.1** binned (7.5 s, 112 MB)
+//! and **15.5** at full resolution (15.9 s, 333 MB), against 29.8 and 12.5 before. Next: decode
+//! only the region of a warm window (the decoder runs ahead of the reconstruction that knows the
+//! region, and a window whose object leaves it needs its frames again), and read the file
+//! without the kernel's copy.
 
 use criterion::{BatchSize, Criterion, criterion_group, criterion_main};
 use meb::capture::binning::Binning;

@@ -41,8 +41,9 @@ use crate::photometric::{
 use crate::rig::Rig;
 pub use crate::timing::StageTiming;
 use crate::types::{LedImages, NormalField};
-use ndarray::{Array2, Zip};
+use ndarray::{Array2, ArrayView2, Zip};
 use rayon::prelude::*;
+use std::borrow::Cow;
 use std::time::Instant;
 use thiserror::Error;
 
@@ -294,17 +295,101 @@ pub fn reconstruct_warm(
     config: &ReconstructConfig,
     warm: Option<&WarmStart>,
 ) -> Result<Reconstruction, ReconstructError> {
+    reconstruct_inputs(&Inputs::Images { images, noise }, rig, mask, config, warm)
+}
+
+/// The full frame's LED images and noise of [`Inputs`].
+type FullFrame<'a> = (Cow<'a, LedImages>, Option<Cow<'a, Array2<f32>>>);
+
+/// What a reconstruction reads: LED images with their noise, or a decoded capture whose usable
+/// images and noise ([`usable_led_images`], [`level_noise`]) are made only where a pass needs
+/// them (a warm window's region of interest, or the full frame).
+enum Inputs<'a> {
+    /// LED images and their noise.
+    Images {
+        images: &'a LedImages,
+        noise: Option<&'a Array2<f32>>,
+    },
+    /// A decoded capture.
+    Decoded(&'a Decoded),
+}
+
+impl<'a> Inputs<'a> {
+    /// The number of LED images.
+    fn leds(&self) -> usize {
+        match self {
+            Inputs::Images { images, .. } => images.images.len(),
+            Inputs::Decoded(decoded) => decoded.leds.images.len(),
+        }
+    }
+
+    /// The full frame's LED images and noise (borrowed where they are given).
+    fn full(&self) -> FullFrame<'a> {
+        match *self {
+            Inputs::Images { images, noise } => (Cow::Borrowed(images), noise.map(Cow::Borrowed)),
+            Inputs::Decoded(decoded) => (
+                Cow::Owned(usable_led_images(decoded)),
+                Some(Cow::Owned(level_noise(decoded))),
+            ),
+        }
+    }
+
+    /// The LED images and noise cut to `roi`, or `None` when they are not of its frame's size
+    /// (the full frame's passes then say what is wrong).
+    fn region(&self, roi: &Roi) -> Option<(LedImages, Option<Array2<f32>>)> {
+        match self {
+            Inputs::Images { images, noise } => {
+                let sizes = images
+                    .images
+                    .iter()
+                    .map(|i| i.dim())
+                    .chain(noise.map(|n| n.dim()));
+                roi.fits(sizes)
+                    .then(|| (roi.cut_images(images), noise.map(|n| roi.cut(n))))
+            }
+            Inputs::Decoded(decoded) => {
+                let flags = [decoded.saturated.dim(), decoded.underexposed.dim()];
+                let sizes = decoded.leds.images.iter().map(|i| i.dim());
+                let sizes = sizes.chain(flags).chain([decoded.noise.dim()]);
+                roi.fits(sizes).then(|| {
+                    let (saturated, underexposed) = (
+                        roi.view(&decoded.saturated),
+                        roi.view(&decoded.underexposed),
+                    );
+                    let images = decoded
+                        .leds
+                        .images
+                        .par_iter()
+                        .map(|image| usable(roi.view(image), saturated, underexposed))
+                        .collect();
+                    let factor = level_noise_factor(decoded);
+                    let noise = roi.view(&decoded.noise).mapv(|s| s * factor);
+                    (LedImages { images }, Some(noise))
+                })
+            }
+        }
+    }
+}
+
+/// [`reconstruct_warm`] of `inputs`.
+fn reconstruct_inputs(
+    inputs: &Inputs,
+    rig: &Rig,
+    mask: Option<&Array2<bool>>,
+    config: &ReconstructConfig,
+    warm: Option<&WarmStart>,
+) -> Result<Reconstruction, ReconstructError> {
     if rig.leds.len() < 3 {
         return Err(ReconstructError::Rig(format!(
             "photometric stereo needs at least 3 LEDs, the rig has {}",
             rig.leds.len()
         )));
     }
-    if rig.leds.len() != images.images.len() {
+    if rig.leds.len() != inputs.leds() {
         return Err(ReconstructError::Rig(format!(
             "the rig has {} LEDs but there are {} LED images",
             rig.leds.len(),
-            images.images.len()
+            inputs.leds()
         )));
     }
     config.integrate.validate()?;
@@ -312,13 +397,26 @@ pub fn reconstruct_warm(
     let shape = (rig.camera.height, rig.camera.width);
     let near_field = matches!(config.light_model, LightModel::NearField { .. });
     let mut start = Start::Cold;
+    // The full frame's images and noise, made once if a pass needs them.
+    let full = std::cell::OnceCell::new();
+    let full_frame = || full.get_or_init(|| inputs.full());
     if let Some(warm) = warm.filter(|w| near_field && w.depth_mm.dim() == shape) {
-        let in_region = Roi::around(&warm.depth_mm, mask, ROI_MARGIN_PX).and_then(|roi| {
-            warm_in_region(&roi, images, rig, mask, noise, config, warm, &mut timings)
-        });
+        let in_region = Roi::around(&warm.depth_mm, mask, ROI_MARGIN_PX)
+            .and_then(|roi| warm_in_region(&roi, inputs, rig, mask, config, warm, &mut timings));
         let result = match in_region {
             Some(result) => result,
-            None => passes(images, rig, mask, noise, config, Some(warm), &mut timings),
+            None => {
+                let (images, noise) = full_frame();
+                passes(
+                    images,
+                    rig,
+                    mask,
+                    noise.as_deref(),
+                    config,
+                    Some(warm),
+                    &mut timings,
+                )
+            }
         };
         let reason = match result {
             Ok((photometric, integration, Ok(start))) => {
@@ -334,8 +432,16 @@ pub fn reconstruct_warm(
         };
         start = Start::Redone { reason };
     }
-    let (photometric, integration, _) =
-        passes(images, rig, mask, noise, config, None, &mut timings)?;
+    let (images, noise) = full_frame();
+    let (photometric, integration, _) = passes(
+        images,
+        rig,
+        mask,
+        noise.as_deref(),
+        config,
+        None,
+        &mut timings,
+    )?;
     Ok(Reconstruction {
         photometric,
         integration,
@@ -349,19 +455,17 @@ pub fn reconstruct_warm(
 #[allow(clippy::too_many_arguments)]
 fn warm_in_region(
     roi: &Roi,
-    images: &LedImages,
+    inputs: &Inputs,
     rig: &Rig,
     mask: Option<&Array2<bool>>,
-    noise: Option<&Array2<f32>>,
     config: &ReconstructConfig,
     warm: &WarmStart,
     timings: &mut Vec<StageTiming>,
 ) -> Option<PassesResult> {
     let started = Instant::now();
+    let (region_images, region_noise) = inputs.region(roi)?;
     let region_rig = roi.cut_rig(rig);
-    let region_images = roi.cut_images(images);
     let region_mask = mask.map(|m| roi.cut(m));
-    let region_noise = noise.map(|n| roi.cut(n));
     let region_warm = WarmStart {
         depth_mm: roi.cut(&warm.depth_mm),
     };
@@ -608,7 +712,9 @@ pub fn from_decoded(
 }
 
 /// [`from_decoded`] started from `warm` ([`reconstruct_warm`]): the path of `meb video`, which
-/// passes the previous window's result; `None` is exactly [`from_decoded`].
+/// passes the previous window's result; `None` is exactly [`from_decoded`]. A warm window's
+/// usable images and noise are made for its region of interest alone (the full frame's only if
+/// a pass needs them), with the same values.
 pub fn from_decoded_warm(
     decoded: &Decoded,
     rig: &Rig,
@@ -616,14 +722,7 @@ pub fn from_decoded_warm(
     config: &ReconstructConfig,
     warm: Option<&WarmStart>,
 ) -> Result<Reconstruction, ReconstructError> {
-    reconstruct_warm(
-        &usable_led_images(decoded),
-        rig,
-        mask,
-        Some(&level_noise(decoded)),
-        config,
-        warm,
-    )
+    reconstruct_inputs(&Inputs::Decoded(decoded), rig, mask, config, warm)
 }
 
 /// The decoded LED images with the pixels the decoder flagged as saturated or under-exposed
@@ -635,21 +734,40 @@ pub fn usable_led_images(decoded: &Decoded) -> LedImages {
         .images
         .par_iter()
         .map(|image| {
-            Zip::from(image)
-                .and(&decoded.saturated)
-                .and(&decoded.underexposed)
-                .map_collect(|&v, &sat, &under| if sat || under { f32::NAN } else { v })
+            usable(
+                image.view(),
+                decoded.saturated.view(),
+                decoded.underexposed.view(),
+            )
         })
         .collect();
     LedImages { images }
+}
+
+/// `image` with its `saturated` or `underexposed` pixels set to NaN.
+fn usable(
+    image: ArrayView2<f32>,
+    saturated: ArrayView2<bool>,
+    underexposed: ArrayView2<bool>,
+) -> Array2<f32> {
+    Zip::from(image)
+        .and(saturated)
+        .and(underexposed)
+        .map_collect(|&v, &sat, &under| if sat || under { f32::NAN } else { v })
 }
 
 /// Per-pixel noise σ_A of the decoded on-levels A_i. The decoder reports σ of one frame
 /// sample; an on-level averages about frames/2 samples (each carrier is on half the time), so
 /// σ_A = σ · √(2/frames).
 pub fn level_noise(decoded: &Decoded) -> Array2<f32> {
+    let factor = level_noise_factor(decoded);
+    decoded.noise.mapv(|s| s * factor)
+}
+
+/// √(2/frames): σ_A / σ of [`level_noise`].
+fn level_noise_factor(decoded: &Decoded) -> f32 {
     let frames = decoded.report.frames_used.max(2) as f32;
-    decoded.noise.mapv(|s| s * (2.0 / frames).sqrt())
+    (2.0 / frames).sqrt()
 }
 
 #[cfg(test)]
@@ -753,6 +871,65 @@ mod tests {
         assert_eq!(pixels(ps), pixels(full_ps));
     }
 
+    /// A decoded window is reconstructed warm from usable images and noise made for its region
+    /// alone, exactly as from the full frame's [`usable_led_images`] and [`level_noise`].
+    #[test]
+    fn a_decoded_window_gives_what_its_full_frame_images_give() {
+        use crate::demod::synthetic::{Scene, render};
+        use crate::demod::{DecodeConfig, LedCount, decode};
+        let sphere = still_sphere();
+        let scene = Scene::default();
+        let (mut source, _, _) = render(&scene);
+        let config = DecodeConfig {
+            leds: LedCount::Fixed(scene.leds),
+            ..DecodeConfig::default()
+        };
+        // A decode's report, with the sphere's images, noise and flags.
+        let mut decoded = decode(&mut source, &config, &mut |_, _| {}).expect("decodes");
+        let dim = sphere.noise.dim();
+        decoded.leds = sphere.images.clone();
+        decoded.noise = Array2::from_shape_fn(dim, |(r, c)| 1e-3 * (1.0 + ((r * c) % 7) as f32));
+        decoded.saturated = Array2::from_shape_fn(dim, |(r, c)| (r, c) == (90, 160));
+        decoded.underexposed = Array2::from_shape_fn(dim, |(r, c)| r == 100 && c % 9 == 0);
+        let from_region = from_decoded_warm(
+            &decoded,
+            &sphere.rig,
+            None,
+            &sphere.config,
+            Some(&sphere.warm),
+        )
+        .expect("from the decode");
+        let from_full = reconstruct_warm(
+            &usable_led_images(&decoded),
+            &sphere.rig,
+            None,
+            Some(&level_noise(&decoded)),
+            &sphere.config,
+            Some(&sphere.warm),
+        )
+        .expect("from the full frame's images");
+        assert!(
+            matches!(from_region.start, Start::Warm { .. }),
+            "{:?}",
+            from_region.start
+        );
+        assert!(
+            from_region
+                .timings
+                .iter()
+                .any(|t| t.stage.starts_with("region of interest")),
+            "the region of interest was not used"
+        );
+        let bits = |r: &Reconstruction| r.integration.depth.depth_mm.mapv(f32::to_bits);
+        assert_eq!(bits(&from_region), bits(&from_full));
+        let normals = |r: &Reconstruction| r.photometric.field.normals.mapv(f32::to_bits);
+        assert_eq!(normals(&from_region), normals(&from_full));
+        assert_eq!(from_region.start, from_full.start);
+        // The flagged pixels have no normal.
+        assert!(!from_region.photometric.field.mask[(90, 160)]);
+        assert!(!from_region.photometric.field.mask[(100, 153)]);
+    }
+
     /// An object that reaches an inner edge of the region may go on beyond it: the region's
     /// result is not used.
     #[test]
@@ -763,12 +940,15 @@ mod tests {
         middle[(90, 160)] = 0.0;
         let roi = Roi::around(&middle, None, 10).expect("a small region");
         let mut timings = Vec::new();
+        let inputs = Inputs::Images {
+            images: &sphere.images,
+            noise: Some(&sphere.noise),
+        };
         let result = warm_in_region(
             &roi,
-            &sphere.images,
+            &inputs,
             &sphere.rig,
             None,
-            Some(&sphere.noise),
             &sphere.config,
             &sphere.warm,
             &mut timings,

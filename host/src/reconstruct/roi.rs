@@ -14,7 +14,7 @@ use crate::integrate::{Confidence, Integration};
 use crate::photometric::PhotometricResult;
 use crate::rig::{Projection, Rig};
 use crate::types::LedImages;
-use ndarray::{Array2, Array3, s};
+use ndarray::{Array2, Array3, ArrayView2, s};
 use std::ops::Range;
 
 /// Pixels added on every side of the warm start's bounding box: what the object's silhouette
@@ -68,10 +68,19 @@ impl Roi {
         (share <= WORTHWHILE_SHARE).then_some(roi)
     }
 
+    /// Whether arrays of these sizes are of the region's frame (and can be cut to it).
+    pub fn fits(&self, mut sizes: impl Iterator<Item = (usize, usize)>) -> bool {
+        sizes.all(|size| size == self.frame)
+    }
+
+    /// The region of a full-frame array, in place.
+    pub fn view<'a, T>(&self, full: &'a Array2<T>) -> ArrayView2<'a, T> {
+        full.slice(s![self.rows.clone(), self.cols.clone()])
+    }
+
     /// The region of a full-frame array.
     pub fn cut<T: Clone>(&self, full: &Array2<T>) -> Array2<T> {
-        full.slice(s![self.rows.clone(), self.cols.clone()])
-            .to_owned()
+        self.view(full).to_owned()
     }
 
     /// The LED images cut to the region.
