@@ -41,14 +41,15 @@ use crate::photometric::{
 use crate::rig::Rig;
 pub use crate::timing::StageTiming;
 use crate::types::{LedImages, NormalField};
-use ndarray::{Array2, ArrayView2, Zip};
-use rayon::prelude::*;
-use std::borrow::Cow;
+use ndarray::{Array2, Zip};
 use std::time::Instant;
 use thiserror::Error;
 
+mod inputs;
 mod offset;
 mod roi;
+use inputs::Inputs;
+pub use inputs::{level_noise, usable_led_images};
 pub use offset::{
     OFFSET_PREFERENCE_T, WARM_OFFSET_BRACKET_MM, WARM_OFFSET_GAIN, WARM_WIDE_BRACKET_MM,
 };
@@ -296,79 +297,6 @@ pub fn reconstruct_warm(
     warm: Option<&WarmStart>,
 ) -> Result<Reconstruction, ReconstructError> {
     reconstruct_inputs(&Inputs::Images { images, noise }, rig, mask, config, warm)
-}
-
-/// The full frame's LED images and noise of [`Inputs`].
-type FullFrame<'a> = (Cow<'a, LedImages>, Option<Cow<'a, Array2<f32>>>);
-
-/// What a reconstruction reads: LED images with their noise, or a decoded capture whose usable
-/// images and noise ([`usable_led_images`], [`level_noise`]) are made only where a pass needs
-/// them (a warm window's region of interest, or the full frame).
-enum Inputs<'a> {
-    /// LED images and their noise.
-    Images {
-        images: &'a LedImages,
-        noise: Option<&'a Array2<f32>>,
-    },
-    /// A decoded capture.
-    Decoded(&'a Decoded),
-}
-
-impl<'a> Inputs<'a> {
-    /// The number of LED images.
-    fn leds(&self) -> usize {
-        match self {
-            Inputs::Images { images, .. } => images.images.len(),
-            Inputs::Decoded(decoded) => decoded.leds.images.len(),
-        }
-    }
-
-    /// The full frame's LED images and noise (borrowed where they are given).
-    fn full(&self) -> FullFrame<'a> {
-        match *self {
-            Inputs::Images { images, noise } => (Cow::Borrowed(images), noise.map(Cow::Borrowed)),
-            Inputs::Decoded(decoded) => (
-                Cow::Owned(usable_led_images(decoded)),
-                Some(Cow::Owned(level_noise(decoded))),
-            ),
-        }
-    }
-
-    /// The LED images and noise cut to `roi`, or `None` when they are not of its frame's size
-    /// (the full frame's passes then say what is wrong).
-    fn region(&self, roi: &Roi) -> Option<(LedImages, Option<Array2<f32>>)> {
-        match self {
-            Inputs::Images { images, noise } => {
-                let sizes = images
-                    .images
-                    .iter()
-                    .map(|i| i.dim())
-                    .chain(noise.map(|n| n.dim()));
-                roi.fits(sizes)
-                    .then(|| (roi.cut_images(images), noise.map(|n| roi.cut(n))))
-            }
-            Inputs::Decoded(decoded) => {
-                let flags = [decoded.saturated.dim(), decoded.underexposed.dim()];
-                let sizes = decoded.leds.images.iter().map(|i| i.dim());
-                let sizes = sizes.chain(flags).chain([decoded.noise.dim()]);
-                roi.fits(sizes).then(|| {
-                    let (saturated, underexposed) = (
-                        roi.view(&decoded.saturated),
-                        roi.view(&decoded.underexposed),
-                    );
-                    let images = decoded
-                        .leds
-                        .images
-                        .par_iter()
-                        .map(|image| usable(roi.view(image), saturated, underexposed))
-                        .collect();
-                    let factor = level_noise_factor(decoded);
-                    let noise = roi.view(&decoded.noise).mapv(|s| s * factor);
-                    (LedImages { images }, Some(noise))
-                })
-            }
-        }
-    }
 }
 
 /// [`reconstruct_warm`] of `inputs`.
@@ -725,51 +653,6 @@ pub fn from_decoded_warm(
     reconstruct_inputs(&Inputs::Decoded(decoded), rig, mask, config, warm)
 }
 
-/// The decoded LED images with the pixels the decoder flagged as saturated or under-exposed
-/// set to NaN, so photometric stereo leaves them out.
-pub fn usable_led_images(decoded: &Decoded) -> LedImages {
-    // One pass per image (no copy to overwrite), the images side by side.
-    let images = decoded
-        .leds
-        .images
-        .par_iter()
-        .map(|image| {
-            usable(
-                image.view(),
-                decoded.saturated.view(),
-                decoded.underexposed.view(),
-            )
-        })
-        .collect();
-    LedImages { images }
-}
-
-/// `image` with its `saturated` or `underexposed` pixels set to NaN.
-fn usable(
-    image: ArrayView2<f32>,
-    saturated: ArrayView2<bool>,
-    underexposed: ArrayView2<bool>,
-) -> Array2<f32> {
-    Zip::from(image)
-        .and(saturated)
-        .and(underexposed)
-        .map_collect(|&v, &sat, &under| if sat || under { f32::NAN } else { v })
-}
-
-/// Per-pixel noise σ_A of the decoded on-levels A_i. The decoder reports σ of one frame
-/// sample; an on-level averages about frames/2 samples (each carrier is on half the time), so
-/// σ_A = σ · √(2/frames).
-pub fn level_noise(decoded: &Decoded) -> Array2<f32> {
-    let factor = level_noise_factor(decoded);
-    decoded.noise.mapv(|s| s * factor)
-}
-
-/// √(2/frames): σ_A / σ of [`level_noise`].
-fn level_noise_factor(decoded: &Decoded) -> f32 {
-    let frames = decoded.report.frames_used.max(2) as f32;
-    (2.0 / frames).sqrt()
-}
-
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -814,6 +697,22 @@ mod tests {
         }
     }
 
+    /// `reconstruction` kept its warm start and was reconstructed in its region of interest.
+    fn assert_warm_in_its_region(reconstruction: &Reconstruction) {
+        assert!(
+            matches!(reconstruction.start, Start::Warm { .. }),
+            "{:?}",
+            reconstruction.start
+        );
+        assert!(
+            reconstruction
+                .timings
+                .iter()
+                .any(|t| t.stage.starts_with("region of interest")),
+            "the region of interest was not used"
+        );
+    }
+
     /// A warm window reconstructed in its region of interest and pasted back is the one the
     /// full frame gives: the same pixels, the same depth to float rounding.
     #[test]
@@ -839,18 +738,7 @@ mod tests {
             Some(&sphere.warm),
         )
         .expect("in the region");
-        assert!(
-            matches!(region.start, Start::Warm { .. }),
-            "{:?}",
-            region.start
-        );
-        assert!(
-            region
-                .timings
-                .iter()
-                .any(|t| t.stage.starts_with("region of interest")),
-            "the region of interest was not used"
-        );
+        assert_warm_in_its_region(&region);
         let (a, b) = (&region.integration.depth.depth_mm, &full.depth.depth_mm);
         assert_eq!(a.dim(), b.dim());
         let mut worst = 0.0f32;
@@ -875,17 +763,9 @@ mod tests {
     /// alone, exactly as from the full frame's [`usable_led_images`] and [`level_noise`].
     #[test]
     fn a_decoded_window_gives_what_its_full_frame_images_give() {
-        use crate::demod::synthetic::{Scene, render};
-        use crate::demod::{DecodeConfig, LedCount, decode};
         let sphere = still_sphere();
-        let scene = Scene::default();
-        let (mut source, _, _) = render(&scene);
-        let config = DecodeConfig {
-            leds: LedCount::Fixed(scene.leds),
-            ..DecodeConfig::default()
-        };
         // A decode's report, with the sphere's images, noise and flags.
-        let mut decoded = decode(&mut source, &config, &mut |_, _| {}).expect("decodes");
+        let mut decoded = synthetic_decode();
         let dim = sphere.noise.dim();
         decoded.leds = sphere.images.clone();
         decoded.noise = Array2::from_shape_fn(dim, |(r, c)| 1e-3 * (1.0 + ((r * c) % 7) as f32));
@@ -908,18 +788,7 @@ mod tests {
             Some(&sphere.warm),
         )
         .expect("from the full frame's images");
-        assert!(
-            matches!(from_region.start, Start::Warm { .. }),
-            "{:?}",
-            from_region.start
-        );
-        assert!(
-            from_region
-                .timings
-                .iter()
-                .any(|t| t.stage.starts_with("region of interest")),
-            "the region of interest was not used"
-        );
+        assert_warm_in_its_region(&from_region);
         let bits = |r: &Reconstruction| r.integration.depth.depth_mm.mapv(f32::to_bits);
         assert_eq!(bits(&from_region), bits(&from_full));
         let normals = |r: &Reconstruction| r.photometric.field.normals.mapv(f32::to_bits);
@@ -956,10 +825,8 @@ mod tests {
         assert!(result.is_none(), "a cut-off object was pasted back");
     }
 
-    /// The decoder's saturated and under-exposed pixels become NaN in every LED image; the
-    /// other readings are kept as decoded.
-    #[test]
-    fn flagged_pixels_are_left_out_of_every_led_image() {
+    /// The decode of the demodulator's default synthetic scene.
+    fn synthetic_decode() -> Decoded {
         use crate::demod::synthetic::{Scene, render};
         use crate::demod::{DecodeConfig, LedCount, decode};
         let scene = Scene::default();
@@ -968,12 +835,19 @@ mod tests {
             leds: LedCount::Fixed(scene.leds),
             ..DecodeConfig::default()
         };
-        let mut decoded = decode(&mut source, &config, &mut |_, _| {}).expect("decodes");
+        decode(&mut source, &config, &mut |_, _| {}).expect("decodes")
+    }
+
+    /// The decoder's saturated and under-exposed pixels become NaN in every LED image; the
+    /// other readings are kept as decoded.
+    #[test]
+    fn flagged_pixels_are_left_out_of_every_led_image() {
+        let mut decoded = synthetic_decode();
         decoded.saturated[(3, 4)] = true;
         decoded.underexposed[(10, 20)] = true;
         decoded.underexposed[(47, 63)] = true;
         let usable = usable_led_images(&decoded);
-        assert_eq!(usable.images.len(), scene.leds);
+        assert_eq!(usable.images.len(), decoded.leds.images.len());
         for (image, original) in usable.images.iter().zip(&decoded.leds.images) {
             for ((p, v), o) in image.indexed_iter().zip(original) {
                 let flagged = decoded.saturated[p] || decoded.underexposed[p];
