@@ -23,12 +23,14 @@
 //! one) and kept unless the misfit clearly prefers another in a bracket of a few mm (a t-test
 //! over bands of the part, [`OFFSET_PREFERENCE_T`]); a preferred offset is blended with the
 //! carried one by a prior across windows ([`WARM_OFFSET_GAIN`]), and the integrator starts from
-//! the previous depth with the early passes' loose settings. One pass is normally enough: a
-//! second runs only when the depth moved more than [`WARM_LIGHTS_MOVED_MM`] from the one its
-//! light vectors were computed at. A warm result that strays from its start is redone cold.
-//! A warm window is reconstructed inside the previous depth's bounding box grown by
-//! [`ROI_MARGIN_PX`] (its region of interest, module `roi`) and pasted back into the full
-//! frame; an object that reaches the region's edge is reconstructed on the full frame instead.
+//! the previous depth with looser settings than a cold window's early passes (one two-LED
+//! alternation, [`pass_integration`]). One pass is normally enough: a second runs only when the
+//! depth moved more than [`WARM_LIGHTS_MOVED_MM`] from the one its light vectors were computed
+//! at. A warm result that strays from its start is redone cold. A warm window is reconstructed
+//! inside the previous depth's bounding box grown by [`ROI_MARGIN_PX`] (its region of interest,
+//! module `roi`; a decode's usable images are made for that region alone, module `inputs`) and
+//! pasted back into the full frame; an object that reaches the region's edge is reconstructed on
+//! the full frame instead.
 
 use crate::demod::Decoded;
 use crate::integrate::{
@@ -281,7 +283,7 @@ pub fn reconstruct(
 /// ([`WarmStart`]): light vectors at the previous depth, each part's offset searched within
 /// ±[`WARM_OFFSET_BRACKET_MM`] of the offset carried from it (kept unless the misfit clearly
 /// prefers another, [`OFFSET_PREFERENCE_T`], and then moved by the share [`WARM_OFFSET_GAIN`]
-/// of the way to it), integration warm-started with the early passes' loose settings, and
+/// of the way to it), integration warm-started with loose settings ([`pass_integration`]), and
 /// passes stopped once the depth lies within [`WARM_LIGHTS_MOVED_MM`] (median) of the one the
 /// pass's light vectors came from. A warm result that moved more than [`WARM_MAX_MOVE_MM`]
 /// (median) from the start, clearly preferred an offset at the edge of the wider bracket
@@ -564,10 +566,9 @@ fn passes(
 
 /// The integration settings of a pass: the configured ones for the last pass of a cold
 /// reconstruction. Early passes only feed the light vectors of the next, so a few reweightings
-/// (or two-LED alternations) and a looser solve suffice ([`EARLY_PASS_REWEIGHTINGS`],
-/// [`EARLY_PASS_TOLERANCE`]); a warm pass begins next to the answer and takes those, with one
-/// alternation and a looser solve still ([`WARM_COVERAGE_ALTERNATIONS`],
-/// [`WARM_SOLVE_TOLERANCE`]).
+/// (or two-LED alternations) and a looser solve suffice (at most 8, relative residual 10⁻⁵); a
+/// warm pass begins next to the answer and takes those, with one alternation and a looser solve
+/// still (10⁻⁴; the constants' docs give the measurements).
 pub fn pass_integration(config: &ReconstructConfig, last: bool, warm: bool) -> IntegrateConfig {
     let mut integrate = config.integrate.clone();
     if !last || warm {
