@@ -298,7 +298,9 @@ fn report(name: &str, out: &Integration, workspace: &IntegrationWorkspace) {
 
 fn bench(c: &mut Criterion) {
     // As `meb` does first thing: repeated integrations reuse their arrays' pages.
-    meb::memory::keep_freed_memory();
+    // SAFETY: criterion calls this on its main thread before any other thread starts (the
+    // windows are simulated or read below).
+    unsafe { meb::memory::keep_freed_memory() };
     let Some((rig, config, first, second)) = windows() else {
         eprintln!("cannot simulate, decode or reconstruct the turning ellipsoid");
         return;

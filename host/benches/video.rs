@@ -284,7 +284,9 @@ fn clip() -> Option<(Rig, FrameFormat, Vec<Frame>)> {
 
 fn bench(c: &mut Criterion) {
     // As `meb` does first thing: windows reuse their arrays' pages.
-    meb::memory::keep_freed_memory();
+    // SAFETY: criterion calls this on its main thread before any other thread starts (the
+    // clip is simulated below).
+    unsafe { meb::memory::keep_freed_memory() };
     let Some((rig, format, frames)) = clip() else {
         eprintln!("cannot simulate the clip");
         return;

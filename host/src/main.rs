@@ -39,7 +39,8 @@ enum Command {
 
 fn main() -> ExitCode {
     // Windows of a video reuse their arrays' pages instead of faulting them in afresh.
-    meb::memory::keep_freed_memory();
+    // SAFETY: first thing in `main`: no other thread has started.
+    unsafe { meb::memory::keep_freed_memory() };
     let cli = Cli::parse();
     let result = match cli.command {
         Command::Demo(args) => cli::demo::run(&args),
