@@ -63,19 +63,10 @@ impl<'a> Inputs<'a> {
                 let sizes = decoded.leds.images.iter().map(|i| i.dim());
                 let sizes = sizes.chain(flags).chain([decoded.noise.dim()]);
                 roi.fits(sizes).then(|| {
-                    let (saturated, underexposed) = (
-                        roi.view(&decoded.saturated),
-                        roi.view(&decoded.underexposed),
-                    );
-                    let images = decoded
-                        .leds
-                        .images
-                        .par_iter()
-                        .map(|image| usable(roi.view(image), saturated, underexposed))
-                        .collect();
-                    let factor = level_noise_factor(decoded);
-                    let noise = roi.view(&decoded.noise).mapv(|s| s * factor);
-                    (LedImages { images }, Some(noise))
+                    (
+                        usable_images_in(decoded, Some(roi)),
+                        Some(level_noise_in(decoded, Some(roi))),
+                    )
                 })
             }
         }
@@ -85,20 +76,28 @@ impl<'a> Inputs<'a> {
 /// The decoded LED images with the pixels the decoder flagged as saturated or under-exposed
 /// set to NaN, so photometric stereo leaves them out.
 pub fn usable_led_images(decoded: &Decoded) -> LedImages {
-    // One pass per image (no copy to overwrite), the images side by side.
+    usable_images_in(decoded, None)
+}
+
+/// [`usable_led_images`] inside `roi` (the whole frame for `None`): one pass per image (no copy
+/// to overwrite), the images side by side.
+fn usable_images_in(decoded: &Decoded, roi: Option<&Roi>) -> LedImages {
+    let (saturated, underexposed) = (
+        area(&decoded.saturated, roi),
+        area(&decoded.underexposed, roi),
+    );
     let images = decoded
         .leds
         .images
         .par_iter()
-        .map(|image| {
-            usable(
-                image.view(),
-                decoded.saturated.view(),
-                decoded.underexposed.view(),
-            )
-        })
+        .map(|image| usable(area(image, roi), saturated, underexposed))
         .collect();
     LedImages { images }
+}
+
+/// `full` inside `roi` (all of it for `None`).
+fn area<'a, T>(full: &'a Array2<T>, roi: Option<&Roi>) -> ArrayView2<'a, T> {
+    roi.map_or_else(|| full.view(), |r| r.view(full))
 }
 
 /// `image` with its `saturated` or `underexposed` pixels set to NaN.
@@ -117,12 +116,12 @@ fn usable(
 /// sample; an on-level averages about frames/2 samples (each carrier is on half the time), so
 /// σ_A = σ · √(2/frames).
 pub fn level_noise(decoded: &Decoded) -> Array2<f32> {
-    let factor = level_noise_factor(decoded);
-    decoded.noise.mapv(|s| s * factor)
+    level_noise_in(decoded, None)
 }
 
-/// √(2/frames): σ_A / σ of [`level_noise`].
-fn level_noise_factor(decoded: &Decoded) -> f32 {
+/// [`level_noise`] inside `roi` (the whole frame for `None`).
+fn level_noise_in(decoded: &Decoded, roi: Option<&Roi>) -> Array2<f32> {
     let frames = decoded.report.frames_used.max(2) as f32;
-    (2.0 / frames).sqrt()
+    let factor = (2.0 / frames).sqrt();
+    area(&decoded.noise, roi).mapv(|s| s * factor)
 }
