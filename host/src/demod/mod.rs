@@ -217,8 +217,8 @@ pub fn decode_frames(
     } else {
         std::borrow::Cow::Owned(
             frames
-                .iter()
-                .map(|f| window::crop(f.clone(), format.width, decoder.roi))
+                .par_iter()
+                .map(|f| window::cut(f, format.width, decoder.roi))
                 .collect(),
         )
     };

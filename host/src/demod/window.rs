@@ -158,15 +158,57 @@ pub(super) fn crop(samples: Samples, width: usize, roi: Roi) -> Samples {
     if roi.x == 0 && roi.width == width && roi.y == 0 && roi.height * width == samples.len() {
         return samples;
     }
-    let rows = roi.y..roi.y + roi.height;
+    cut(&samples, width, roi)
+}
+
+/// The region of interest of a full frame, row by row into one allocation.
+pub(super) fn cut(samples: &Samples, width: usize, roi: Roi) -> Samples {
+    fn rows<T: Copy>(v: &[T], width: usize, roi: Roi) -> Vec<T> {
+        let mut out = Vec::with_capacity(roi.width * roi.height);
+        for r in roi.y..roi.y + roi.height {
+            out.extend_from_slice(&v[r * width + roi.x..r * width + roi.x + roi.width]);
+        }
+        out
+    }
     match samples {
-        Samples::U8(v) => Samples::U8(
-            rows.flat_map(|r| v[r * width + roi.x..r * width + roi.x + roi.width].to_vec())
-                .collect(),
-        ),
-        Samples::U16(v) => Samples::U16(
-            rows.flat_map(|r| v[r * width + roi.x..r * width + roi.x + roi.width].to_vec())
-                .collect(),
-        ),
+        Samples::U8(v) => Samples::U8(rows(v, width, roi)),
+        Samples::U16(v) => Samples::U16(rows(v, width, roi)),
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn a_cut_keeps_the_region_row_by_row_and_a_whole_frame_is_not_copied() {
+        let (width, height) = (7, 5);
+        let values: Vec<u16> = (0..(width * height) as u16).collect();
+        let roi = Roi {
+            x: 2,
+            y: 1,
+            width: 3,
+            height: 2,
+        };
+        let expected: Vec<u16> = vec![9, 10, 11, 16, 17, 18];
+        let Samples::U16(cut16) = cut(&Samples::U16(values.clone()), width, roi) else {
+            panic!("16-bit samples stay 16-bit");
+        };
+        assert_eq!(cut16, expected);
+        let bytes = Samples::U8(values.iter().map(|&v| v as u8).collect());
+        let Samples::U8(cut8) = crop(bytes, width, roi) else {
+            panic!("8-bit samples stay 8-bit");
+        };
+        assert_eq!(cut8, expected.iter().map(|&v| v as u8).collect::<Vec<_>>());
+        let whole = Roi {
+            x: 0,
+            y: 0,
+            width,
+            height,
+        };
+        let Samples::U16(all) = crop(Samples::U16(values.clone()), width, whole) else {
+            panic!("16-bit samples stay 16-bit");
+        };
+        assert_eq!(all, values);
     }
 }
