@@ -50,6 +50,20 @@ const LANES: usize = 4;
 /// Largest padded rank: the signal space holds at most 3·N + 2 directions (spectrum).
 const MAX_LANES: usize = (3 * super::MAX_LEDS + 2).div_ceil(LANES) * LANES;
 
+/// A local maximum of an LED's shift score reaching this share of its best is tried as a start
+/// too (the other LEDs at their best; the refinement keeps the lowest residual). The signal
+/// space can hold an LED that lights few of the sample's pixels poorly, and a wrong shift of it
+/// then scores higher than the true one: on a 514×311 region around the turning ellipsoid
+/// (1280×720, thesis-dynamic, 32-frame windows, carried exposure and rate ratio) LED 3's true
+/// shift scored 0.29–0.36 and one 7 chips away 0.37–0.65, and every one of 6 windows was
+/// refused as implausible (median σ 0.043 against the true fit's 0.005) while the whole
+/// frame's decodes were right. With these starts 12 of 14 decodes of that region and a 700×400
+/// one are right; the other two had two LEDs at wrong shifts at once. At 0.75 the true shift
+/// was too far below (0.36 against 0.50).
+const RIVAL_SHARE: f64 = 0.5;
+/// Rival shifts tried per LED.
+const RIVALS: usize = 2;
+
 /// Scores templates against the signal space.
 struct Scorer<'a> {
     /// The signal space V (F × rank) frame-major, each frame's row padded with zeros to
@@ -131,6 +145,42 @@ impl<'a> Scorer<'a> {
             }
         }
         best
+    }
+
+    /// The local maxima of one LED's score over its first half period (circular: a shift by
+    /// half a period scores the same) other than the one at `best`, scoring at least
+    /// [`RIVAL_SHARE`] of `best`'s score, each refined by golden section: the [`RIVALS`]
+    /// highest, best first.
+    fn rivals(&self, led: usize, timing: Timing, step: f64, best: (f64, f64)) -> Vec<f64> {
+        let half = self.waves.get(led).map_or(4, ReceivedWaveform::period) as f64 / 2.0;
+        let steps = (half / step).round() as usize;
+        if steps < 3 {
+            return Vec::new();
+        }
+        let mut template = vec![0.0; self.frames];
+        let grid: Vec<f64> = (0..steps)
+            .map(|k| self.score(led, timing, k as f64 * step, &mut template))
+            .collect();
+        let apart = |shift: f64| {
+            let d = (shift - best.1).rem_euclid(half);
+            d.min(half - d) > 1.5 * step
+        };
+        let mut rivals: Vec<(f64, f64)> = (0..steps)
+            .filter(|&k| {
+                let (before, after) = (grid[(k + steps - 1) % steps], grid[(k + 1) % steps]);
+                grid[k] > before && grid[k] >= after && grid[k] >= RIVAL_SHARE * best.0
+            })
+            .map(|k| k as f64 * step)
+            .filter(|&shift| apart(shift))
+            .map(|shift| {
+                let (x, s) = golden_max(shift - step, shift + step, |x| {
+                    self.score(led, timing, x, &mut template)
+                });
+                (s, x.rem_euclid(half))
+            })
+            .collect();
+        rivals.sort_by(|a, b| b.0.total_cmp(&a.0));
+        rivals.into_iter().take(RIVALS).map(|(_, x)| x).collect()
     }
 
     /// Sum over LEDs of their best scores, and the shifts.
@@ -238,7 +288,7 @@ pub fn starts(
             peaks.push(p);
         }
     }
-    peaks
+    let mut starts: Vec<Start> = peaks
         .into_iter()
         .map(|(_, exposure, shifts)| Start {
             timing: Timing {
@@ -247,7 +297,25 @@ pub fn starts(
             },
             shifts: shifts.clone(),
         })
-        .collect()
+        .collect();
+    // The best start with one LED at a rival shift ([`RIVAL_SHARE`]); the refinement keeps the
+    // lowest residual.
+    if templates.is_none()
+        && let Some(best) = starts.first().cloned()
+    {
+        for (led, &shift) in best.shifts.iter().enumerate() {
+            let score = scorer.score(led, best.timing, shift, &mut vec![0.0; frames]);
+            for rival in scorer.rivals(led, best.timing, SHIFT_STEP, (score, shift)) {
+                let mut shifts = best.shifts.clone();
+                shifts[led] = rival;
+                starts.push(Start {
+                    timing: best.timing,
+                    shifts,
+                });
+            }
+        }
+    }
+    starts
 }
 
 /// The rate ratio whose templates at full exposure the signal space holds best.
@@ -278,4 +346,61 @@ fn scan_rate(scorer: &Scorer<'_>, frames: usize, max_mismatch: f64) -> f64 {
             },
         );
     golden_max(best.1 - step, best.1 + step, |rate| at(rate, SHIFT_STEP)).0
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use nalgebra::{DMatrix, DVector};
+
+    /// A signal space that holds LED 3's template (of four LEDs, period 16 chips) at two
+    /// shifts 6.75 chips apart, as a region's sample can (see [`RIVAL_SHARE`]): whichever the
+    /// grid picks, the other is a start too, for the refinement to choose between them.
+    #[test]
+    fn a_rival_shift_of_an_led_is_tried_as_a_start() {
+        let frames = 32;
+        let waves: Vec<ReceivedWaveform> = (0..4).map(ReceivedWaveform::new).collect();
+        let timing = Timing {
+            rate_ratio: 1.0,
+            exposure: 1.0,
+        };
+        let template = |led: usize, shift: f64| {
+            let mut t = vec![0.0; frames];
+            timing.fill_template(&waves[led], shift, &mut t);
+            let mean = t.iter().sum::<f64>() / frames as f64;
+            DVector::from_iterator(frames, t.iter().map(|v| v - mean))
+        };
+        let columns = [
+            template(0, 0.25),
+            template(1, 2.0),
+            template(2, 0.5),
+            template(2, 7.25),
+            template(3, 1.625),
+        ];
+        let basis = DMatrix::from_columns(&columns).qr().q();
+        let space = SignalSpace {
+            vectors: basis,
+            values: vec![1.0; columns.len()],
+            noise: 0.0,
+            rank: columns.len(),
+        };
+        let limits = FitLimits {
+            rate_ratio: Some(1.0),
+            exposure: Some(1.0),
+            ..FitLimits::default()
+        };
+        let seeds = starts(&space, &waves, frames, &limits);
+        let near = |shift: f64, target: f64| {
+            let d = (shift - target).rem_euclid(8.0);
+            d.min(8.0 - d) < 0.2
+        };
+        for target in [0.5, 7.25] {
+            assert!(
+                seeds.iter().any(|s| near(s.shifts[2], target)),
+                "no start has LED 3 at {target} chips: {seeds:?}"
+            );
+        }
+        // Every start keeps the timing it was given.
+        assert!(seeds.iter().all(|s| s.timing == timing));
+    }
 }
