@@ -206,9 +206,12 @@ mod tests {
             width,
             height,
         };
-        let Samples::U16(all) = crop(Samples::U16(values.clone()), width, whole) else {
+        let frame = values.clone();
+        let storage = frame.as_ptr();
+        let Samples::U16(all) = crop(Samples::U16(frame), width, whole) else {
             panic!("16-bit samples stay 16-bit");
         };
         assert_eq!(all, values);
+        assert_eq!(all.as_ptr(), storage, "the whole frame was copied");
     }
 }
