@@ -7,11 +7,11 @@
 //! window: reader thread, decode, motion check, reconstruction); the other cases time its
 //! stages. `decode_carried_timing` decodes with the exposure and rate ratio carried from an
 //! earlier window, as every window after the first few does; `decode_region` does so in a
-//! 514×311 region of interest around the object (`meb decode --roi`). `reconstruct` is the first window
-//! from scratch (cold); `window_warm` reconstructs the second window (frames 44..76) started
-//! from the first window's result, as `meb video` does for every window after the first
-//! ([`meb::reconstruct::WarmStart`]). `frame_warm` is the one 3-D frame from frames in
-//! memory: decode (carried timing) and warm reconstruction of the second window in series;
+//! 514×311 region of interest around the object (`meb decode --roi`). `reconstruct` is the
+//! first window from scratch (cold); `window_warm` reconstructs the second window (frames
+//! 44..76) started from the first window's result, as `meb video` does for every window after
+//! the first ([`meb::reconstruct::WarmStart`]). `frame_warm` is the one 3-D frame from
+//! frames in memory: decode (carried timing) and warm reconstruction of the second window in series;
 //! `frame_warm_bin2` bins its 32 frames first. The bench first prints both per-stage profiles and
 //! how far the warm result lies from a cold reconstruction of the same window.
 //!

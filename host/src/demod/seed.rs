@@ -122,21 +122,32 @@ impl<'a> Scorer<'a> {
         captured / energy
     }
 
-    /// Best shift of one LED in its first half period (a half-period shift negates a carrier,
-    /// SPEC §2, which leaves the score unchanged), optionally refined by golden section.
-    fn best_shift(&self, led: usize, timing: Timing, step: f64, refine: bool) -> (f64, f64) {
-        let period = self.waves.get(led).map_or(4, ReceivedWaveform::period) as f64;
+    /// Half of one LED's carrier period, chips: a half-period shift negates a carrier (SPEC §2),
+    /// which leaves the score unchanged, so shifts are searched in [0, half).
+    fn half_period(&self, led: usize) -> f64 {
+        self.waves.get(led).map_or(4, ReceivedWaveform::period) as f64 / 2.0
+    }
+
+    /// One LED's score at the shifts k·`step` of its first half period.
+    fn shift_grid(&self, led: usize, timing: Timing, step: f64) -> Vec<f64> {
         let mut template = vec![0.0; self.frames];
-        let steps = (period / 2.0 / step).round() as usize;
+        let steps = (self.half_period(led) / step).round() as usize;
+        (0..steps)
+            .map(|k| self.score(led, timing, k as f64 * step, &mut template))
+            .collect()
+    }
+
+    /// Best shift of one LED in its first half period ([`Self::half_period`]), optionally
+    /// refined by golden section.
+    fn best_shift(&self, led: usize, timing: Timing, step: f64, refine: bool) -> (f64, f64) {
         let mut best = (f64::NEG_INFINITY, 0.0);
-        for k in 0..steps {
-            let shift = k as f64 * step;
-            let s = self.score(led, timing, shift, &mut template);
+        for (k, s) in self.shift_grid(led, timing, step).into_iter().enumerate() {
             if s > best.0 {
-                best = (s, shift);
+                best = (s, k as f64 * step);
             }
         }
         if refine {
+            let mut template = vec![0.0; self.frames];
             let (shift, s) = golden_max(best.1 - step, best.1 + step, |x| {
                 self.score(led, timing, x, &mut template)
             });
@@ -147,20 +158,17 @@ impl<'a> Scorer<'a> {
         best
     }
 
-    /// The local maxima of one LED's score over its first half period (circular: a shift by
-    /// half a period scores the same) other than the one at `best`, scoring at least
-    /// [`RIVAL_SHARE`] of `best`'s score, each refined by golden section: the [`RIVALS`]
-    /// highest, best first.
+    /// The local maxima of one LED's score over its first half period (circular) other than
+    /// the one at `best`, scoring at least [`RIVAL_SHARE`] of `best`'s score, each refined by
+    /// golden section: the [`RIVALS`] highest, best first.
     fn rivals(&self, led: usize, timing: Timing, step: f64, best: (f64, f64)) -> Vec<f64> {
-        let half = self.waves.get(led).map_or(4, ReceivedWaveform::period) as f64 / 2.0;
-        let steps = (half / step).round() as usize;
+        let half = self.half_period(led);
+        let grid = self.shift_grid(led, timing, step);
+        let steps = grid.len();
         if steps < 3 {
             return Vec::new();
         }
         let mut template = vec![0.0; self.frames];
-        let grid: Vec<f64> = (0..steps)
-            .map(|k| self.score(led, timing, k as f64 * step, &mut template))
-            .collect();
         let apart = |shift: f64| {
             let d = (shift - best.1).rem_euclid(half);
             d.min(half - d) > 1.5 * step
