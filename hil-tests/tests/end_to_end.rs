@@ -101,6 +101,11 @@ fn configured_luminaire_to_depth_map_meets_the_target() {
     );
     let reconstruction =
         from_decoded(&decoded, &rig, None, &ReconstructConfig::decoded_capture()).unwrap();
+    assert!(
+        reconstruction.support.verdict.is_plausible(),
+        "{:?}",
+        reconstruction.support
+    );
     let errors = compare_depth(
         &reconstruction.integration.depth.depth_mm,
         &truth.depth_mm,

@@ -219,6 +219,68 @@ fn bad_inputs_give_clear_errors() {
     }
 }
 
+/// The thesis-dynamic rig's camera at 320×180 sees a 75 mm cube corner-on: two of the
+/// faces it sees are lit by two LEDs only (a decoded capture: 9 % of the reconstructed surface
+/// measured), whose tilt the integrator can only guess. `meb reconstruct` refuses it and writes
+/// nothing; `--force` writes it with what was found recorded in the report.
+#[test]
+fn a_surface_lit_mostly_by_two_leds_is_refused() {
+    let tmp = tempfile::tempdir().unwrap();
+    let p = |name: &str| arg(&tmp.path().join(name)).to_string();
+    run_ok(&[
+        "simulate",
+        "--rig",
+        "thesis-dynamic",
+        "--camera-size",
+        "320x180",
+        "--scene",
+        "cube",
+        "--corner",
+        "--frames",
+        "32",
+        "--format",
+        "y4m",
+        "--out",
+        &p("cap"),
+    ]);
+    let capture = p("cap/capture.y4m");
+    let rig = p("cap/rig.toml");
+    let err = run_err(&[
+        "reconstruct",
+        &capture,
+        "--rig",
+        &rig,
+        "--out",
+        &p("refused"),
+    ]);
+    assert!(
+        err.contains("implausible") && err.contains("lit by three or more LEDs"),
+        "{err}"
+    );
+    assert!(
+        !tmp.path().join("refused").exists(),
+        "a refused result was written"
+    );
+    run_ok(&[
+        "reconstruct",
+        &capture,
+        "--rig",
+        &rig,
+        "--out",
+        &p("forced"),
+        "--force",
+    ]);
+    let text = std::fs::read_to_string(tmp.path().join("forced/report.json")).unwrap();
+    let report: Report = serde_json::from_str(&text).unwrap();
+    let share = report.summary.measured_share.unwrap();
+    assert!(share < meb::reconstruct::MIN_MEASURED_SHARE, "{share}");
+    assert!(
+        report.summary.implausible[0].contains("three or more LEDs"),
+        "{:?}",
+        report.summary.implausible
+    );
+}
+
 #[test]
 fn integrate_rejects_nan_normals() {
     let tmp = tempfile::tempdir().unwrap();

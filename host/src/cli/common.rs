@@ -134,8 +134,27 @@ pub fn mesh_extensions(formats: &[MeshFormat]) -> Vec<String> {
         .collect()
 }
 
+/// Refuses a reconstruction whose depth its support check ([`meb::reconstruct::Support`])
+/// finds implausible, saying what looks wrong and what to try, unless `force` (then warns).
+pub fn check_support(reconstruction: &meb::reconstruct::Reconstruction, force: bool) -> Result<()> {
+    let verdict = &reconstruction.support.verdict;
+    if verdict.is_plausible() {
+        return Ok(());
+    }
+    let problems = verdict.problems.join("; ");
+    if force {
+        eprintln!("warning: kept an implausible reconstruction (--force): {problems}");
+        return Ok(());
+    }
+    let advice = verdict.advice.join("; ");
+    anyhow::bail!(
+        "the reconstruction looks implausible: {problems} (try: {advice}; --force writes it anyway)"
+    )
+}
+
 /// The report summary every decoded-capture reconstruction shares: LED images, frames,
-/// integrator, light model, object pixels and the artefact filter's share.
+/// integrator, light model, object pixels, the artefact filter's share and the measured share
+/// (with what its support check found, when kept by `--force`).
 pub fn reconstruction_summary(
     decoded: &meb::demod::Decoded,
     config: &meb::reconstruct::ReconstructConfig,
@@ -149,6 +168,8 @@ pub fn reconstruction_summary(
         light_model: Some(light_model_name(config.light_model)),
         object_pixels: Some(mask.iter().filter(|&&m| m).count()),
         kept_fraction: Some(reconstruction.integration.kept_fraction),
+        measured_share: Some(reconstruction.support.measured_share),
+        implausible: reconstruction.support.verdict.problems.clone(),
         ..Summary::default()
     }
 }

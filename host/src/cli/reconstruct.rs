@@ -103,6 +103,7 @@ pub fn run(args: &ReconstructArgs) -> Result<()> {
         return Ok(());
     }
     let reconstruction = from_decoded(&inputs.decoded, &inputs.rig, inputs.mask.as_ref(), &config)?;
+    super::common::check_support(&reconstruction, args.force)?;
     let field = &reconstruction.photometric.field;
     let depth = &reconstruction.integration.depth;
     let (depth_errors, angular_errors) = match &inputs.truth {

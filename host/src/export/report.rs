@@ -56,6 +56,13 @@ pub struct Summary {
     /// Object pixels lit by at least three LEDs in the ground truth (where accuracy is measured).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub lit_by_three_pixels: Option<usize>,
+    /// Share (0..1) of the reconstructed pixels measured by three or more LEDs.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub measured_share: Option<f64>,
+    /// What the reconstruction's support check found implausible, written on request
+    /// (`--force`); empty for a plausible result.
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub implausible: Vec<String>,
     /// The ground-truth file.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub ground_truth: Option<String>,
@@ -473,6 +480,15 @@ fn figure_rows(report: &Report) -> Vec<(String, String)> {
             "kept by the artefact filter".into(),
             format!("{:.1} %", 100.0 * k),
         ));
+    }
+    if let Some(m) = s.measured_share {
+        rows.push((
+            "reconstructed surface lit by ≥ 3 LEDs".into(),
+            format!("{:.1} %", 100.0 * m),
+        ));
+    }
+    for problem in &s.implausible {
+        rows.push(("implausible, kept by --force".into(), problem.clone()));
     }
     rows.push((
         "image".into(),

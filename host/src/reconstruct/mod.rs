@@ -31,6 +31,10 @@
 //! module `roi`; a decode's usable images are made for that region alone, module `inputs`) and
 //! pasted back into the full frame; an object that reaches the region's edge is reconstructed on
 //! the full frame instead.
+//!
+//! Every result carries a verdict on whether its depth rests on what the LEDs measured (module
+//! `support`: enough of the surface lit by three or more LEDs). The commands refuse an
+//! implausible result unless `--force`; a warm result found implausible is redone cold.
 
 use crate::demod::Decoded;
 use crate::integrate::{
@@ -50,6 +54,7 @@ use thiserror::Error;
 mod inputs;
 mod offset;
 mod roi;
+mod support;
 use inputs::Inputs;
 pub use inputs::{level_noise, usable_led_images};
 pub use offset::{
@@ -58,6 +63,7 @@ pub use offset::{
 use offset::{OffsetPrior, place_parts};
 pub use roi::ROI_MARGIN_PX;
 use roi::Roi;
+pub use support::{MIN_MEASURED_SHARE, Support};
 
 /// Bilateral reweightings, or two-LED alternations, of the near-field passes before the last
 /// (they only feed the next pass's light vectors).
@@ -200,6 +206,9 @@ pub struct Reconstruction {
     pub timings: Vec<StageTiming>,
     /// Whether it started from a warm start.
     pub start: Start,
+    /// Whether the depth rests on what the LEDs measured ([`support`]): a result to refuse
+    /// unless its verdict is plausible.
+    pub support: Support,
 }
 
 /// How a reconstruction started.
@@ -349,21 +358,22 @@ fn reconstruct_inputs(
             }
         };
         let reason = match result {
-            Ok((photometric, integration, Ok(start))) => {
+            Ok((photometric, integration, Ok(start), support)) => {
                 return Ok(Reconstruction {
                     photometric,
                     integration,
                     timings,
                     start,
+                    support,
                 });
             }
-            Ok((_, _, Err(reason))) => reason,
+            Ok((_, _, Err(reason), _)) => reason,
             Err(error) => format!("the warm-started reconstruction failed: {error}"),
         };
         start = Start::Redone { reason };
     }
     let (images, noise) = full_frame();
-    let (photometric, integration, _) = passes(
+    let (photometric, integration, _, support) = passes(
         images,
         rig,
         mask,
@@ -377,6 +387,7 @@ fn reconstruct_inputs(
         integration,
         timings,
         start,
+        support,
     })
 }
 
@@ -414,11 +425,11 @@ fn warm_in_region(
     );
     let started = Instant::now();
     let pasted = match result {
-        Ok((photometric, _, _)) if roi.reached_edge(&photometric.object_mask) => return None,
-        Ok((photometric, integration, start)) => {
+        Ok((photometric, ..)) if roi.reached_edge(&photometric.object_mask) => return None,
+        Ok((photometric, integration, start, support)) => {
             let (photometric, integration) =
                 roi.paste(photometric, integration, &rig.camera.projection());
-            Ok((photometric, integration, start))
+            Ok((photometric, integration, start, support))
         }
         Err(error) => Err(error),
     };
@@ -429,10 +440,17 @@ fn warm_in_region(
     Some(pasted)
 }
 
-/// What [`passes`] returns: the last pass's photometric stereo and integration, and how the
-/// result started or why a warm one cannot be trusted.
-type PassesResult =
-    Result<(PhotometricResult, Integration, Result<Start, String>), ReconstructError>;
+/// What [`passes`] returns: the last pass's photometric stereo and integration, how the result
+/// started or why a warm one cannot be trusted, and its support ([`support`]).
+type PassesResult = Result<
+    (
+        PhotometricResult,
+        Integration,
+        Result<Start, String>,
+        Support,
+    ),
+    ReconstructError,
+>;
 
 /// The photometric stereo ↔ integration passes (module docs), cold or from `warm`, with how the
 /// result started ([`Start::Cold`], or [`Start::Warm`] with the passes run and how far it moved)
@@ -538,13 +556,19 @@ fn passes(
     }
     let (photometric, integration) = previous
         .ok_or_else(|| ReconstructError::Rig("no reconstruction pass was run".to_string()))?;
+    let support = support::judge(&integration);
     let start = verdict.and_then(|passes| {
         let Some(warm) = warm else {
             return Ok(Start::Cold);
         };
         let moved = depth_change(&integration.depth.depth_mm, &warm.depth_mm);
         let kept = integration.kept.iter().filter(|&&k| k).count();
-        if moved.median_mm > WARM_MAX_MOVE_MM {
+        if !support.verdict.is_plausible() {
+            Err(format!(
+                "the warm result is implausible: {}",
+                support.verdict.problems.join("; ")
+            ))
+        } else if moved.median_mm > WARM_MAX_MOVE_MM {
             Err(format!(
                 "the depth moved {:.2} mm (median) from the warm start (more than {WARM_MAX_MOVE_MM} mm)",
                 moved.median_mm
@@ -561,7 +585,7 @@ fn passes(
             })
         }
     });
-    Ok((photometric, integration, start))
+    Ok((photometric, integration, start, support))
 }
 
 /// The integration settings of a pass: the configured ones for the last pass of a cold
@@ -719,7 +743,7 @@ mod tests {
     #[test]
     fn a_warm_window_in_its_region_equals_the_full_frames() {
         let sphere = still_sphere();
-        let (full_ps, full, start) = passes(
+        let (full_ps, full, start, _) = passes(
             &sphere.images,
             &sphere.rig,
             None,

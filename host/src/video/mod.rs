@@ -222,6 +222,13 @@ pub struct ReconstructionQuality {
     pub iterations: usize,
     /// Whether the reconstruction started from the previous window's (warm) or from scratch.
     pub start: Start,
+    /// Share of the reconstructed pixels measured by three or more LEDs
+    /// ([`crate::reconstruct::Support`]).
+    #[serde(default)]
+    pub measured_share: f64,
+    /// What the reconstruction's support check found wrong (empty when plausible).
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub implausible: Vec<String>,
 }
 
 impl ReconstructionQuality {
@@ -238,6 +245,8 @@ impl ReconstructionQuality {
             kept_fraction: reconstruction.integration.kept_fraction,
             iterations: reconstruction.integration.iterations,
             start: reconstruction.start.clone(),
+            measured_share: reconstruction.support.measured_share,
+            implausible: reconstruction.support.verdict.problems.clone(),
         }
     }
 }
@@ -852,9 +861,33 @@ fn reconstruct_window(
             });
         }
     };
-    record.status = FrameStatus::Reconstructed;
     record.reconstruction = Some(ReconstructionQuality::of(&reconstruction));
     timing.stages = reconstruction.timings.clone();
+    let support = &reconstruction.support.verdict;
+    if !support.is_plausible() {
+        let problems = support.problems.join("; ");
+        if config.decode.on_implausible != OnImplausible::Keep {
+            record.reason = Some(format!(
+                "the reconstruction is implausible: {problems} (try: {}; --force keeps such \
+                 windows)",
+                support.advice.join("; ")
+            ));
+            record.timing = timing;
+            return Ok(Outcome {
+                record,
+                decoded: Some(decoded),
+                reconstruction: None,
+            });
+        }
+        let kept = format!(
+            "the reconstruction is implausible ({problems}) and was kept on request (--force)"
+        );
+        record.reason = Some(match record.reason.take() {
+            Some(reason) => format!("{reason}; {kept}"),
+            None => kept,
+        });
+    }
+    record.status = FrameStatus::Reconstructed;
     if let Some(truth) = truth {
         let time = Instant::now();
         record.accuracy = score(&reconstruction, truth, decoded_range)?;
