@@ -15,7 +15,7 @@ use std::path::{Path, PathBuf};
 use std::process::{Command, Stdio};
 
 mod common;
-use common::{dynamic_rig, meb, run_ok};
+use common::{dynamic_rig, meb, run_ok, simulate_y4m};
 
 /// The thesis' dynamic rig at 160×90 pixels.
 fn small_dynamic_rig(dir: &Path) -> String {
@@ -629,24 +629,8 @@ fn a_wrong_fit_is_refused_moving_or_still_unless_forced() {
 fn windows_whose_depth_rests_on_two_led_guesses_are_refused_unless_forced() {
     let tmp = tempfile::tempdir().unwrap();
     let clip = tmp.path().join("cube");
-    run_ok(&[
-        "simulate",
-        "--rig",
-        "thesis-dynamic",
-        "--camera-size",
-        "320x180",
-        "--scene",
-        "cube",
-        "--corner",
-        "--rpm",
-        "7.5",
-        "--frames",
-        "80",
-        "--format",
-        "y4m",
-        "--out",
-        &s(&clip),
-    ]);
+    let scene = ["--scene", "cube", "--corner", "--rpm", "7.5"];
+    simulate_y4m(&clip, "thesis-dynamic", "320x180", 80, &scene);
     let capture = s(&clip.join("capture.y4m"));
     let rig = s(&clip.join("rig.toml"));
     let refused = tmp.path().join("refused");

@@ -33,7 +33,8 @@
 //! the full frame instead.
 //!
 //! Every result carries a verdict on whether its depth rests on what the LEDs measured (module
-//! `support`: enough of the surface lit by three or more LEDs). The commands refuse an
+//! `support`: enough of the surface lit by three or more LEDs, every part placed by its
+//! offset search). The commands refuse an
 //! implausible result unless `--force`; a warm result found implausible is redone cold.
 
 use crate::demod::Decoded;
@@ -60,7 +61,7 @@ pub use inputs::{level_noise, usable_led_images};
 pub use offset::{
     OFFSET_PREFERENCE_T, WARM_OFFSET_BRACKET_MM, WARM_OFFSET_GAIN, WARM_WIDE_BRACKET_MM,
 };
-use offset::{OffsetPrior, place_parts};
+use offset::{OffsetPrior, Unplaced, place_parts};
 pub use roi::ROI_MARGIN_PX;
 use roi::Roi;
 pub use support::{MIN_MEASURED_SHARE, Support};
@@ -487,6 +488,8 @@ fn passes(
     let mut object_mask = mask.cloned();
     let mut previous: Option<(PhotometricResult, Integration)> = None;
     let mut verdict = Ok(0);
+    // Parts a pass's offset search could not place (a part keeps its number from pass to pass).
+    let mut unplaced = std::collections::BTreeMap::new();
     for pass in 0..passes {
         let start = Instant::now();
         let depth = previous
@@ -530,10 +533,9 @@ fn passes(
                 (None, Some(before)) => OffsetPrior::Previous(before),
                 (_, None) => OffsetPrior::None,
             };
-            if let Err(reason) =
-                place_parts(images, rig, noise, &ps, &mut integration, config, prior)
-            {
-                verdict = Err(reason);
+            match place_parts(images, rig, noise, &ps, &mut integration, config, prior) {
+                Ok(parts) => unplaced.extend(parts.into_iter().map(|u| (u.part, u))),
+                Err(reason) => verdict = Err(reason),
             }
             time("depth offset search", pass, start);
         }
@@ -556,7 +558,8 @@ fn passes(
     }
     let (photometric, integration) = previous
         .ok_or_else(|| ReconstructError::Rig("no reconstruction pass was run".to_string()))?;
-    let support = support::judge(&integration);
+    let unplaced: Vec<Unplaced> = unplaced.into_values().collect();
+    let support = support::judge(&integration, &unplaced);
     let start = verdict.and_then(|passes| {
         let Some(warm) = warm else {
             return Ok(Start::Cold);

@@ -113,7 +113,8 @@ pub(super) enum OffsetPrior<'a> {
 /// it back on the start's depth unless the misfit clearly prefers another within the bracket
 /// around it; a clearly preferred offset at the edge of that bracket is searched for once more
 /// in the wider ±[`WARM_WIDE_BRACKET_MM`] one, and at that one's edge too is an error (the
-/// object moved further than a warm start can follow).
+/// object moved further than a warm start can follow). A scan whose misfit keeps falling to
+/// the edge of its range leaves the part there and reports it ([`Unplaced`]).
 pub(super) fn place_parts(
     images: &LedImages,
     rig: &Rig,
@@ -122,7 +123,8 @@ pub(super) fn place_parts(
     integration: &mut Integration,
     config: &ReconstructConfig,
     prior: OffsetPrior,
-) -> Result<(), String> {
+) -> Result<Vec<Unplaced>, String> {
+    let mut unplaced = Vec::new();
     let projection = rig.camera.projection();
     let cap = match prior {
         OffsetPrior::Warm(_) => WARM_MISFIT_PIXELS,
@@ -161,16 +163,35 @@ pub(super) fn place_parts(
             continue;
         };
         if at_edge {
-            return Err(format!(
-                "part {part}'s depth offset lies at the edge of the warm start's ±{WARM_WIDE_BRACKET_MM} mm bracket"
-            ));
+            if let Bracket::Around { .. } = bracket {
+                return Err(format!(
+                    "part {part}'s depth offset lies at the edge of the warm start's ±{WARM_WIDE_BRACKET_MM} mm bracket"
+                ));
+            }
+            unplaced.push(Unplaced {
+                part,
+                pixels: integration.part.iter().filter(|&&p| p == part).count(),
+                reach_mm: offset.abs(),
+            });
         }
         if offset != 0.0 {
             integration.depth.depth_mm =
                 moved_part(depth, &integration.part, part, offset, &projection);
         }
     }
-    Ok(())
+    Ok(unplaced)
+}
+
+/// A part the offset search could not place: scanned over its whole range, its misfit kept
+/// falling to the range's edge (it is left there).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Unplaced {
+    /// The part ([`Integration::part`]).
+    pub part: u32,
+    /// Its pixels.
+    pub pixels: usize,
+    /// How far the scan reached, mm.
+    pub reach_mm: f64,
 }
 
 /// The offset (mm towards the camera, [`moved_depth`]) that best puts the integrated `depth`
@@ -252,7 +273,8 @@ enum Bracket {
 /// The offset (mm towards the camera, within the `bracket`) of the depth of `pixels` that
 /// minimises their Lambertian misfit (module docs) — around a carried offset, that offset
 /// unless the misfit clearly prefers the minimum ([`clearly_better`]) — and whether it lies at
-/// the (wider) bracket's edge; `None` with fewer than 16 pixels. The light vectors and the
+/// the (wider) bracket's edge, or for a scan at the edge of the scanned range (the misfit kept
+/// falling: no minimum inside it); `None` with fewer than 16 pixels. The light vectors and the
 /// pixels' rays and values are gathered once ([`ModelMisfit`]) for every bracket searched, and
 /// the carried offset's misfit once for both.
 #[allow(clippy::too_many_arguments)]
@@ -279,7 +301,8 @@ fn best_offset(
         &config.photometric,
     );
     let misfit = |offset: f64| model.at(offset);
-    // Coarse scan of ±half, then Brent's refinement around the best sample.
+    // Coarse scan of ±half, then Brent's refinement around the best sample; at the edge when
+    // that refinement ends at the outer end of an end sample's bracket (±(half + step)).
     let scan = |half: f64| {
         let samples = 13;
         let step = 2.0 * half / (samples - 1) as f64;
@@ -292,14 +315,15 @@ fn best_offset(
             }
         }
         let (refined, value) = brent_minimum(&misfit, best - step, best + step);
-        if value <= best_value { refined } else { best }
+        let found = if value <= best_value { refined } else { best };
+        (found, at_edge(found, 0.0, half + step))
     };
     match bracket {
-        Bracket::Scan(half) => Some((scan(half), false)),
+        Bracket::Scan(half) => Some(scan(half)),
         Bracket::Near { centre, half } => {
             let (refined, _) = brent_minimum(&misfit, centre - half, centre + half);
             if at_edge(refined, centre, half) {
-                Some((scan(config.offset_search_mm), false))
+                Some(scan(config.offset_search_mm))
             } else {
                 Some((refined, false))
             }

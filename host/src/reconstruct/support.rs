@@ -9,10 +9,14 @@
 //! reconstructed at 8–42 mm depth RMSE). So at least [`MIN_MEASURED_SHARE`] of the
 //! reconstructed pixels must be measured ([`Confidence::Measured`]).
 //!
-//! Not judged here: the depth of separately integrated pieces relative to each other, which
-//! only the near-field misfit ([`super::offset`]) places (its curvature did not separate the
-//! right placements from the wrong ones on the simulated scenes tried).
+//! The depth of each separately integrated part is placed by the near-field misfit
+//! ([`super::offset`]); a part whose misfit kept falling to the edge of the searched range was
+//! not placed at all (an in-plane capture of a sphere before a cube 70 mm behind it: the cube
+//! left at the −70 mm edge, 20 mm from its depth), and the result is refused too. A placement
+//! inside the range is not judged (the misfit's curvature did not separate the right placements
+//! from the wrong ones on the simulated scenes tried).
 
+use super::offset::Unplaced;
 use crate::demod::quality::Verdict;
 use crate::integrate::{Confidence, Integration};
 
@@ -33,8 +37,9 @@ pub struct Support {
     pub verdict: Verdict,
 }
 
-/// Judges the support of `integration`'s depth (module docs).
-pub fn judge(integration: &Integration) -> Support {
+/// Judges the support of `integration`'s depth, whose offset search left the parts
+/// `unplaced` (module docs).
+pub(super) fn judge(integration: &Integration, unplaced: &[Unplaced]) -> Support {
     let confidence = &integration.confidence;
     let reconstructed = confidence
         .iter()
@@ -49,23 +54,34 @@ pub fn judge(integration: &Integration) -> Support {
     } else {
         measured as f64 / reconstructed as f64
     };
-    let (problems, advice) = if measured_share < MIN_MEASURED_SHARE {
-        (
-            vec![format!(
-                "only {:.0} % of the reconstructed surface is lit by three or more LEDs (at \
-                 least {:.0} % needed): the rest is lit by two LEDs or filled, whose tilt the \
-                 integrator guesses",
-                100.0 * measured_share,
-                100.0 * MIN_MEASURED_SHARE
-            )],
-            vec![
-                "turn the object or move the LEDs so that three or more light most of it"
-                    .to_string(),
-            ],
-        )
-    } else {
-        (Vec::new(), Vec::new())
-    };
+    let mut problems = Vec::new();
+    let mut advice = Vec::new();
+    if measured_share < MIN_MEASURED_SHARE {
+        problems.push(format!(
+            "only {:.0} % of the reconstructed surface is lit by three or more LEDs (at least \
+             {:.0} % needed): the rest is lit by two LEDs or filled, whose tilt the integrator \
+             guesses",
+            100.0 * measured_share,
+            100.0 * MIN_MEASURED_SHARE
+        ));
+        advice.push(
+            "turn the object or move the LEDs so that three or more light most of it".to_string(),
+        );
+    }
+    for u in unplaced {
+        problems.push(format!(
+            "part {} ({} pixels) could not be placed in depth: its lighting misfit kept falling \
+             to the edge of the ±{:.0} mm search",
+            u.part, u.pixels, u.reach_mm
+        ));
+    }
+    if !unplaced.is_empty() {
+        advice.push(
+            "reconstruct each object alone (--mask), or place the objects with a range camera \
+             (--tof)"
+                .to_string(),
+        );
+    }
     Support {
         measured_share,
         verdict: Verdict::from_findings(problems, advice),
@@ -112,7 +128,7 @@ mod tests {
         let r = sphere();
         assert!(r.support.verdict.is_plausible(), "{:?}", r.support);
         assert!(r.support.measured_share >= MIN_MEASURED_SHARE);
-        assert_eq!(r.support, judge(&r.integration));
+        assert_eq!(r.support, judge(&r.integration, &[]));
     }
 
     #[test]
@@ -130,11 +146,29 @@ mod tests {
                 n += 1;
             }
         }
-        let support = judge(&r.integration);
+        let support = judge(&r.integration, &[]);
         assert!(support.measured_share < MIN_MEASURED_SHARE, "{support:?}");
         assert!((support.measured_share - r.support.measured_share * 0.4).abs() < 0.01);
         assert!(!support.verdict.is_plausible());
         assert!(support.verdict.problems[0].contains("three or more LEDs"));
         assert!(!support.verdict.advice.is_empty());
+    }
+
+    #[test]
+    fn a_part_its_offset_search_could_not_place_is_refused() {
+        let r = sphere();
+        let unplaced = Unplaced {
+            part: 1,
+            pixels: 1260,
+            reach_mm: 70.0,
+        };
+        let support = judge(&r.integration, &[unplaced]);
+        assert!(!support.verdict.is_plausible());
+        assert_eq!(support.measured_share, r.support.measured_share);
+        assert!(
+            support.verdict.problems[0].contains("part 1 (1260 pixels) could not be placed"),
+            "{support:?}"
+        );
+        assert!(support.verdict.advice[0].contains("--mask"));
     }
 }

@@ -66,6 +66,28 @@ pub fn refused(args: &[&str], out: &Path, expect: &str) -> String {
     text
 }
 
+/// Simulates `frames` frames of `scene` (`meb simulate` scene arguments) under the rig preset
+/// `rig` with its camera at `size` (`WxH`) into the y4m capture folder `out` (capture.y4m,
+/// rig.toml, depth.npy).
+pub fn simulate_y4m(out: &Path, rig: &str, size: &str, frames: usize, scene: &[&str]) {
+    let frames = frames.to_string();
+    let mut args = vec![
+        "simulate",
+        "--rig",
+        rig,
+        "--camera-size",
+        size,
+        "--frames",
+        &frames,
+        "--format",
+        "y4m",
+        "--out",
+        arg(out),
+    ];
+    args.extend_from_slice(scene);
+    run_ok(&args);
+}
+
 /// The thesis' out-of-plane LED positions (SPEC §5), mm.
 pub const OUT_OF_PLANE_LEDS: [[f64; 3]; 4] = [
     [-270.0, 420.0, 100.0],
