@@ -99,3 +99,36 @@ pub enum Confidence {
     /// 3: full photometric-stereo normal from three or more LEDs.
     Measured = 3,
 }
+
+/// Reconstructed pixels by how their depth is known (`confidence.npy`).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
+pub struct ConfidenceCounts {
+    /// Full photometric-stereo normal from three or more LEDs.
+    pub measured: usize,
+    /// Lit by two LEDs: normal from the two measurements and the surface's integrability.
+    pub two_leds: usize,
+    /// Holes inside the object filled by the integrator.
+    pub filled: usize,
+}
+
+impl ConfidenceCounts {
+    /// Counts the pixels of each reconstructed class.
+    pub fn of(confidence: &Array2<Confidence>) -> Self {
+        let count = |k: Confidence| confidence.iter().filter(|&&c| c == k).count();
+        Self {
+            measured: count(Confidence::Measured),
+            two_leds: count(Confidence::TwoLeds),
+            filled: count(Confidence::Filled),
+        }
+    }
+
+    /// Share of the reconstructed pixels measured by three or more LEDs (0 when none is).
+    pub fn measured_share(&self) -> f64 {
+        let reconstructed = self.measured + self.two_leds + self.filled;
+        if reconstructed == 0 {
+            0.0
+        } else {
+            self.measured as f64 / reconstructed as f64
+        }
+    }
+}

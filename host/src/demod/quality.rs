@@ -98,7 +98,8 @@ pub enum VerdictStatus {
     Overridden,
 }
 
-/// The verdict on a decode, with what looks wrong and what to try.
+/// The verdict on a decode (or a reconstruction, [`crate::reconstruct::Support`]), with what
+/// looks wrong and what to try.
 #[derive(Debug, Clone, Default, PartialEq, Serialize, Deserialize)]
 pub struct Verdict {
     /// The outcome.
@@ -124,7 +125,7 @@ impl Verdict {
         }
     }
 
-    /// Whether the decode may be used.
+    /// Whether the result may be used.
     pub fn is_plausible(&self) -> bool {
         self.status == VerdictStatus::Plausible
     }

@@ -11,6 +11,7 @@ use super::render::{VIEWS, render_surface};
 use super::viewer;
 use crate::metrics::{AngularErrors, DepthErrors};
 use crate::timing::StageTiming;
+pub use crate::types::ConfidenceCounts;
 use crate::types::{Confidence, DepthMap, NormalField};
 use base64::Engine;
 use image::RgbImage;
@@ -149,29 +150,6 @@ pub struct Report {
     pub total_ms: f64,
     /// The preview files written.
     pub files: Vec<String>,
-}
-
-/// Reconstructed pixels by how their depth is known (`confidence.npy`).
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
-pub struct ConfidenceCounts {
-    /// Full photometric-stereo normal from three or more LEDs.
-    pub measured: usize,
-    /// Lit by two LEDs: normal from the two measurements and the surface's integrability.
-    pub two_leds: usize,
-    /// Holes inside the object filled by the integrator.
-    pub filled: usize,
-}
-
-impl ConfidenceCounts {
-    /// Counts the pixels of each reconstructed class.
-    pub fn of(confidence: &Array2<Confidence>) -> Self {
-        let count = |k: Confidence| confidence.iter().filter(|&&c| c == k).count();
-        Self {
-            measured: count(Confidence::Measured),
-            two_leds: count(Confidence::TwoLeds),
-            filled: count(Confidence::Filled),
-        }
-    }
 }
 
 /// The colour of each confidence class in `confidence.png`: green measured, amber two LEDs,

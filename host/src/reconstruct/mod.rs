@@ -685,14 +685,15 @@ pub fn from_decoded_warm(
 mod tests {
     use super::*;
 
-    /// A still sphere's window as `meb video` passes it, and the warm start its cold
-    /// reconstruction leaves.
+    /// A still sphere's window as `meb video` passes it, its cold reconstruction and the warm
+    /// start that leaves.
     pub(super) struct StillSphere {
         pub(super) rig: Rig,
         pub(super) images: LedImages,
         pub(super) noise: Array2<f32>,
         pub(super) config: ReconstructConfig,
         pub(super) warm: WarmStart,
+        pub(super) cold: Reconstruction,
     }
 
     /// LED images of a sphere of radius 30 mm on a 320×180 thesis-dynamic rig with a flat
@@ -718,6 +719,7 @@ mod tests {
             reconstruct_warm(&images, &rig, None, Some(&noise), &config, None).expect("cold");
         StillSphere {
             warm: WarmStart::of(&cold),
+            cold,
             rig,
             images,
             noise,

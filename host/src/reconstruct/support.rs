@@ -18,7 +18,8 @@
 
 use super::offset::Unplaced;
 use crate::demod::quality::Verdict;
-use crate::integrate::{Confidence, Integration};
+use crate::integrate::Integration;
+use crate::types::ConfidenceCounts;
 
 /// Least share of the reconstructed pixels that must be measured by three or more LEDs. On a
 /// sweep of simulated still captures (640×360, three thesis rigs, spheres, ellipsoids, blobby
@@ -40,20 +41,7 @@ pub struct Support {
 /// Judges the support of `integration`'s depth, whose offset search left the parts
 /// `unplaced` (module docs).
 pub(super) fn judge(integration: &Integration, unplaced: &[Unplaced]) -> Support {
-    let confidence = &integration.confidence;
-    let reconstructed = confidence
-        .iter()
-        .filter(|&&c| c != Confidence::None)
-        .count();
-    let measured = confidence
-        .iter()
-        .filter(|&&c| c == Confidence::Measured)
-        .count();
-    let measured_share = if reconstructed == 0 {
-        0.0
-    } else {
-        measured as f64 / reconstructed as f64
-    };
+    let measured_share = ConfidenceCounts::of(&integration.confidence).measured_share();
     let mut problems = Vec::new();
     let mut advice = Vec::new();
     if measured_share < MIN_MEASURED_SHARE {
@@ -90,37 +78,14 @@ pub(super) fn judge(integration: &Integration, unplaced: &[Unplaced]) -> Support
 
 #[cfg(test)]
 mod tests {
-    use super::super::{ReconstructConfig, Reconstruction, reconstruct};
+    use super::super::Reconstruction;
+    use super::super::tests::still_sphere;
     use super::*;
-    use crate::rig::Rig;
-    use crate::simulate::geometry::SurfaceMap;
-    use crate::simulate::lighting::led_images;
-    use crate::simulate::scene::{Scene, SceneObject};
-    use crate::types::LedImages;
-    use ndarray::Array2;
+    use crate::types::Confidence;
 
-    /// A Ø60 mm sphere on the thesis-dynamic rig at 320×180, noise-free (brightest reading 0.5
-    /// of full scale), reconstructed.
+    /// The still sphere's cold reconstruction (a Ø60 mm sphere, thesis-dynamic rig at 320×180).
     fn sphere() -> Reconstruction {
-        let mut rig = Rig::preset("thesis-dynamic").expect("preset");
-        (rig.camera.width, rig.camera.height) = (320, 180);
-        let scene = Scene::single(SceneObject::sphere(60.0));
-        let map = SurfaceMap::render(&scene, &rig.camera, 0.0);
-        let mut images = led_images(&map, &rig, 1.0);
-        let brightest = images.iter().flatten().fold(0.0f32, |m, &v| m.max(v));
-        for image in &mut images {
-            image.mapv_inplace(|v| v * 0.5 / brightest);
-        }
-        let noise = Array2::from_elem((180, 320), 1e-4);
-        let images = LedImages { images };
-        reconstruct(
-            &images,
-            &rig,
-            None,
-            Some(&noise),
-            &ReconstructConfig::default(),
-        )
-        .expect("sphere")
+        still_sphere().cold
     }
 
     #[test]
