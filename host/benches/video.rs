@@ -276,6 +276,31 @@
 //! poorly. The seeds now include each LED's rival shifts (`demod::seed`, `RIVAL_SHARE`), which
 //! decodes 12 of 14 such region windows right (0 of 6 before); decoding warm windows around
 //! the object stays out, for it saves 3 ms and still falls back now and then.
+//!
+//! Session 35: where a warm frame's wall time goes on 2 cores. Perf over 10 s of `frame_warm`:
+//! the calling thread alone (serial work, the pool idle) is 24 % of the samples, ≈ 20 ms of a
+//! 60 ms frame, and the pool's two workers were busy 1.5 cores' worth in the parallel parts.
+//! The serial part is a long tail of ≤ 2 ms items: the matched filter's output planes zeroed by
+//! `calloc` (memory kept for reuse must be cleared: a serial memset of ≈ 20 MB), the multigrid's
+//! small levels and CG's vector updates, the speck and hole labelling of the object mask, the
+//! pieces and parts labellings, the region's bounding box, the depth-change medians. Now the
+//! output planes are written once by the rows' kernels into unzeroed memory, the region's
+//! arrays are pasted row by row in parallel into unfilled memory, the labelling floods on
+//! row-major indices, the pieces and the bilateral parts are labelled side by side, and the
+//! bounding box is found by rows in parallel. Every output is byte-identical (`meb video` on a
+//! 200-frame 1280×720 turning ellipsoid: every depth, normals and albedo file and every
+//! non-timing field of `video.json`). Measured with a loop of 100 warm frames (decode with
+//! carried timing + warm reconstruction of the second window, as `frame_warm`), main 8adb532
+//! and this code alternated, two runs each: frame minimum 50.3 / 50.4 → **47.1 / 46.5 ms**,
+//! median 59.8 / 57.2 → **54.1 / 54.2 ms**; decode minimum 9.7 / 9.6 → 8.2 / 8.2 ms; warm
+//! reconstruction minimum 40.5 / 40.1 → 38.5 / 38.2 ms. Criterion medians on this (shared)
+//! machine scatter by ±10 % from run to run, more than these changes. The warm window's stages
+//! in steady state (minimum / median of 60): integration 21.4 / 26.2 ms, photometric stereo
+//! 6.9 / 8.4 ms, offset search 5.9 / 7.4 ms, paste 1.8 / 2.2 ms (the 5.4 ms this bench prints
+//! first is its first, cold-cache call). Tried and dropped: a coarser Brent tolerance for warm
+//! windows (0.1 mm instead of 0.01 mm) made the offset search slower (8.5–9.9 ms against
+//! 5.9–7.7 ms): its minimum then more often lay clearly below the carried offset's misfit, which
+//! costs the band t-test's two extra evaluations.
 
 use criterion::{BatchSize, Criterion, criterion_group, criterion_main};
 use meb::capture::binning::Binning;

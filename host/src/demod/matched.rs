@@ -19,6 +19,7 @@ use super::stats::PixelStats;
 use super::window::{CodeMap, Region};
 use crate::capture::Samples;
 use rayon::prelude::*;
+use std::mem::MaybeUninit;
 
 /// Pixels accumulated together in registers.
 const TILE: usize = 16;
@@ -169,14 +170,106 @@ fn dispatch<T: Code>(
     }
 }
 
-/// One row's output slices.
+/// One row's output slices, not yet written: the row's kernel writes every pixel of each
+/// (the planes are allocated without being zeroed first, [`OutputPlanes`]).
 struct RowOutput<'a> {
-    leds: Vec<&'a mut [f32]>,
-    noise_variance: &'a mut [f32],
-    saturated: &'a mut [bool],
-    underexposed: &'a mut [bool],
+    leds: Vec<&'a mut [MaybeUninit<f32>]>,
+    noise_variance: &'a mut [MaybeUninit<f32>],
+    saturated: &'a mut [MaybeUninit<bool>],
+    underexposed: &'a mut [MaybeUninit<bool>],
     /// The row's report statistics.
     stats: PixelStats,
+}
+
+impl RowOutput<'_> {
+    /// Writes `value`'s defaults (0, not saturated, not under-exposed) to every pixel of the row
+    /// from `from` on.
+    fn clear_from(&mut self, from: usize) {
+        let clear = |row: &mut [MaybeUninit<f32>]| {
+            row.iter_mut().skip(from).for_each(|v| {
+                v.write(0.0);
+            })
+        };
+        self.leds.iter_mut().for_each(|row| clear(row));
+        clear(self.noise_variance);
+        for flags in [&mut *self.saturated, &mut *self.underexposed] {
+            flags.iter_mut().skip(from).for_each(|v| {
+                v.write(false);
+            });
+        }
+    }
+}
+
+/// The output planes of a window: allocated without zeroing (a `vec![0.0; n]` of memory the
+/// allocator kept for reuse is a serial memset of ≈ 20 MB at 1280×720, 1–2 ms of a window
+/// on the calling thread) and handed out row by row; every pixel of every plane is then
+/// written once by its row's kernel.
+struct OutputPlanes {
+    leds: Vec<Vec<f32>>,
+    noise_variance: Vec<f32>,
+    saturated: Vec<bool>,
+    underexposed: Vec<bool>,
+    pixels: usize,
+}
+
+impl OutputPlanes {
+    /// Room for `images` LED planes of `pixels` pixels and the three per-pixel maps.
+    fn with_room(images: usize, pixels: usize) -> Self {
+        Self {
+            leds: (0..images).map(|_| Vec::with_capacity(pixels)).collect(),
+            noise_variance: Vec::with_capacity(pixels),
+            saturated: Vec::with_capacity(pixels),
+            underexposed: Vec::with_capacity(pixels),
+            pixels,
+        }
+    }
+
+    /// Every plane's unwritten pixels as rows of `width`.
+    fn rows(&mut self, width: usize) -> Vec<RowOutput<'_>> {
+        let (pixels, images) = (self.pixels, self.leds.len());
+        let mut led_rows: Vec<_> = self
+            .leds
+            .iter_mut()
+            .map(|p| p.spare_capacity_mut()[..pixels].chunks_mut(width))
+            .collect();
+        self.noise_variance.spare_capacity_mut()[..pixels]
+            .chunks_mut(width)
+            .zip(self.saturated.spare_capacity_mut()[..pixels].chunks_mut(width))
+            .zip(self.underexposed.spare_capacity_mut()[..pixels].chunks_mut(width))
+            .map(|((noise_variance, saturated), underexposed)| RowOutput {
+                leds: led_rows.iter_mut().filter_map(Iterator::next).collect(),
+                noise_variance,
+                saturated,
+                underexposed,
+                stats: PixelStats::new(images),
+            })
+            .collect()
+    }
+
+    /// The planes, once every row from [`Self::rows`] was written whole.
+    ///
+    /// # Safety
+    ///
+    /// Every element of every row [`Self::rows`] handed out must have been written.
+    unsafe fn written(mut self) -> (Vec<Vec<f32>>, Vec<f32>, Vec<bool>, Vec<bool>) {
+        let pixels = self.pixels;
+        // SAFETY: the capacity is `pixels` (`with_room`) and the caller wrote every element of
+        // the first `pixels` (the rows cover them).
+        unsafe {
+            for plane in &mut self.leds {
+                plane.set_len(pixels);
+            }
+            self.noise_variance.set_len(pixels);
+            self.saturated.set_len(pixels);
+            self.underexposed.set_len(pixels);
+        }
+        (
+            self.leds,
+            self.noise_variance,
+            self.saturated,
+            self.underexposed,
+        )
+    }
 }
 
 /// The kernel for K model columns: every row in parallel, written straight into the images.
@@ -216,47 +309,34 @@ fn run<const K: usize, T: Code>(
         })
         .collect();
     let noise_factor = (plan.scale * plan.scale / plan.dof) as f32;
-    // Zeroed by the allocator (untouched pages), so the parallel rows fault them in.
-    let mut leds: Vec<Vec<f32>> = (0..K - 1).map(|_| vec![0.0f32; pixels]).collect();
-    let mut noise_variance = vec![0.0f32; pixels];
-    let mut saturated = vec![false; pixels];
-    let mut underexposed = vec![false; pixels];
-    let stats = {
-        let mut led_rows: Vec<_> = leds.iter_mut().map(|p| p.chunks_mut(width)).collect();
-        let rows: Vec<RowOutput<'_>> = noise_variance
-            .chunks_mut(width)
-            .zip(saturated.chunks_mut(width))
-            .zip(underexposed.chunks_mut(width))
-            .map(|((noise_variance, saturated), underexposed)| RowOutput {
-                leds: led_rows.iter_mut().filter_map(Iterator::next).collect(),
-                noise_variance,
-                saturated,
-                underexposed,
-                stats: PixelStats::new(K - 1),
-            })
-            .collect();
-        let simd = simd_available();
-        rows.into_par_iter()
-            .enumerate()
-            .map_init(Vec::new, |tiles, (row, mut out)| {
-                let band = plan.region.band_of(row);
-                let samples: Vec<&[T]> = frames
-                    .iter()
-                    .map(|f| f.get(row * width..(row + 1) * width).unwrap_or(&[]))
-                    .collect();
-                let job = RowJob {
-                    solver: &solvers[band],
-                    noise_factor,
-                    limits: plan.limits,
-                    weights: &weights[band],
-                    samples: &samples,
-                    width,
-                };
-                run_row::<K, T, _>(simd, &job, value, &mut out, tiles);
-                out.stats
-            })
-            .reduce(|| PixelStats::new(K - 1), |a, b| a.merge(&b))
-    };
+    let mut planes = OutputPlanes::with_room(K - 1, pixels);
+    let simd = simd_available();
+    let stats = planes
+        .rows(width)
+        .into_par_iter()
+        .enumerate()
+        .map_init(Vec::new, |tiles, (row, mut out)| {
+            let band = plan.region.band_of(row);
+            let samples: Vec<&[T]> = frames
+                .iter()
+                .map(|f| f.get(row * width..(row + 1) * width).unwrap_or(&[]))
+                .collect();
+            let job = RowJob {
+                solver: &solvers[band],
+                noise_factor,
+                limits: plan.limits,
+                weights: &weights[band],
+                samples: &samples,
+                width,
+            };
+            let written = run_row::<K, T, _>(simd, &job, value, &mut out, tiles);
+            // Every pixel is written (the tiles cover the row); should one not be, it reads 0.
+            out.clear_from(written);
+            out.stats
+        })
+        .reduce(|| PixelStats::new(K - 1), |a, b| a.merge(&b));
+    // SAFETY: every row's kernel wrote its first `written` pixels and `clear_from` the rest.
+    let (leds, noise_variance, saturated, underexposed) = unsafe { planes.written() };
     WindowAmplitudes {
         leds,
         noise_variance,
@@ -291,22 +371,22 @@ fn simd_available() -> bool {
     }
 }
 
-/// Runs one row with the widest kernel the CPU supports.
+/// Runs one row with the widest kernel the CPU supports; returns how many of the row's first
+/// pixels it wrote.
 fn run_row<const K: usize, T: Code, V: Fn(T) -> f32 + Copy>(
     simd: bool,
     job: &RowJob<'_, K, T>,
     value: V,
     out: &mut RowOutput<'_>,
     tiles: &mut Vec<TileSums<K, T>>,
-) {
+) -> usize {
     #[cfg(target_arch = "x86_64")]
     if simd {
         // SAFETY: `simd_available` checked that this CPU has AVX2 and FMA.
-        unsafe { row_avx2::<K, T, V>(job, value, out, tiles) };
-        return;
+        return unsafe { row_avx2::<K, T, V>(job, value, out, tiles) };
     }
     let _ = simd;
-    row_kernel::<K, false, T, V>(job, value, out, tiles);
+    row_kernel::<K, false, T, V>(job, value, out, tiles)
 }
 
 /// The row kernel compiled for AVX2 + FMA (8-lane f32 vectors, fused multiply-adds).
@@ -317,8 +397,8 @@ fn row_avx2<const K: usize, T: Code, V: Fn(T) -> f32 + Copy>(
     value: V,
     out: &mut RowOutput<'_>,
     tiles: &mut Vec<TileSums<K, T>>,
-) {
-    row_kernel::<K, true, T, V>(job, value, out, tiles);
+) -> usize {
+    row_kernel::<K, true, T, V>(job, value, out, tiles)
 }
 
 /// The row's tiles of [`TILE`] pixels stream over the frames [`GROUP`] at a time: each
@@ -330,7 +410,7 @@ fn row_kernel<const K: usize, const FMA: bool, T: Code, V: Fn(T) -> f32 + Copy>(
     value: V,
     out: &mut RowOutput<'_>,
     tiles: &mut Vec<TileSums<K, T>>,
-) {
+) -> usize {
     let count = job.width.div_ceil(TILE);
     tiles.clear();
     tiles.resize(count, TileSums::default());
@@ -349,11 +429,16 @@ fn row_kernel<const K: usize, const FMA: bool, T: Code, V: Fn(T) -> f32 + Copy>(
         add_frames::<K, 1, FMA, T, V>(tiles, row, weight, job.width, value);
     }
     let mut lanes = LaneStats::<K>::default();
+    let mut written = 0;
     for (t, sums) in tiles.iter().enumerate() {
         let x = t * TILE;
-        solve::<K, T>(job, sums, x, TILE.min(job.width - x), out, &mut lanes);
+        if x != written {
+            break;
+        }
+        written += solve::<K, T>(job, sums, x, TILE.min(job.width - x), out, &mut lanes);
     }
     lanes.fold_into(&mut out.stats);
+    written
 }
 
 /// A row's report sums kept per lane, so that adding a tile vectorises (the pixel-by-pixel
@@ -522,7 +607,8 @@ fn add_frames<const K: usize, const G: usize, const FMA: bool, T: Code, V: Fn(T)
 }
 
 /// Solves the tile's least-squares systems, all lanes at once in f32, and writes the
-/// coefficients, noise variances and maxima.
+/// coefficients, noise variances and maxima of the `len` pixels from `x`; returns how many
+/// pixels it wrote (`len`, or 0 if they lie beyond the row).
 #[allow(clippy::needless_range_loop)] // indexed lanes vectorise
 #[inline(always)]
 fn solve<const K: usize, T: Code>(
@@ -532,7 +618,10 @@ fn solve<const K: usize, T: Code>(
     len: usize,
     out: &mut RowOutput<'_>,
     lanes: &mut LaneStats<K>,
-) {
+) -> usize {
+    if out.noise_variance.len() < x + len || out.leds.iter().any(|row| row.len() < x + len) {
+        return 0;
+    }
     let mut explained = [0.0f32; TILE];
     for c in 0..K {
         for l in 0..TILE {
@@ -573,15 +662,18 @@ fn solve<const K: usize, T: Code>(
     write_lanes(out.noise_variance, x, len, &noise);
     write_lanes(out.saturated, x, len, &saturated);
     write_lanes(out.underexposed, x, len, &underexposed);
+    len
 }
 
 /// Writes the first `len` lanes to `target[x..]`.
 #[inline(always)]
-fn write_lanes<U: Copy>(target: &mut [U], x: usize, len: usize, lanes: &[U; TILE]) {
+fn write_lanes<U: Copy>(target: &mut [MaybeUninit<U>], x: usize, len: usize, lanes: &[U; TILE]) {
     if let Some(slot) = target.get_mut(x..x + len)
         && let Some(values) = lanes.get(..len)
     {
-        slot.copy_from_slice(values);
+        for (slot, &value) in slot.iter_mut().zip(values) {
+            slot.write(value);
+        }
     }
 }
 

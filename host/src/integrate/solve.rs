@@ -311,7 +311,25 @@ pub(super) fn solve_window(
         }
     }
     let t = Instant::now();
-    let (piece_of_node, pieces) = topology.components();
+    // Pieces, and parts: pieces further split where the bilateral integrator found a depth
+    // discontinuity all the way across (their relative depth is unknown to the normals). The
+    // two labellings are independent and run side by side.
+    let ((piece_of_node, pieces), bilateral_parts) = rayon::join(
+        || topology.components(),
+        || {
+            bilateral.then(|| {
+                let cut = bilateral::discontinuities(
+                    &topology,
+                    &x,
+                    &slopes,
+                    stiffness,
+                    DISCONTINUITY_WEIGHT,
+                );
+                let min_part = MIN_PART_PIXELS.max(topology.len() / 100);
+                absorb_small_parts(&topology, topology.components_without(&cut), min_part)
+            })
+        },
+    );
     let mut depth = Array2::from_elem(region.dim(), f64::NAN);
     if config.integrator == Integrator::FastMarching {
         let gradients = SurfaceGradients {
@@ -335,16 +353,7 @@ pub(super) fn solve_window(
     anchor(&mut depth, &topology, &piece_of_node, pieces, config.anchor);
     profile.add("pieces and anchoring", t);
     let t = Instant::now();
-    // Parts: pieces further split where the bilateral integrator found a depth discontinuity
-    // all the way across (their relative depth is unknown to the normals).
-    let (part_of_node, parts) = if bilateral {
-        let cut =
-            bilateral::discontinuities(&topology, &x, &slopes, stiffness, DISCONTINUITY_WEIGHT);
-        let min_part = MIN_PART_PIXELS.max(topology.len() / 100);
-        absorb_small_parts(&topology, topology.components_without(&cut), min_part)
-    } else {
-        (piece_of_node.clone(), pieces)
-    };
+    let (part_of_node, parts) = bilateral_parts.unwrap_or_else(|| (piece_of_node.clone(), pieces));
     let depth_mm = depth.mapv(|u| {
         if u.is_finite() {
             grid.depth_mm(u)
