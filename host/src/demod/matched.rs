@@ -182,8 +182,8 @@ struct RowOutput<'a> {
 }
 
 impl RowOutput<'_> {
-    /// Writes `value`'s defaults (0, not saturated, not under-exposed) to every pixel of the row
-    /// from `from` on.
+    /// Writes 0 (no signal, no noise, neither saturated nor under-exposed) to every pixel of
+    /// the row from column `from` on, in every plane.
     fn clear_from(&mut self, from: usize) {
         let clear = |row: &mut [MaybeUninit<f32>]| {
             row.iter_mut().skip(from).for_each(|v| {
