@@ -629,10 +629,7 @@ struct DepthChange {
 /// The [`DepthChange`] from `before` to `after`.
 fn depth_change(after: &Array2<f32>, before: &Array2<f32>) -> DepthChange {
     let change = |(a, b): (&f32, &f32)| (a.is_finite() && b.is_finite()).then(|| (a - b).abs());
-    let mut absolute: Vec<f32> = match (after.as_slice(), before.as_slice()) {
-        (Some(a), Some(b)) if a.len() == b.len() => a.iter().zip(b).filter_map(change).collect(),
-        _ => after.iter().zip(before).filter_map(change).collect(),
-    };
+    let mut absolute: Vec<f32> = after.iter().zip(before).filter_map(change).collect();
     let pixels = absolute.len();
     if pixels == 0 {
         return DepthChange {

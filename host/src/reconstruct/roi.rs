@@ -54,38 +54,28 @@ impl Roi {
         if mask.is_some_and(|m| m.dim() != frame) {
             return None;
         }
-        // Each row's first and last pixel inside, rows in parallel.
+        // Each row's first and last pixel inside, rows in parallel (over row-major copies of
+        // the arrays only should they be stored otherwise).
         let width = frame.1.max(1);
-        let spans: Vec<(usize, usize, usize)> = match (depth.as_slice(), mask.map(|m| m.as_slice()))
-        {
-            (Some(depth), None | Some(Some(_))) => {
-                let mask = mask.and_then(|m| m.as_slice());
-                depth
-                    .par_chunks(width)
-                    .enumerate()
-                    .filter_map(|(r, row)| {
-                        let masked = mask.map(|m| &m[r * width..][..row.len()]);
-                        let mut inside = row
-                            .iter()
-                            .enumerate()
-                            .map(|(c, z)| (c, z.is_finite() || masked.is_some_and(|m| m[c])));
-                        row_span(r, &mut inside)
-                    })
-                    .collect()
-            }
-            _ => depth
-                .outer_iter()
-                .enumerate()
-                .filter_map(|(r, row)| {
-                    let mask_row = mask.map(|m| m.row(r));
-                    let mut inside = row
-                        .iter()
-                        .enumerate()
-                        .map(|(c, z)| (c, z.is_finite() || mask_row.is_some_and(|m| m[c])));
-                    row_span(r, &mut inside)
-                })
-                .collect(),
+        let depth = depth.as_standard_layout();
+        let mask = mask.map(|m| m.as_standard_layout());
+        let mask = match &mask {
+            Some(m) => Some(m.as_slice()?),
+            None => None,
         };
+        let spans: Vec<(usize, usize, usize)> = depth
+            .as_slice()?
+            .par_chunks(width)
+            .enumerate()
+            .filter_map(|(r, row)| {
+                let masked = mask.map(|m| &m[r * width..][..row.len()]);
+                let mut inside = row
+                    .iter()
+                    .enumerate()
+                    .map(|(c, z)| (c, z.is_finite() || masked.is_some_and(|m| m[c])));
+                row_span(r, &mut inside)
+            })
+            .collect();
         let (first, last) = (spans.first()?, spans.last()?);
         let (top, bottom) = (first.0, last.0);
         let left = spans.iter().map(|s| s.1).min()?;
