@@ -3,8 +3,8 @@
 //!
 //! A push–pull pyramid (Gortler et al., "The Lumigraph", SIGGRAPH 1996, §3.4): coarser levels
 //! average the known values (pull), finer ones blend their partial averages with the coarser
-//! level's (push), which reaches into holes of any size; a few Gauss–Seidel sweeps of the
-//! Laplace equation over the filled pixels then smooth the seams. Everything that depends only
+//! level's (push), which reaches into holes of any size; a few red–black Gauss–Seidel sweeps of
+//! the Laplace equation over the filled pixels then smooth the seams. Everything that depends only
 //! on which pixels are known — the pyramid's weights and every filled pixel's neighbours — is
 //! worked out once in an [`Inpainting`] and shared by the channels filled over the same pixels
 //! (s_x and s_y, filled together as pairs in one pass: [`Channels`]). The fill works in the
@@ -14,7 +14,7 @@
 use ndarray::Array2;
 use std::borrow::Cow;
 
-/// Gauss–Seidel sweeps that smooth the push–pull interpolation.
+/// Red–black Gauss–Seidel sweeps that smooth the push–pull interpolation.
 const SMOOTHING_SWEEPS: usize = 30;
 
 /// A pixel's values in the channels filled together: one value, or a pair (s_x, s_y) filled in
@@ -72,7 +72,11 @@ pub(crate) struct Inpainting {
     shape: (usize, usize),
     /// Level 0 (the grid, weight 1 where known) and the coarser levels, finest first.
     levels: Vec<Level>,
-    /// Row-major index of each pixel to fill, in raster order.
+    /// Row-major index of each pixel to fill: those of even row + column first, then the odd
+    /// ones, each in raster order. No pixel neighbours one of its own colour, so a sweep in
+    /// this order is a red–black Gauss–Seidel sweep: within a colour no update waits for the
+    /// one before it (in raster order each waited for its left neighbour's, and a sweep took
+    /// 2.5× as long).
     free: Vec<u32>,
     /// Cell of level 1 above each pixel to fill (the push reaches level 0 only there: its
     /// weights are 0 or 1, so a pixel to fill takes its parent's value).
@@ -97,10 +101,12 @@ impl Inpainting {
         let (rows, cols) = shape;
         assert_eq!(wanted.dim(), shape, "inpainting masks of different sizes");
         let (known, wanted) = (row_major(known), row_major(wanted));
-        let free: Vec<u32> = (0..rows * cols)
+        // Red–black order: the pixels of even (row + column) first, then the odd ones.
+        let (mut free, odd): (Vec<u32>, Vec<u32>) = (0..rows * cols)
             .filter(|&i| wanted[i] && !known[i])
             .map(|i| i as u32)
-            .collect();
+            .partition(|&i| (i as usize / cols + i as usize % cols).is_multiple_of(2));
+        free.extend(odd);
         let stencil = free
             .iter()
             .map(|&i| {

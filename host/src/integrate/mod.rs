@@ -46,6 +46,7 @@ use crate::types::{DepthMap, NormalField};
 use grid::DepthGrid;
 use nalgebra::Vector3;
 use ndarray::{Array2, Array3};
+use rayon::prelude::*;
 use solve::{Problem, solve_window};
 use std::time::Instant;
 use thiserror::Error;
@@ -404,45 +405,7 @@ pub fn integrate_surface_with(
     for p in evidence.planes {
         class[(p.pixel.0 - origin.0, p.pixel.1 - origin.1)] = Confidence::TwoLeds;
     }
-    let mut bad = (0usize, 0, 0);
-    let mut zero = 0;
-    let mut slopes = Array2::from_elem(inner, (0.0, 0.0));
-    for ((wr, wc), &m) in window.view(&field.mask).indexed_iter() {
-        if !m {
-            continue;
-        }
-        let (r, c) = (wr + origin.0, wc + origin.1);
-        let n = Vector3::from([0, 1, 2].map(|j| f64::from(field.normals[(r, c, j)])));
-        if !n.iter().all(|v| v.is_finite()) {
-            if bad.0 == 0 {
-                bad = (0, r, c);
-            }
-            bad.0 += 1;
-            continue;
-        }
-        // A normal facing away from the camera carries no slope: treat the pixel as a hole.
-        if n.norm() == 0.0 {
-            zero += 1;
-        }
-        match grid.slopes(r, c, &n) {
-            Some((sx, sy)) => {
-                class[(wr, wc)] = Confidence::Measured;
-                slopes[(wr, wc)] = (
-                    sx.clamp(-config.max_slope, config.max_slope),
-                    sy.clamp(-config.max_slope, config.max_slope),
-                );
-            }
-            None if class[(wr, wc)] == Confidence::None => class[(wr, wc)] = Confidence::Filled,
-            None => {}
-        }
-    }
-    if bad.0 > 0 {
-        return Err(IntegrateError::NonFinite {
-            count: bad.0,
-            row: bad.1,
-            col: bad.2,
-        });
-    }
+    let (slopes, zero) = classify_pixels(field, &grid, &window, config.max_slope, &mut class)?;
     if !class
         .iter()
         .any(|&k| k == Confidence::Measured || k == Confidence::TwoLeds)
@@ -474,6 +437,89 @@ pub fn integrate_surface_with(
     };
     workspace.profile.add("pixel classes and slopes", started);
     solve_window(&problem, &window, shape, config, initial, workspace)
+}
+
+/// Rows of the window per parallel task when its pixels are classified.
+const ROWS_PER_TASK: usize = 8;
+
+/// What classifying one row of the window found: normals with a non-finite component (how
+/// many, and the first one's pixel) and zero normals.
+#[derive(Default)]
+struct RowTally {
+    non_finite: usize,
+    first_non_finite: Option<(usize, usize)>,
+    zero: usize,
+}
+
+/// Classifies the mask's pixels of `window` in `class` (window-sized; holes and two-LED pixels
+/// marked already): `Measured` with their slopes (clipped to ±`max_slope`) where the normal has
+/// one, `Filled` where it faces away and nothing else is known. Returns the slopes (0 elsewhere)
+/// and how many normals were zero; a non-finite normal is an error. Rows in parallel.
+fn classify_pixels(
+    field: &NormalField,
+    grid: &DepthGrid,
+    window: &Window,
+    max_slope: f64,
+    class: &mut Array2<Confidence>,
+) -> Result<(Array2<(f64, f64)>, usize), IntegrateError> {
+    let origin = (window.rows.start, window.cols.start);
+    let inner = (window.rows.len(), window.cols.len());
+    if class.as_slice().is_none() {
+        *class = class.as_standard_layout().into_owned();
+    }
+    let mut slopes = Array2::from_elem(inner, (0.0, 0.0));
+    let mask = window.view(&field.mask);
+    let (Some(class_all), Some(slopes_all)) = (class.as_slice_mut(), slopes.as_slice_mut()) else {
+        unreachable!("arrays in standard layout")
+    };
+    let tallies: Vec<RowTally> = class_all
+        .par_chunks_mut(inner.1)
+        .zip(slopes_all.par_chunks_mut(inner.1))
+        .enumerate()
+        .with_min_len(ROWS_PER_TASK)
+        .map(|(wr, (class_row, slope_row))| {
+            let mut tally = RowTally::default();
+            let r = wr + origin.0;
+            let cells = class_row.iter_mut().zip(slope_row).zip(mask.row(wr));
+            for (wc, ((class, slope), &m)) in cells.enumerate() {
+                if !m {
+                    continue;
+                }
+                let c = wc + origin.1;
+                let n = Vector3::from([0, 1, 2].map(|j| f64::from(field.normals[(r, c, j)])));
+                if !n.iter().all(|v| v.is_finite()) {
+                    tally.first_non_finite.get_or_insert((r, c));
+                    tally.non_finite += 1;
+                    continue;
+                }
+                // A normal facing away from the camera carries no slope: the pixel is a hole.
+                if n.norm() == 0.0 {
+                    tally.zero += 1;
+                }
+                match grid.slopes(r, c, &n) {
+                    Some((sx, sy)) => {
+                        *class = Confidence::Measured;
+                        *slope = (
+                            sx.clamp(-max_slope, max_slope),
+                            sy.clamp(-max_slope, max_slope),
+                        );
+                    }
+                    None if *class == Confidence::None => *class = Confidence::Filled,
+                    None => {}
+                }
+            }
+            tally
+        })
+        .collect();
+    let non_finite: usize = tallies.iter().map(|t| t.non_finite).sum();
+    if let Some((row, col)) = tallies.iter().find_map(|t| t.first_non_finite) {
+        return Err(IntegrateError::NonFinite {
+            count: non_finite,
+            row,
+            col,
+        });
+    }
+    Ok((slopes, tallies.iter().map(|t| t.zero).sum()))
 }
 
 /// Integrates slopes ∂z/∂x, ∂z/∂y (dimensionless) with grid pitch `pitch_mm` (orthographic).
@@ -896,6 +942,36 @@ mod tests {
                 IntegrateError::NoUsableNormals {
                     zero: 30,
                     facing_away: 0
+                }
+            ),
+            "{err}"
+        );
+        // Non-finite normals are counted and the first in raster order named, in grid
+        // coordinates, whichever row band of the classification found it.
+        let shape = (40, 30);
+        let mask = Array2::from_shape_fn(shape, |(r, c)| r >= 3 && c >= 2);
+        let mut normals = Array3::zeros((shape.0, shape.1, 3));
+        for r in 0..shape.0 {
+            for c in 0..shape.1 {
+                normals[(r, c, 2)] = 1.0;
+            }
+        }
+        for (r, c, j) in [(25, 3, 0), (13, 20, 2), (13, 7, 1), (1, 1, 0)] {
+            normals[(r, c, j)] = f32::NAN;
+        }
+        let field = NormalField {
+            normals,
+            albedo: Array2::ones(shape),
+            mask,
+        };
+        let err = integrate_normals(&field, 1.0, &IntegrateConfig::default(), None).unwrap_err();
+        assert!(
+            matches!(
+                err,
+                IntegrateError::NonFinite {
+                    count: 3,
+                    row: 13,
+                    col: 7
                 }
             ),
             "{err}"

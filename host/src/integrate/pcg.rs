@@ -5,6 +5,8 @@
 //! rule are parameters, so the masked Poisson solve ([`super::least_squares`]) and the Nehab
 //! fusion ([`super::fusion`]) share one loop.
 
+use rayon::prelude::*;
+
 /// When conjugate gradients stops (checked before every iteration, including the first).
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub(crate) enum Stop {
@@ -43,7 +45,6 @@ pub(crate) fn preconditioned_cg(
 ) -> usize {
     let n = b.len();
     assert!(x.len() == n, "x and b must have the same length");
-    let dot = |u: &[f64], v: &[f64]| u.iter().zip(v).map(|(p, q)| p * q).sum::<f64>();
     let CgVectors { r, z, p, ap } = vectors;
     for v in [&mut *r, &mut *z, &mut *p, &mut *ap] {
         v.resize(n, 0.0);
@@ -76,21 +77,73 @@ pub(crate) fn preconditioned_cg(
             return iteration;
         }
         let alpha = rz / curvature;
-        rr = 0.0;
-        for ((xk, rk), (pk, apk)) in x.iter_mut().zip(r.iter_mut()).zip(p.iter().zip(ap.iter())) {
-            *xk += alpha * pk;
-            *rk -= alpha * apk;
-            rr += *rk * *rk;
-        }
+        rr = step(x, r, p, ap, alpha);
         precondition(r, z);
         let rz_next = dot(r, z);
         let beta = rz_next / rz;
         rz = rz_next;
-        p.iter_mut()
-            .zip(z.iter())
-            .for_each(|(pk, zk)| *pk = zk + beta * *pk);
+        next_direction(p, z, beta);
     }
     max_iterations
+}
+
+/// Vectors shorter than this are updated on the calling thread.
+const PARALLEL_LENGTH: usize = 16_384;
+/// Entries per parallel task. Sums are taken per band and the bands' sums added in order, so
+/// the result does not depend on how the thread pool splits the work.
+const BAND: usize = 4_096;
+
+/// uᵀv.
+fn dot(u: &[f64], v: &[f64]) -> f64 {
+    let band = |(u, v): (&[f64], &[f64])| u.iter().zip(v).map(|(p, q)| p * q).sum::<f64>();
+    if u.len() < PARALLEL_LENGTH {
+        return band((u, v));
+    }
+    let sums: Vec<f64> = u
+        .par_chunks(BAND)
+        .zip(v.par_chunks(BAND))
+        .map(band)
+        .collect();
+    sums.iter().sum()
+}
+
+/// x += α p, r −= α Ap; returns ‖r‖².
+fn step(x: &mut [f64], r: &mut [f64], p: &[f64], ap: &[f64], alpha: f64) -> f64 {
+    let band = |x: &mut [f64], r: &mut [f64], p: &[f64], ap: &[f64]| {
+        let mut rr = 0.0;
+        for ((xk, rk), (pk, apk)) in x.iter_mut().zip(r.iter_mut()).zip(p.iter().zip(ap)) {
+            *xk += alpha * pk;
+            *rk -= alpha * apk;
+            rr += *rk * *rk;
+        }
+        rr
+    };
+    if x.len() < PARALLEL_LENGTH {
+        return band(x, r, p, ap);
+    }
+    let sums: Vec<f64> = x
+        .par_chunks_mut(BAND)
+        .zip(r.par_chunks_mut(BAND))
+        .zip(p.par_chunks(BAND).zip(ap.par_chunks(BAND)))
+        .map(|((x, r), (p, ap))| band(x, r, p, ap))
+        .collect();
+    sums.iter().sum()
+}
+
+/// p = z + β p.
+fn next_direction(p: &mut [f64], z: &[f64], beta: f64) {
+    let band = |(p, z): (&mut [f64], &[f64])| {
+        p.iter_mut()
+            .zip(z)
+            .for_each(|(pk, zk)| *pk = zk + beta * *pk);
+    };
+    if p.len() < PARALLEL_LENGTH {
+        band((p, z));
+    } else {
+        p.par_chunks_mut(BAND)
+            .zip(z.par_chunks(BAND))
+            .for_each(band);
+    }
 }
 
 #[cfg(test)]
@@ -173,6 +226,37 @@ mod tests {
 
     /// Vectors kept from a solve of another size (and left full of its values) give the same
     /// solution, bit for bit, as fresh ones.
+    #[test]
+    fn long_vectors_are_updated_in_bands_as_short_ones_are() {
+        let n = 3 * PARALLEL_LENGTH + 123;
+        let wave =
+            |phase: f64| -> Vec<f64> { (0..n).map(|i| (i as f64 * 0.37 + phase).sin()).collect() };
+        let (u, v) = (wave(0.0), wave(1.0));
+        let serial: f64 = u.iter().zip(&v).map(|(a, b)| a * b).sum();
+        let banded = dot(&u, &v);
+        assert!(
+            (banded - serial).abs() <= 1e-12 * n as f64,
+            "{banded} {serial}"
+        );
+        // The same bands every time, whatever the thread pool does.
+        assert_eq!(dot(&u, &v).to_bits(), banded.to_bits());
+        let (mut x, mut r, p, ap) = (wave(2.0), wave(3.0), wave(4.0), wave(5.0));
+        let (x0, r0) = (x.clone(), r.clone());
+        let rr = step(&mut x, &mut r, &p, &ap, 0.3);
+        for k in 0..n {
+            assert_eq!(x[k], x0[k] + 0.3 * p[k]);
+            assert_eq!(r[k], r0[k] - 0.3 * ap[k]);
+        }
+        let serial: f64 = r.iter().map(|v| v * v).sum();
+        assert!((rr - serial).abs() <= 1e-12 * n as f64, "{rr} {serial}");
+        let (mut p, z) = (wave(6.0), wave(7.0));
+        let p0 = p.clone();
+        next_direction(&mut p, &z, 0.7);
+        for k in 0..n {
+            assert_eq!(p[k], z[k] + 0.7 * p0[k]);
+        }
+    }
+
     #[test]
     fn kept_vectors_give_the_same_solution_as_fresh_ones() {
         let jacobi = |r: &[f64], z: &mut [f64]| z.iter_mut().zip(r).for_each(|(z, r)| *z = r / 2.0);

@@ -401,24 +401,20 @@ pub(super) fn solve_window(
     {
         out.depth.pitch_mm = distance_mm / intrinsics.fx;
     }
-    for (k, &(r, c)) in topology.cells.iter().enumerate() {
-        if !kept[(r, c)] {
-            continue;
-        }
-        let full = (r + window.rows.start, c + window.cols.start);
-        out.depth.depth_mm[full] = depth_mm[(r, c)] as f32;
-        out.kept[full] = true;
-        out.piece[full] = piece_of_node[k];
-        out.part[full] = part_of_node[k];
-        let class = problem.class[(r, c)];
-        out.confidence[full] = class;
-        if class != Confidence::Measured {
-            let n = grid.normal(full.0, full.1, slopes[k].0, slopes[k].1);
-            for j in 0..3 {
-                out.completed_normals[(full.0, full.1, j)] = n[j] as f32;
-            }
-        }
-    }
+    place_nodes(
+        &mut out,
+        &NodeResults {
+            topology: &topology,
+            window,
+            grid,
+            class: &problem.class,
+            kept: &kept,
+            depth_mm: &depth_mm,
+            slopes: &slopes,
+            piece: &piece_of_node,
+            part: &part_of_node,
+        },
+    );
     profile.add("output", t);
     workspace.cached = Some(workspace::CachedSystem {
         origin: problem.origin,
@@ -428,4 +424,79 @@ pub(super) fn solve_window(
         hierarchy,
     });
     Ok(out)
+}
+
+/// Rows of the output per parallel task.
+const ROWS_PER_TASK: usize = 8;
+
+/// What a window's solve found at its nodes, for [`place_nodes`].
+struct NodeResults<'a> {
+    topology: &'a Topology,
+    window: &'a Window,
+    grid: &'a DepthGrid,
+    /// Each window pixel's class.
+    class: &'a Array2<Confidence>,
+    /// Window pixels the artefact filter kept.
+    kept: &'a Array2<bool>,
+    /// Depth of each window pixel (mm).
+    depth_mm: &'a Array2<f64>,
+    /// Slopes, piece and part of each node.
+    slopes: &'a [(f64, f64)],
+    piece: &'a [u32],
+    part: &'a [u32],
+}
+
+/// Writes the kept nodes' depth, piece, part, class and (where not measured) completed normal
+/// into `out`'s full-grid arrays (fresh, row-major), one output row per task: a window row's
+/// nodes are a run of the raster-ordered nodes.
+fn place_nodes(out: &mut Integration, nodes: &NodeResults) {
+    let cols = out.kept.ncols();
+    let cells = &nodes.topology.cells;
+    let (Some(depth), Some(kept), Some(piece), Some(part), Some(confidence), Some(normals)) = (
+        out.depth.depth_mm.as_slice_mut(),
+        out.kept.as_slice_mut(),
+        out.piece.as_slice_mut(),
+        out.part.as_slice_mut(),
+        out.confidence.as_slice_mut(),
+        out.completed_normals.as_slice_mut(),
+    ) else {
+        unreachable!("new arrays are in standard layout")
+    };
+    depth
+        .par_chunks_mut(cols)
+        .zip(kept.par_chunks_mut(cols))
+        .zip(piece.par_chunks_mut(cols))
+        .zip(part.par_chunks_mut(cols))
+        .zip(confidence.par_chunks_mut(cols))
+        .zip(normals.par_chunks_mut(3 * cols))
+        .enumerate()
+        .with_min_len(ROWS_PER_TASK)
+        .for_each(
+            |(row, (((((depth, kept), piece), part), confidence), normals))| {
+                let Some(wr) = row.checked_sub(nodes.window.rows.start) else {
+                    return;
+                };
+                let first = cells.partition_point(|&(r, _)| r < wr);
+                let end = first + cells[first..].partition_point(|&(r, _)| r == wr);
+                for (k, &(_, c)) in cells.iter().enumerate().take(end).skip(first) {
+                    if !nodes.kept[(wr, c)] {
+                        continue;
+                    }
+                    let col = c + nodes.window.cols.start;
+                    depth[col] = nodes.depth_mm[(wr, c)] as f32;
+                    kept[col] = true;
+                    piece[col] = nodes.piece[k];
+                    part[col] = nodes.part[k];
+                    let class = nodes.class[(wr, c)];
+                    confidence[col] = class;
+                    if class != Confidence::Measured {
+                        let (sx, sy) = nodes.slopes[k];
+                        let n = nodes.grid.normal(row, col, sx, sy);
+                        for j in 0..3 {
+                            normals[3 * col + j] = n[j] as f32;
+                        }
+                    }
+                }
+            },
+        );
 }
