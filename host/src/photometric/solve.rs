@@ -555,6 +555,11 @@ fn diagnose(
     ))
 }
 
+/// Pixels per parallel task of a misfit evaluation. A warm window's 5 000 pixels make ten
+/// tasks, which two threads share evenly (1 024 made five: one thread ran three). The tasks'
+/// sums are added in order, so an evaluation does not depend on how the work was shared.
+const MISFIT_CHUNK: usize = 512;
+
 /// The relative least-squares misfit Σ w‖A − L·G‖² / Σ w‖A‖² of the Lambertian model over a
 /// set of pixels lit by four or more LEDs, as a function of a depth offset. It depends on the
 /// light vectors, which lets the near-field stage find the object's absolute depth. Each
@@ -610,8 +615,8 @@ impl<'a> ModelMisfit<'a> {
         let k = self.leds;
         let projection = self.lights.projection();
         self.pixels
-            .par_chunks(1024)
-            .zip(self.values.par_chunks(1024 * k))
+            .par_chunks(MISFIT_CHUNK)
+            .zip(self.values.par_chunks(MISFIT_CHUNK * k))
             .flat_map_iter(|(chunk, values)| {
                 let mut l = vec![Vector3::zeros(); k];
                 chunk
@@ -631,10 +636,10 @@ impl<'a> ModelMisfit<'a> {
     pub fn at(&self, offset_mm: f64) -> f64 {
         let k = self.leds;
         let projection = self.lights.projection();
-        let (misfit, energy) = self
+        let sums: Vec<(f64, f64)> = self
             .pixels
-            .par_chunks(1024)
-            .zip(self.values.par_chunks(1024 * k))
+            .par_chunks(MISFIT_CHUNK)
+            .zip(self.values.par_chunks(MISFIT_CHUNK * k))
             .map(|(chunk, values)| {
                 let mut l = vec![Vector3::zeros(); k];
                 let (mut misfit, mut energy) = (0.0, 0.0);
@@ -647,7 +652,8 @@ impl<'a> ModelMisfit<'a> {
                 }
                 (misfit, energy)
             })
-            .reduce(|| (0.0, 0.0), |a, b| (a.0 + b.0, a.1 + b.1));
+            .collect();
+        let (misfit, energy) = sums.iter().fold((0.0, 0.0), |a, b| (a.0 + b.0, a.1 + b.1));
         if energy > 0.0 {
             misfit / energy
         } else {
