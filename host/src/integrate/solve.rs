@@ -207,6 +207,8 @@ pub(super) fn solve_window(
         _ => config.coverage.iterations,
     };
     let (mut iterations, mut passes) = (0, 0);
+    // Each node's piece and the piece count, once labelled.
+    let mut pieces_of_graph: Option<(Vec<u32>, usize)> = None;
     let mut previous_energy: Option<f64> = None;
     // Reweighting passes need solves only as exact as the weights are settled (inexact IRLS).
     let mut solve_tolerance = config.tolerance;
@@ -255,7 +257,16 @@ pub(super) fn solve_window(
                 m.reweight(lap, least_squares::REGULARISATION);
                 m
             }
-            None => hierarchy.insert(Multigrid::new(lap, least_squares::REGULARISATION)),
+            None => {
+                // The pieces depend on the graph alone: they are labelled beside the
+                // hierarchy's (mostly serial) set-up instead of after the solves.
+                let (m, labelled) = rayon::join(
+                    || Multigrid::new(lap, least_squares::REGULARISATION),
+                    || topology.components(),
+                );
+                pieces_of_graph.get_or_insert(labelled);
+                hierarchy.insert(m)
+            }
         };
         profile.add("hierarchy setup", t);
         let t = Instant::now();
@@ -315,7 +326,7 @@ pub(super) fn solve_window(
     // discontinuity all the way across (their relative depth is unknown to the normals). The
     // two labellings are independent and run side by side.
     let ((piece_of_node, pieces), bilateral_parts) = rayon::join(
-        || topology.components(),
+        || pieces_of_graph.unwrap_or_else(|| topology.components()),
         || {
             bilateral.then(|| {
                 let cut = bilateral::discontinuities(
