@@ -301,6 +301,36 @@
 //! windows (0.1 mm instead of 0.01 mm) made the offset search slower (8.5–9.9 ms against
 //! 5.9–7.7 ms): its minimum then more often lay clearly below the carried offset's misfit, which
 //! costs the band t-test's two extra evaluations.
+//!
+//! Session 36: the warm integration (21 ms of a 47 ms frame) by its steps (minimum / median of
+//! 64 windows): push–pull inpainting 3.9 / 4.4 ms, of which each fill's 30 Gauss–Seidel sweeps
+//! took 3.1 ms for the s_x, s_y pairs and as long for the albedo alone (12 405 pixels to fill):
+//! in raster order each update waited for its left neighbour's, so the sweep was bound by that
+//! chain, not by arithmetic. Conjugate gradients 6.0 / 8.0 ms (5 iterations), edge equations
+//! 2.0 / 2.5, hierarchy 1.4 / 1.5, pieces and anchoring 1.0 / 1.4, pixel classes 1.1 / 1.2,
+//! output 1.1 / 1.2. Now the sweeps go in red–black order (each colour's updates independent:
+//! a fill 3.1 → 1.5 ms, inpainting 2.0 / 2.1 ms); a warm pass's solve stops at a relative
+//! residual of 10⁻³ (3 iterations instead of 5; 3.5 / 4.1 ms); the pixel classes (0.7 / 0.8)
+//! and the output (0.6 / 0.7) go by rows in parallel; CG's vector updates by fixed bands; the
+//! pieces are labelled beside the hierarchy's set-up (pieces and anchoring 0.4 / 0.5 ms); and a
+//! misfit evaluation of the offset search runs in ten tasks of 512 pixels instead of five of
+//! 1 024 (offset search median 6.3 → 5.9 ms). Loop of 100 warm frames, main 6423012 and this
+//! code alternated, two runs each: frame minimum 46.7 / 46.2 → **40.9 / 42.0 ms**, median
+//! 58.3 / 50.4 → 49.9 / 48.5 ms; warm integration minimum 21.5 / 21.1 → 16.1 / 16.2 ms; warm
+//! reconstruction minimum 38.2 / 37.8 → 32.7 / 33.3 ms. Criterion (one run): `window_warm`
+//! 37.3 ms (36.9–37.9), `frame_warm` 48.1 ms (46.6–50.7), `frame_warm_bin2` 38.5 ms. The
+//! red–black fill is not bit-identical to the raster one (the other changes are, up to the
+//! order of CG's sums): on a 600-frame 1280×720 turning ellipsoid (15 windows against truth
+//! every 20 frames) the per-window depth RMSE moved by +0.1 to +3.1 µm (median +1.7 µm) with
+//! it and by −1.1 to +2.4 µm (median +0.6 µm) with the looser solve, on RMSEs of 0.51–0.80 mm. `meb video` on 2000 frames (that clip's first 200
+//! repeated ten times; windows of 40, no `--save`): 9.9 / 12.6 → 13.2 / 13.8 3-D frames/s, the
+//! mean warm reconstruction in the video 97 / 76 → 72 / 69 ms (decoder, reader, writer and
+//! FFmpeg share the cores). Tried and dropped: 10 sweeps instead of 30 (the cold window's RMSE
+//! 0.734 → 0.755 mm); 2 500 pixels instead of 5 000 for the warm offset search (every warm
+//! window's RMSE 48–96 µm worse); multigrid levels of 8 192 nodes and more in parallel (was
+//! 16 384: no change); the decoding thread in a rayon pool of its own at nice 10 (no change end
+//! to end; perf over the whole run: the cores ≈ 81 % busy, FFmpeg, writer and reader ≈ 17 % of
+//! the samples).
 
 use criterion::{BatchSize, Criterion, criterion_group, criterion_main};
 use meb::capture::binning::Binning;
