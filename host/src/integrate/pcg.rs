@@ -224,8 +224,8 @@ mod tests {
         );
     }
 
-    /// Vectors kept from a solve of another size (and left full of its values) give the same
-    /// solution, bit for bit, as fresh ones.
+    /// The vector updates of a long solve, in parallel bands, equal the serial formulas: the
+    /// element-wise ones exactly, the sums to rounding and the same on every call.
     #[test]
     fn long_vectors_are_updated_in_bands_as_short_ones_are() {
         let n = 3 * PARALLEL_LENGTH + 123;
@@ -257,6 +257,8 @@ mod tests {
         }
     }
 
+    /// Vectors kept from a solve of another size (and left full of its values) give the same
+    /// solution, bit for bit, as fresh ones.
     #[test]
     fn kept_vectors_give_the_same_solution_as_fresh_ones() {
         let jacobi = |r: &[f64], z: &mut [f64]| z.iter_mut().zip(r).for_each(|(z, r)| *z = r / 2.0);
