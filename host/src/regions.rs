@@ -3,6 +3,7 @@
 //! integration of normals, so neither depends on the other.
 
 use ndarray::Array2;
+use std::borrow::Cow;
 
 /// Label of a pixel outside every region.
 pub const OUTSIDE: u32 = u32::MAX;
@@ -16,15 +17,32 @@ pub struct Regions {
     pub sizes: Vec<usize>,
 }
 
+/// The values of a boolean grid in row-major order, borrowed when they are stored so.
+pub(crate) fn row_major(mask: &Array2<bool>) -> Cow<'_, [bool]> {
+    match mask.as_slice() {
+        Some(flat) => Cow::Borrowed(flat),
+        None => Cow::Owned(mask.iter().copied().collect()),
+    }
+}
+
+/// The row-major indices of the 4-neighbours of pixel `index` of a `rows`×`cols` grid (up,
+/// down, left, right; `None` beyond the grid's edge).
+pub(crate) fn grid_neighbours(index: usize, (rows, cols): (usize, usize)) -> [Option<usize>; 4] {
+    let (r, c) = (index / cols, index % cols);
+    [
+        (r > 0).then(|| index - cols),
+        (r + 1 < rows).then(|| index + cols),
+        (c > 0).then(|| index - 1),
+        (c + 1 < cols).then(|| index + 1),
+    ]
+}
+
 /// Labels the 4-connected regions of `mask` in raster order of their first pixel. The flood
 /// fill works on row-major indices (the labelling of an object's box was a millisecond of
 /// every video window's serial time with 2-D indexing).
 pub fn label(mask: &Array2<bool>) -> Regions {
     let (rows, cols) = mask.dim();
-    let inside: std::borrow::Cow<'_, [bool]> = match mask.as_slice() {
-        Some(flat) => std::borrow::Cow::Borrowed(flat),
-        None => std::borrow::Cow::Owned(mask.iter().copied().collect()),
-    };
+    let inside = row_major(mask);
     let mut label = vec![OUTSIDE; rows * cols];
     let mut sizes = Vec::new();
     let mut stack = Vec::new();
@@ -38,15 +56,7 @@ pub fn label(mask: &Array2<bool>) -> Regions {
         stack.push(start);
         while let Some(q) = stack.pop() {
             size += 1;
-            let (r, c) = (q / cols, q % cols);
-            // The 4-neighbours inside the grid.
-            let neighbours = [
-                (r > 0).then(|| q - cols),
-                (r + 1 < rows).then(|| q + cols),
-                (c > 0).then(|| q - 1),
-                (c + 1 < cols).then(|| q + 1),
-            ];
-            for n in neighbours.into_iter().flatten() {
+            for n in grid_neighbours(q, (rows, cols)).into_iter().flatten() {
                 if inside[n] && label[n] == OUTSIDE {
                     label[n] = id;
                     stack.push(n);
@@ -56,7 +66,8 @@ pub fn label(mask: &Array2<bool>) -> Regions {
         sizes.push(size);
     }
     Regions {
-        label: Array2::from_shape_fn((rows, cols), |(r, c)| label[r * cols + c]),
+        label: Array2::from_shape_vec((rows, cols), label)
+            .expect("one label per pixel of the mask"),
         sizes,
     }
 }

@@ -11,8 +11,8 @@
 //! grid's own row-major storage: the pull reads the known values there, the push reaches the
 //! grid only at the pixels to fill (its weights there are 0), and the sweeps update it in place.
 
+use crate::regions::{grid_neighbours, row_major};
 use ndarray::Array2;
-use std::borrow::Cow;
 
 /// Red–black Gauss–Seidel sweeps that smooth the push–pull interpolation.
 const SMOOTHING_SWEEPS: usize = 30;
@@ -86,14 +86,6 @@ pub(crate) struct Inpainting {
     stencil: Vec<([u32; 4], u8)>,
 }
 
-/// The values of a boolean grid in row-major order, borrowed when they are stored so.
-fn row_major(a: &Array2<bool>) -> Cow<'_, [bool]> {
-    match a.as_slice() {
-        Some(s) => Cow::Borrowed(s),
-        None => Cow::Owned(a.iter().copied().collect()),
-    }
-}
-
 impl Inpainting {
     /// The pyramid and smoothing stencil for filling `wanted ∧ ¬known` from `known`.
     pub fn new(known: &Array2<bool>, wanted: &Array2<bool>) -> Self {
@@ -110,16 +102,9 @@ impl Inpainting {
         let stencil = free
             .iter()
             .map(|&i| {
-                let (r, c) = (i as usize / cols, i as usize % cols);
                 let mut nb = [0u32; 4];
                 let mut n = 0u8;
-                let candidates = [
-                    (r > 0).then(|| i as usize - cols),
-                    (r + 1 < rows).then(|| i as usize + cols),
-                    (c > 0).then(|| i as usize - 1),
-                    (c + 1 < cols).then(|| i as usize + 1),
-                ];
-                for q in candidates.into_iter().flatten() {
+                for q in grid_neighbours(i as usize, shape).into_iter().flatten() {
                     if wanted[q] || known[q] {
                         nb[n as usize] = q as u32;
                         n += 1;
