@@ -619,7 +619,13 @@ fn solve<const K: usize, T: Code>(
     out: &mut RowOutput<'_>,
     lanes: &mut LaneStats<K>,
 ) -> usize {
-    if out.noise_variance.len() < x + len || out.leds.iter().any(|row| row.len() < x + len) {
+    // Every plane must hold the pixels: a pixel reported written must be written in all.
+    let end = x + len;
+    if out.noise_variance.len() < end
+        || out.saturated.len() < end
+        || out.underexposed.len() < end
+        || out.leds.iter().any(|row| row.len() < end)
+    {
         return 0;
     }
     let mut explained = [0.0f32; TILE];
