@@ -324,7 +324,8 @@ pub(super) fn solve_window(
     let t = Instant::now();
     // Pieces, and parts: pieces further split where the bilateral integrator found a depth
     // discontinuity all the way across (their relative depth is unknown to the normals). The
-    // two labellings are independent and run side by side.
+    // two labellings are independent and run side by side (the pieces of a fresh graph were
+    // labelled already, beside the hierarchy's set-up).
     let ((piece_of_node, pieces), bilateral_parts) = rayon::join(
         || pieces_of_graph.unwrap_or_else(|| topology.components()),
         || {
