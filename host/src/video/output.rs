@@ -20,7 +20,7 @@
 use super::encode::{VideoContainer, VideoEncoder};
 use super::render::{PictureSize, blank_picture, depth_picture, depth_range, shaded_picture};
 use super::{FrameRecord, FrameStatus, FrameTiming, VideoError, VideoFrame, VideoSummary};
-use crate::export::files::{FilesError, write_npy};
+use crate::export::files::{FilesError, write_npy_synced};
 use ndarray::{Array2, Array3};
 use serde::{Deserialize, Serialize};
 use std::io::{BufRead, BufWriter, Write};
@@ -121,15 +121,13 @@ pub struct FrameArrays<'a> {
     pub albedo: Option<&'a Array2<f32>>,
 }
 
-/// Writes `array` as `.npy` at `path` and waits until it is on disk.
+/// Writes `array` as `.npy` at `path` and waits until it is on disk (past the page cache:
+/// [`crate::export::files::direct`]).
 fn write_synced<D: ndarray::Dimension>(
     path: &Path,
     array: &ndarray::Array<f32, D>,
 ) -> Result<(), VideoError> {
-    write_npy(path, array)?;
-    std::fs::File::open(path)
-        .and_then(|file| file.sync_data())
-        .map_err(|e| FilesError::write(path, e).into())
+    Ok(write_npy_synced(path, array)?)
 }
 
 /// Writes a run's outputs into `dir` as windows arrive (module docs).

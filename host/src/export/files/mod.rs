@@ -1,5 +1,5 @@
 //! The one file layer of `meb`: atomic output folders ([`folder`]), `.npy` arrays ([`npy`]),
-//! the colour ramp ([`colour`]), PNG previews ([`preview`]) and mask images ([`mask`]).
+//! large outputs written past the page cache ([`direct`]), the colour ramp ([`colour`]), PNG previews ([`preview`]) and mask images ([`mask`]).
 //!
 //! Every command that writes files goes through this module, so every output folder is
 //! replaced whole or not at all, every array is read with the same type and shape checks, and
@@ -7,6 +7,7 @@
 //! (only [`crate::stats`]), so any stage may use it.
 
 pub mod colour;
+pub mod direct;
 pub mod folder;
 pub mod mask;
 pub mod npy;
@@ -14,7 +15,7 @@ pub mod preview;
 
 pub use folder::{OutputFolder, Replace, remove_temporaries_on_signal};
 pub use mask::{read_mask, write_mask};
-pub use npy::{read_exact, read_float, write_npy};
+pub use npy::{read_exact, read_float, write_npy, write_npy_synced};
 
 use std::path::{Path, PathBuf};
 use thiserror::Error;

@@ -26,6 +26,26 @@ where
     std::fs::write(path, bytes).map_err(|e| FilesError::write(path, e))
 }
 
+/// Writes `array` to `path` as [`write_npy`] does and waits until it is on disk, large arrays
+/// past the page cache ([`super::direct`]).
+pub fn write_npy_synced<A, D>(path: &Path, array: &Array<A, D>) -> Result<(), FilesError>
+where
+    A: WritableElement,
+    D: Dimension,
+{
+    // The data and a header of at most a few hundred bytes, without regrowing.
+    let mut bytes =
+        Vec::with_capacity(std::mem::size_of_val(array.as_slice().unwrap_or(&[])) + 512);
+    array
+        .write_npy(&mut bytes)
+        .map_err(|e| FilesError::Encode {
+            path: path.to_path_buf(),
+            source: Box::new(e),
+        })?;
+    super::direct::write_synced(path, &bytes).map_err(|e| FilesError::write(path, e))?;
+    Ok(())
+}
+
 /// Reads a float array (float32, or float64 converted to float32) and checks its shape:
 /// `shape[k] == None` accepts any length on axis k.
 pub fn read_float<D: Dimension>(
