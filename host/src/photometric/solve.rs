@@ -631,6 +631,24 @@ impl<'a> ModelMisfit<'a> {
             .collect()
     }
 
+    /// The misfit [`Self::at`] gives, from the per-pixel `terms` of [`Self::terms`] at the same
+    /// offset: the same sums in the same order, so the two are bit-identical.
+    pub fn relative(terms: &[(f64, f64)]) -> f64 {
+        let (misfit, energy) = terms
+            .chunks(MISFIT_CHUNK)
+            .map(|chunk| {
+                chunk
+                    .iter()
+                    .fold((0.0, 0.0), |(m, e), (tm, te)| (m + tm, e + te))
+            })
+            .fold((0.0, 0.0), |a, b| (a.0 + b.0, a.1 + b.1));
+        if energy > 0.0 {
+            misfit / energy
+        } else {
+            f64::INFINITY
+        }
+    }
+
     /// The misfit with every point moved `offset_mm` towards the camera ([`moved_depth`]);
     /// infinite when no pixel is solved from four or more LEDs.
     pub fn at(&self, offset_mm: f64) -> f64 {
