@@ -49,6 +49,7 @@ use crate::rig::Rig;
 pub use crate::timing::StageTiming;
 use crate::types::{LedImages, NormalField};
 use ndarray::{Array2, Zip};
+use rayon::prelude::*;
 use std::time::Instant;
 use thiserror::Error;
 
@@ -492,6 +493,8 @@ fn passes(
     let mut verdict = Ok(0);
     // Parts a pass's offset search could not place (a part keeps its number from pass to pass).
     let mut unplaced = std::collections::BTreeMap::new();
+    // The last pass's depth change from the warm start, when its light vectors came from it.
+    let mut moved_from_warm: Option<DepthChange> = None;
     for pass in 0..passes {
         let start = Instant::now();
         let depth = previous
@@ -543,9 +546,14 @@ fn passes(
         }
         // A warm pass's light vectors came from `depth`; once the depth found lies near it they
         // were right (WARM_LIGHTS_MOVED_MM) and another pass would change nothing material.
+        // In a warm start's first pass the light vectors came from the warm depth itself: that
+        // change is also how far the result moved from the warm start, if it is the last pass.
         let settled = match (warm, depth) {
             (Some(_), Some(lit_at)) => {
-                depth_change(&integration.depth.depth_mm, lit_at).median_mm <= WARM_LIGHTS_MOVED_MM
+                let change = depth_change(&integration.depth.depth_mm, lit_at);
+                let settled = change.median_mm <= WARM_LIGHTS_MOVED_MM;
+                moved_from_warm = (pass == 0).then_some(change);
+                settled
             }
             _ => false,
         };
@@ -566,7 +574,8 @@ fn passes(
         let Some(warm) = warm else {
             return Ok(Start::Cold);
         };
-        let moved = depth_change(&integration.depth.depth_mm, &warm.depth_mm);
+        let moved = moved_from_warm
+            .unwrap_or_else(|| depth_change(&integration.depth.depth_mm, &warm.depth_mm));
         let kept = integration.kept.iter().filter(|&&k| k).count();
         if !support.verdict.is_plausible() {
             Err(format!(
@@ -628,10 +637,21 @@ struct DepthChange {
     pixels: usize,
 }
 
+/// Pixels per parallel band of [`depth_change`].
+const CHANGE_BAND: usize = 16_384;
+
 /// The [`DepthChange`] from `before` to `after`.
 fn depth_change(after: &Array2<f32>, before: &Array2<f32>) -> DepthChange {
     let change = |(a, b): (&f32, &f32)| (a.is_finite() && b.is_finite()).then(|| (a - b).abs());
-    let mut absolute: Vec<f32> = after.iter().zip(before).filter_map(change).collect();
+    // Gathered in parallel bands (in order) where both arrays are contiguous and alike.
+    let mut absolute: Vec<f32> = match (after.as_slice(), before.as_slice()) {
+        (Some(a), Some(b)) if after.dim() == before.dim() => a
+            .par_chunks(CHANGE_BAND)
+            .zip(b.par_chunks(CHANGE_BAND))
+            .flat_map_iter(|(a, b)| a.iter().zip(b).filter_map(change))
+            .collect(),
+        _ => after.iter().zip(before).filter_map(change).collect(),
+    };
     let pixels = absolute.len();
     if pixels == 0 {
         return DepthChange {

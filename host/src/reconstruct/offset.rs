@@ -12,6 +12,7 @@ use crate::photometric::{Lights, ModelMisfit, PhotometricResult};
 use crate::rig::{Projection, Rig};
 use crate::types::LedImages;
 use ndarray::{Array2, Zip};
+use rayon::prelude::*;
 use std::cell::RefCell;
 
 /// Width in mm of the interval to which the search for a part's depth offset
@@ -229,18 +230,24 @@ fn carried_offset(
 }
 
 /// The pixels chosen by `inside` that constrain absolute depth: lit by more than three LEDs,
-/// with a depth; at most about `cap`, evenly spread.
+/// with a depth; at most about `cap`, evenly spread. Gathered by rows in parallel, in raster
+/// order.
 fn constraining_pixels(
     ps: &PhotometricResult,
     depth: &Array2<f32>,
     cap: usize,
-    inside: impl Fn((usize, usize)) -> bool,
+    inside: impl Fn((usize, usize)) -> bool + Sync,
 ) -> Vec<(usize, usize)> {
-    let pixels: Vec<(usize, usize)> = ps
-        .lit_count
-        .indexed_iter()
-        .filter(|(p, n)| **n > 3 && depth[*p].is_finite() && inside(*p))
-        .map(|(p, _)| p)
+    let (rows, cols) = ps.lit_count.dim();
+    let pixels: Vec<(usize, usize)> = (0..rows)
+        .into_par_iter()
+        .flat_map_iter(|r| {
+            let (lit, depth) = (ps.lit_count.row(r), depth.row(r));
+            (0..cols)
+                .filter(move |&c| lit[c] > 3 && depth[c].is_finite())
+                .map(move |c| (r, c))
+                .filter(|&p| inside(p))
+        })
         .collect();
     let step = pixels.len().div_ceil(cap).max(1);
     pixels.into_iter().step_by(step).collect()
