@@ -533,6 +533,45 @@ mod tests {
     use crate::photometric::estimate_normals;
     use crate::reconstruct::tests::still_sphere;
 
+    /// The misfit summed from an evaluation's per-pixel terms (what a warm start's t-test keeps)
+    /// is bit for bit the misfit evaluated on its own, over several parallel tasks' pixels.
+    #[test]
+    fn the_misfit_from_its_terms_is_the_misfit() {
+        let sphere = still_sphere();
+        let depth = &sphere.warm.depth_mm;
+        let lights = Lights::near_field(&sphere.rig, Some(depth));
+        let ps = estimate_normals(
+            &sphere.images,
+            &lights,
+            None,
+            Some(&sphere.noise),
+            &sphere.config.photometric,
+        )
+        .expect("photometric stereo");
+        let pixels = constraining_pixels(&ps, depth, WARM_MISFIT_PIXELS, |_| true);
+        // Two parallel tasks of 512 pixels.
+        assert!(pixels.len() > 600, "{} pixels", pixels.len());
+        let model = ModelMisfit::new(
+            &sphere.images,
+            &lights,
+            &pixels,
+            Some(&sphere.noise),
+            &ps.noise_gains,
+            &sphere.config.photometric,
+        );
+        for offset in [-2.5, 0.0, 0.37, 4.0] {
+            let terms = model.terms(offset);
+            assert_eq!(terms.len(), pixels.len());
+            let (from_terms, evaluated) = (ModelMisfit::relative(&terms), model.at(offset));
+            assert!(evaluated.is_finite() && evaluated > 0.0, "{evaluated}");
+            assert_eq!(
+                from_terms.to_bits(),
+                evaluated.to_bits(),
+                "offset {offset} mm"
+            );
+        }
+    }
+
     /// A later pass searches near the offset carried from the previous one, and scans the
     /// whole range when the minimum lies at that bracket's edge.
     #[test]

@@ -40,10 +40,7 @@ pub enum WriteMode {
 /// Writes `bytes` to `path` (created or truncated) and waits until they are on disk; large
 /// files go past the page cache where the file system allows it (module docs).
 pub fn write_synced(path: &Path, bytes: &[u8]) -> std::io::Result<WriteMode> {
-    if std::env::var_os("MEB_TMP_BUFFERED").is_none()
-        && bytes.len() >= MIN_DIRECT_BYTES
-        && write_direct(path, bytes).is_ok()
-    {
+    if bytes.len() >= MIN_DIRECT_BYTES && write_direct(path, bytes).is_ok() {
         return Ok(WriteMode::Direct);
     }
     write_buffered(path, bytes)?;

@@ -1,5 +1,6 @@
 //! The one file layer of `meb`: atomic output folders ([`folder`]), `.npy` arrays ([`npy`]),
-//! large outputs written past the page cache ([`direct`]), the colour ramp ([`colour`]), PNG previews ([`preview`]) and mask images ([`mask`]).
+//! large outputs written past the page cache ([`direct`]), the colour ramp ([`colour`]), PNG
+//! previews ([`preview`]) and mask images ([`mask`]).
 //!
 //! Every command that writes files goes through this module, so every output folder is
 //! replaced whole or not at all, every array is read with the same type and shape checks, and
