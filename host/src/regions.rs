@@ -37,39 +37,105 @@ pub(crate) fn grid_neighbours(index: usize, (rows, cols): (usize, usize)) -> [Op
     ]
 }
 
-/// Labels the 4-connected regions of `mask` in raster order of their first pixel. The flood
-/// fill works on row-major indices (the labelling of an object's box was a millisecond of
-/// every video window's serial time with 2-D indexing).
+/// Labels the 4-connected regions of `mask` in raster order of their first pixel, by runs
+/// (Rosenfeld & Pfaltz's two-pass labelling on row runs, with union–find): each row's runs
+/// of set pixels are joined to the runs they overlap in the row above, and every run is then
+/// written with its region's label. A pixel-by-pixel flood fill of a video window's object box
+/// (≈ 110 000 pixels, one large region) took a third of a millisecond; the runs of that box
+/// number a few hundred.
 pub fn label(mask: &Array2<bool>) -> Regions {
     let (rows, cols) = mask.dim();
     let inside = row_major(mask);
-    let mut label = vec![OUTSIDE; rows * cols];
-    let mut sizes = Vec::new();
-    let mut stack = Vec::new();
-    for start in 0..rows * cols {
-        if !inside[start] || label[start] != OUTSIDE {
-            continue;
-        }
-        let id = sizes.len() as u32;
-        let mut size = 0;
-        label[start] = id;
-        stack.push(start);
-        while let Some(q) = stack.pop() {
-            size += 1;
-            for n in grid_neighbours(q, (rows, cols)).into_iter().flatten() {
-                if inside[n] && label[n] == OUTSIDE {
-                    label[n] = id;
-                    stack.push(n);
-                }
+    let runs = row_runs(&inside, (rows, cols));
+    // Union–find over the runs, the root of a set always its first run in raster order.
+    let mut parent: Vec<u32> = (0..runs.runs.len() as u32).collect();
+    for r in 1..rows {
+        let (above, here) = (runs.of_row(r - 1), runs.of_row(r));
+        let (mut i, mut j) = (above.start, here.start);
+        while i < above.end && j < here.end {
+            // Run a one row up, in the row-major indices of b's row.
+            let (a, b) = (&runs.runs[i], &runs.runs[j]);
+            let (a_start, a_end) = (a.start + cols, a.end + cols);
+            // 4-connected: the column ranges overlap.
+            if a_start < b.end && b.start < a_end {
+                let (x, y) = (root(&mut parent, i as u32), root(&mut parent, j as u32));
+                let (low, high) = (x.min(y), x.max(y));
+                parent[high as usize] = low;
+            }
+            if a_end < b.end {
+                i += 1;
+            } else {
+                j += 1;
             }
         }
-        sizes.push(size);
+    }
+    // Regions numbered in order of their first run (so of their first pixel) in raster order.
+    let mut label = vec![OUTSIDE; rows * cols];
+    let mut region_of_run = vec![OUTSIDE; runs.runs.len()];
+    let mut sizes: Vec<usize> = Vec::new();
+    for (k, run) in runs.runs.iter().enumerate() {
+        let first = root(&mut parent, k as u32) as usize;
+        let id = if first == k {
+            sizes.push(0);
+            (sizes.len() - 1) as u32
+        } else {
+            region_of_run[first]
+        };
+        region_of_run[k] = id;
+        sizes[id as usize] += run.len();
+        label[run.clone()].fill(id);
     }
     Regions {
         label: Array2::from_shape_vec((rows, cols), label)
             .expect("one label per pixel of the mask"),
         sizes,
     }
+}
+
+/// The runs of set pixels of a row-major grid, as row-major index ranges in raster order, and
+/// where each row's runs start in that list.
+struct RowRuns {
+    /// Every run, as a range of row-major indices.
+    runs: Vec<std::ops::Range<usize>>,
+    /// `first[r]`: index in `runs` of row r's first run (`first[rows]` = the run count).
+    first: Vec<usize>,
+}
+
+impl RowRuns {
+    /// Indices in `runs` of row `r`'s runs.
+    fn of_row(&self, r: usize) -> std::ops::Range<usize> {
+        self.first[r]..self.first[r + 1]
+    }
+}
+
+/// The [`RowRuns`] of `inside`, a `rows`×`cols` grid in row-major order.
+fn row_runs(inside: &[bool], (rows, cols): (usize, usize)) -> RowRuns {
+    let mut runs = Vec::new();
+    let mut first = Vec::with_capacity(rows + 1);
+    for (r, line) in inside.chunks_exact(cols.max(1)).take(rows).enumerate() {
+        first.push(runs.len());
+        let mut c = 0;
+        while let Some(offset) = line[c..].iter().position(|&m| m) {
+            let start = c + offset;
+            let end = line[start..]
+                .iter()
+                .position(|&m| !m)
+                .map_or(cols, |o| start + o);
+            runs.push(r * cols + start..r * cols + end);
+            c = end;
+        }
+    }
+    first.resize(rows + 1, runs.len());
+    RowRuns { runs, first }
+}
+
+/// The root of run `i`'s set, halving the path on the way.
+fn root(parent: &mut [u32], mut i: u32) -> u32 {
+    while parent[i as usize] != i {
+        parent[i as usize] = parent[parent[i as usize] as usize];
+        i = parent[i as usize];
+    }
+    i
 }
 
 /// Clears the regions of `mask` with fewer than `min_pixels` pixels.
@@ -110,6 +176,78 @@ mod tests {
             let hole_edge = (2..5).contains(&r) && (2..5).contains(&c);
             (ring && !hole_edge) || (r == 7 && (8..10).contains(&c))
         })
+    }
+
+    /// The labelling by a pixel-by-pixel flood fill, in raster order of each region's first
+    /// pixel: the reference the run labelling must equal.
+    fn flood_fill_labels(mask: &Array2<bool>) -> Regions {
+        let (rows, cols) = mask.dim();
+        let inside = row_major(mask);
+        let mut label = vec![OUTSIDE; rows * cols];
+        let mut sizes = Vec::new();
+        for start in 0..rows * cols {
+            if !inside[start] || label[start] != OUTSIDE {
+                continue;
+            }
+            let id = sizes.len() as u32;
+            let (mut size, mut stack) = (0, vec![start]);
+            label[start] = id;
+            while let Some(q) = stack.pop() {
+                size += 1;
+                for n in grid_neighbours(q, (rows, cols)).into_iter().flatten() {
+                    if inside[n] && label[n] == OUTSIDE {
+                        label[n] = id;
+                        stack.push(n);
+                    }
+                }
+            }
+            sizes.push(size);
+        }
+        Regions {
+            label: Array2::from_shape_vec((rows, cols), label).unwrap(),
+            sizes,
+        }
+    }
+
+    /// Random masks of every density (fixed seed), spirals and combs whose regions join far
+    /// below their first rows, and degenerate shapes: the runs label exactly as the flood fill.
+    #[test]
+    fn run_labels_equal_the_flood_fill() {
+        use rand::{RngExt, SeedableRng};
+        let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(5);
+        let mut masks: Vec<Array2<bool>> = Vec::new();
+        for density in [0.05, 0.3, 0.5, 0.6, 0.9] {
+            for _ in 0..20 {
+                let (rows, cols) = (rng.random_range(1..40), rng.random_range(1..40));
+                masks.push(Array2::from_shape_fn((rows, cols), |_| {
+                    rng.random_bool(density)
+                }));
+            }
+        }
+        // A comb: teeth that join only at the bottom row, and a U whose arms meet late.
+        masks.push(Array2::from_shape_fn((12, 15), |(r, c)| {
+            c % 2 == 0 || r == 11
+        }));
+        masks.push(Array2::from_shape_fn((9, 9), |(r, c)| {
+            (c == 0 || c == 8 || r == 8) && !(r == 8 && c == 4)
+        }));
+        masks.push(Array2::from_shape_fn((9, 9), |(r, c)| {
+            c == 0 || c == 8 || r == 8
+        }));
+        // A spiral.
+        masks.push(Array2::from_shape_fn((11, 11), |(r, c)| {
+            let ring = r.min(c).min(10 - r).min(10 - c);
+            ring % 2 == 0 && !(c == ring + 1 && r == ring && ring < 5)
+        }));
+        masks.push(Array2::from_elem((0, 5), true));
+        masks.push(Array2::from_elem((5, 0), true));
+        masks.push(Array2::from_elem((3, 4), true));
+        masks.push(Array2::from_elem((3, 4), false));
+        // A column-major mask (not stored row by row).
+        masks.push(ring_and_bar().reversed_axes().to_owned().reversed_axes());
+        for mask in &masks {
+            assert_eq!(label(mask), flood_fill_labels(mask), "{mask:?}");
+        }
     }
 
     #[test]

@@ -14,7 +14,11 @@ use super::outcome::Outcome;
 use crate::regions::{enclosed_holes, remove_small};
 use crate::types::LedImages;
 use ndarray::{Array2, Zip, s};
+use rayon::prelude::*;
 use std::ops::Range;
+
+/// Image rows per parallel task of the object tests.
+const ROWS_PER_TASK: usize = 8;
 
 /// Thresholds of the automatic mask.
 #[derive(Debug, Clone, PartialEq, serde::Serialize, serde::Deserialize)]
@@ -188,20 +192,29 @@ fn found_over_noise(
     noise: &Array2<f32>,
     config: &MaskConfig,
 ) -> Array2<bool> {
-    let mut object = Array2::from_elem(albedo.dim(), false);
-    Zip::indexed(&mut object)
-        .and(outcome)
-        .and(albedo)
-        .and(noise)
-        .for_each(|pixel, inside, &outcome, albedo, sigma| {
-            let Some(albedo_ok) = albedo_passes(outcome, *albedo, albedo_ref, config) else {
-                return;
-            };
-            let brightest = images
-                .images
-                .iter()
-                .fold(f32::NEG_INFINITY, |b, image| b.max(image[pixel]));
-            *inside = albedo_ok && brightest >= config.snr_threshold * sigma.max(f32::MIN_POSITIVE);
+    let (rows, cols) = albedo.dim();
+    let mut object = Array2::from_elem((rows, cols), false);
+    let Some(flat) = object.as_slice_mut() else {
+        unreachable!("a new array is in standard layout")
+    };
+    // By rows in parallel: a video window's object box is ≈ 110 000 pixels.
+    flat.par_chunks_mut(cols.max(1))
+        .enumerate()
+        .with_min_len(ROWS_PER_TASK)
+        .for_each(|(r, inside)| {
+            let image_rows: Vec<_> = images.images.iter().map(|im| im.row(r)).collect();
+            let (outcome, albedo, noise) = (outcome.row(r), albedo.row(r), noise.row(r));
+            for (c, inside) in inside.iter_mut().enumerate() {
+                let Some(albedo_ok) = albedo_passes(outcome[c], albedo[c], albedo_ref, config)
+                else {
+                    continue;
+                };
+                let brightest = image_rows
+                    .iter()
+                    .fold(f32::NEG_INFINITY, |b, image| b.max(image[c]));
+                *inside = albedo_ok
+                    && brightest >= config.snr_threshold * noise[c].max(f32::MIN_POSITIVE);
+            }
         });
     object
 }
