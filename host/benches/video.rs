@@ -339,17 +339,19 @@
 //! misfit is known (one evaluation fewer; over 200 random brackets 1 369 evaluations instead of
 //! 1 543; the per-window depth RMSE of a 200-frame 1280×720 clip unchanged to 0.1 µm). A warm
 //! pass's depth change from the warm start is computed once and gathered in parallel, as are
-//! the offset search's pixels. Loop of 100 warm frames, main 956dc70 and this code alternated,
-//! two runs each: frame minimum 40.2 / 39.8 → **38.4 / 38.4 ms**, median 45.1 / 45.0 → 43.2 /
-//! 44.1 ms (p90 57.3 / 52.4 → 49.9 / 49.9 ms); warm offset search minimum 5.6 → 4.5 ms. End to
-//! end, `meb video`'s writer spent most of its time in the kernel copying each 3.7 MB depth
-//! array into fresh page-cache pages, which on these virtual machines fault on the host
-//! (free page reporting): 50 such files took 1.2 s of CPU buffered and 0.02 s written past the
-//! page cache ([`meb::export::files::direct`], `O_DIRECT`). On 2000 frames (a 200-frame clip
-//! repeated ten times; windows of 40, no `--save`), alternated: 9.8 / 11.7 → **12.8 / 14.6 3-D
-//! frames/s**, system time 4.0 / 2.8 → 1.7 / 0.9 s, the writer's mean 67 / 53 → 22 / 16 ms per
-//! window.
-
+//! the offset search's pixels. The object mask's specks and holes are labelled by row runs
+//! with union–find instead of a pixel flood fill ([`meb::regions::label`], same labels), and
+//! its per-pixel test runs by rows in parallel: object region 2.05 → 1.07 ms, photometric
+//! stereo 7.2 → 6.2 ms. Loop of 100 warm frames, main 956dc70 and this code alternated, two
+//! runs each: frame minimum 40.1 / 39.7 → **36.9 / 36.9 ms**, median 43.4 / 42.1 → **39.7 /
+//! 41.3 ms**; warm reconstruction median 33.9 / 33.4 → 31.3 / 30.6 ms; warm offset search
+//! minimum 5.6 → 4.5 ms. End to end, `meb video`'s writer spent most of its time in the kernel
+//! copying each 3.7 MB depth array into fresh page-cache pages, which on these virtual
+//! machines fault on the host (free page reporting): 50 such files took 1.2 s of CPU buffered
+//! and 0.02 s written past the page cache ([`meb::export::files::direct`], `O_DIRECT`). On 2000
+//! frames (a 200-frame clip repeated ten times; windows of 40, no `--save`), alternated: 9.7 /
+//! 12.9 → **15.1 / 15.2 3-D frames/s**, system time 3.9 / 1.8 → 0.9 / 0.8 s, the writer's mean
+//! 56 / 35 → 17 / 16 ms per window; with `--hop 8` 15.8 → 18.5 3-D frames/s.
 use criterion::{BatchSize, Criterion, criterion_group, criterion_main};
 use meb::capture::binning::Binning;
 use meb::capture::memory::MemorySource;
