@@ -531,13 +531,13 @@ fn brent_minimum(
 mod tests {
     use super::*;
     use crate::photometric::estimate_normals;
-    use crate::reconstruct::tests::still_sphere;
+    use crate::reconstruct::tests::{StillSphere, still_sphere};
 
-    /// The misfit summed from an evaluation's per-pixel terms (what a warm start's t-test keeps)
-    /// is bit for bit the misfit evaluated on its own, over several parallel tasks' pixels.
-    #[test]
-    fn the_misfit_from_its_terms_is_the_misfit() {
-        let sphere = still_sphere();
+    /// Photometric stereo of the still sphere lit from its warm depth, and the pixels a warm
+    /// offset search would use.
+    fn sphere_search_inputs(
+        sphere: &StillSphere,
+    ) -> (Lights<'_>, PhotometricResult, Vec<(usize, usize)>) {
         let depth = &sphere.warm.depth_mm;
         let lights = Lights::near_field(&sphere.rig, Some(depth));
         let ps = estimate_normals(
@@ -549,6 +549,15 @@ mod tests {
         )
         .expect("photometric stereo");
         let pixels = constraining_pixels(&ps, depth, WARM_MISFIT_PIXELS, |_| true);
+        (lights, ps, pixels)
+    }
+
+    /// The misfit summed from an evaluation's per-pixel terms (what a warm start's t-test keeps)
+    /// is bit for bit the misfit evaluated on its own, over several parallel tasks' pixels.
+    #[test]
+    fn the_misfit_from_its_terms_is_the_misfit() {
+        let sphere = still_sphere();
+        let (lights, ps, pixels) = sphere_search_inputs(&sphere);
         // Two parallel tasks of 512 pixels.
         assert!(pixels.len() > 600, "{} pixels", pixels.len());
         let model = ModelMisfit::new(
@@ -578,16 +587,7 @@ mod tests {
     fn a_later_pass_searches_near_the_carried_offset_and_scans_beyond_it() {
         let sphere = still_sphere();
         let depth = &sphere.warm.depth_mm;
-        let lights = Lights::near_field(&sphere.rig, Some(depth));
-        let ps = estimate_normals(
-            &sphere.images,
-            &lights,
-            None,
-            Some(&sphere.noise),
-            &sphere.config.photometric,
-        )
-        .expect("photometric stereo");
-        let pixels = constraining_pixels(&ps, depth, WARM_MISFIT_PIXELS, |_| true);
+        let (_, ps, pixels) = sphere_search_inputs(&sphere);
         let find = |bracket| {
             let found = best_offset(
                 &sphere.images,

@@ -16,19 +16,24 @@ where
     A: WritableElement,
     D: Dimension,
 {
-    let mut bytes = Vec::new();
-    array
-        .write_npy(&mut bytes)
-        .map_err(|e| FilesError::Encode {
-            path: path.to_path_buf(),
-            source: Box::new(e),
-        })?;
+    let bytes = encode(path, array)?;
     std::fs::write(path, bytes).map_err(|e| FilesError::write(path, e))
 }
 
 /// Writes `array` to `path` as [`write_npy`] does and waits until it is on disk, large arrays
 /// past the page cache ([`super::direct`]).
 pub fn write_npy_synced<A, D>(path: &Path, array: &Array<A, D>) -> Result<(), FilesError>
+where
+    A: WritableElement,
+    D: Dimension,
+{
+    let bytes = encode(path, array)?;
+    super::direct::write_synced(path, &bytes).map_err(|e| FilesError::write(path, e))?;
+    Ok(())
+}
+
+/// The `.npy` file of `array` (to be written at `path`), in memory.
+fn encode<A, D>(path: &Path, array: &Array<A, D>) -> Result<Vec<u8>, FilesError>
 where
     A: WritableElement,
     D: Dimension,
@@ -42,8 +47,7 @@ where
             path: path.to_path_buf(),
             source: Box::new(e),
         })?;
-    super::direct::write_synced(path, &bytes).map_err(|e| FilesError::write(path, e))?;
-    Ok(())
+    Ok(bytes)
 }
 
 /// Reads a float array (float32, or float64 converted to float32) and checks its shape:
