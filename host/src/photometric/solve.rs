@@ -556,8 +556,8 @@ fn diagnose(
 }
 
 /// Pixels per parallel task of a misfit evaluation. A warm window's 5 000 pixels make ten
-/// tasks, which two threads share evenly (1 024 made five: one thread ran three). The tasks'
-/// sums are added in order, so an evaluation does not depend on how the work was shared.
+/// tasks, which two threads share evenly (1 024 made five: one thread ran three). The misfit
+/// adds the terms by the same tasks, in order ([`ModelMisfit::relative`]).
 const MISFIT_CHUNK: usize = 512;
 
 /// The relative least-squares misfit Σ w‖A − L·G‖² / Σ w‖A‖² of the Lambertian model over a
@@ -631,8 +631,9 @@ impl<'a> ModelMisfit<'a> {
             .collect()
     }
 
-    /// The misfit [`Self::at`] gives, from the per-pixel `terms` of [`Self::terms`] at the same
-    /// offset: the same sums in the same order, so the two are bit-identical.
+    /// The relative misfit Σ w‖A − L·G‖² / Σ w‖A‖² from the per-pixel `terms` of one offset
+    /// ([`Self::terms`]; infinite without energy): each task's pixels summed in order, then the
+    /// tasks' sums in order, so a value does not depend on how the pool shared the work.
     pub fn relative(terms: &[(f64, f64)]) -> f64 {
         let (misfit, energy) = terms
             .chunks(MISFIT_CHUNK)
@@ -652,31 +653,7 @@ impl<'a> ModelMisfit<'a> {
     /// The misfit with every point moved `offset_mm` towards the camera ([`moved_depth`]);
     /// infinite when no pixel is solved from four or more LEDs.
     pub fn at(&self, offset_mm: f64) -> f64 {
-        let k = self.leds;
-        let projection = self.lights.projection();
-        let sums: Vec<(f64, f64)> = self
-            .pixels
-            .par_chunks(MISFIT_CHUNK)
-            .zip(self.values.par_chunks(MISFIT_CHUNK * k))
-            .map(|(chunk, values)| {
-                let mut l = vec![Vector3::zeros(); k];
-                let (mut misfit, mut energy) = (0.0, 0.0);
-                for ((ray, view, z, sigma), a) in chunk.iter().zip(values.chunks_exact(k)) {
-                    let z = projection.map_or(*z, |p| moved_depth(*z, offset_mm, p));
-                    self.lights.at_point(&ray.at(z), &mut l);
-                    let (m, e) = self.solver.misfit(a, &l, view, *sigma);
-                    misfit += m;
-                    energy += e;
-                }
-                (misfit, energy)
-            })
-            .collect();
-        let (misfit, energy) = sums.iter().fold((0.0, 0.0), |a, b| (a.0 + b.0, a.1 + b.1));
-        if energy > 0.0 {
-            misfit / energy
-        } else {
-            f64::INFINITY
-        }
+        Self::relative(&self.terms(offset_mm))
     }
 }
 

@@ -553,7 +553,8 @@ mod tests {
     }
 
     /// The misfit summed from an evaluation's per-pixel terms (what a warm start's t-test keeps)
-    /// is bit for bit the misfit evaluated on its own, over several parallel tasks' pixels.
+    /// is bit for bit the misfit evaluated on its own, over several parallel tasks' pixels, and
+    /// to rounding the plain ratio of the terms' sums.
     #[test]
     fn the_misfit_from_its_terms_is_the_misfit() {
         let sphere = still_sphere();
@@ -577,6 +578,14 @@ mod tests {
                 from_terms.to_bits(),
                 evaluated.to_bits(),
                 "offset {offset} mm"
+            );
+            let (misfit, energy) = terms
+                .iter()
+                .fold((0.0, 0.0), |(m, e), (tm, te)| (m + tm, e + te));
+            let plain = misfit / energy;
+            assert!(
+                (from_terms - plain).abs() <= 1e-12 * plain,
+                "offset {offset} mm: {from_terms} vs {plain}"
             );
         }
     }
