@@ -9,7 +9,7 @@ use meb::capture::{OpenOptions, open};
 use meb::demod::{DecodeConfig, decode};
 use meb::reconstruct::{Start, WarmStart, from_decoded, from_decoded_warm};
 use meb::rig::Rig;
-use meb::video::{FrameStatus, VideoConfig, WindowSchedule, process};
+use meb::video::{FrameStatus, TimingSource, VideoConfig, WindowSchedule, process};
 use ndarray::{Array2, Array3};
 use std::path::{Path, PathBuf};
 use std::process::{Command, Stdio};
@@ -337,6 +337,154 @@ fn a_window_from_the_stream_equals_a_fresh_decode_of_its_frames() {
             assert!(
                 worst < 1e-6,
                 "window {range:?}: LED images differ by {worst}"
+            );
+        }
+    }
+}
+
+/// What a video run gave for one window: its record and, when decoded, its LED images and
+/// depth.
+struct Window {
+    record: meb::video::FrameRecord,
+    images: Vec<Array2<f32>>,
+    depth: Option<Array2<f32>>,
+}
+
+/// Runs the video pipeline over `capture` with `config` and keeps every window.
+fn windows_of(capture: &Path, rig: &Rig, config: &VideoConfig) -> Vec<Window> {
+    let source = open(capture, &OpenOptions::default()).unwrap();
+    let mut windows = Vec::new();
+    process(source, rig, config, None, &mut |frame| {
+        windows.push(Window {
+            record: frame.record.clone(),
+            images: frame
+                .decoded
+                .map(|d| d.leds.images.clone())
+                .unwrap_or_default(),
+            depth: frame
+                .reconstruction
+                .map(|r| r.integration.depth.depth_mm.clone()),
+        });
+        Ok(())
+    })
+    .unwrap();
+    windows
+}
+
+/// The ellipsoid at 320×180 (the object about a third of the frame wide) for 200 frames, then
+/// 40 mm to the side for 80 more: once the timing carry has settled (three windows) the windows
+/// are decoded around the object, the window after the jump (the object reaches out of its
+/// region) whole, and the next one around the object's new place. A window decoded around the
+/// object holds the whole frame's decode there, and its depth is the one of a run that decodes
+/// every window whole.
+#[test]
+fn windows_are_decoded_around_the_object_and_whole_when_it_jumps() {
+    let tmp = tempfile::tempdir().unwrap();
+    let rig_path = dynamic_rig(tmp.path(), 320, 180);
+    let first = ellipsoid(tmp.path(), &rig_path, "first", 200, 7.5, "0,1,0");
+    let moved = ellipsoid_with(
+        tmp.path(),
+        &rig_path,
+        "moved",
+        80,
+        7.5,
+        "0,1,0",
+        &["--phases", "3,7,11,5", "--position-mm", "40,0,0"],
+    );
+    // The second clip's frames after the first's: one y4m stream of 280 frames.
+    let mut clip = std::fs::read(first.join("capture.y4m")).unwrap();
+    let second = std::fs::read(moved.join("capture.y4m")).unwrap();
+    let header = second.iter().position(|&b| b == b'\n').unwrap();
+    clip.extend_from_slice(&second[header + 1..]);
+    let capture = tmp.path().join("jump.y4m");
+    std::fs::write(&capture, clip).unwrap();
+    let rig = Rig::load(&rig_path).unwrap();
+    let config = VideoConfig::thesis(4);
+    let focused = windows_of(&capture, &rig, &config);
+    let whole = windows_of(
+        &capture,
+        &rig,
+        &VideoConfig {
+            full_frame_every: 1,
+            ..config.clone()
+        },
+    );
+    assert_eq!(focused.len(), 7);
+    let regions: Vec<_> = focused.iter().map(|w| w.record.decode_region).collect();
+    assert!(regions[..3].iter().all(Option::is_none), "{regions:?}");
+    assert!(regions[3].is_some() && regions[4].is_some(), "{regions:?}");
+    assert!(
+        regions[5].is_none() && focused[5].record.widened,
+        "{regions:?}"
+    );
+    let (before, after) = (
+        regions[4].unwrap(),
+        regions[6].expect("a region after the jump"),
+    );
+    assert!(
+        after.x >= before.x + 30,
+        "the region did not follow the object: {before:?} then {after:?}"
+    );
+    assert!(whole.iter().all(|w| w.record.decode_region.is_none()));
+    // A region's decode is judged against the whole frame's σ there: the carried timing holds.
+    for w in &focused[3..] {
+        assert_eq!(
+            w.record.timing_source,
+            TimingSource::Carried,
+            "window {}",
+            w.record.index
+        );
+    }
+    for (f, w) in focused.iter().zip(&whole) {
+        let index = f.record.index;
+        assert_eq!(
+            f.record.status,
+            FrameStatus::Reconstructed,
+            "window {index}"
+        );
+        // The same depth as decoding the whole frame, to a few µm.
+        let (a, b) = (f.depth.as_ref().unwrap(), w.depth.as_ref().unwrap());
+        let (rms, shared) = depth_difference(a, b);
+        assert!(
+            rms < 0.05 && shared > 0.99,
+            "window {index}: {rms} mm RMS from the whole-frame run, {shared} shared"
+        );
+        let Some(region) = f.record.decode_region else {
+            continue;
+        };
+        // The region's LED images are the whole frame's decode (same timing) cut to it, to
+        // within a twentieth of the level noise (the shifts are fitted again, from rows
+        // counted from the region's top instead of the frame's).
+        let quality = f.record.decode.as_ref().unwrap();
+        let mut source = open(&capture, &OpenOptions::default()).unwrap();
+        let fresh = decode(
+            source.as_mut(),
+            &DecodeConfig {
+                start: f.record.decoded.0,
+                frames: Some(f.record.decoded.1 - f.record.decoded.0),
+                rate_ratio: Some(quality.rate_ratio),
+                exposure: Some(quality.exposure),
+                ..config.decode.clone()
+            },
+            &mut |_, _| {},
+        )
+        .unwrap();
+        let noise = meb::stats::median(fresh.noise.iter().copied()).unwrap();
+        let level_noise = noise * (2.0 / fresh.report.frames_used as f32).sqrt();
+        for (inner, full) in f.images.iter().zip(&fresh.leds.images) {
+            let cut = full.slice(ndarray::s![
+                region.y..region.y + region.height,
+                region.x..region.x + region.width
+            ]);
+            assert_eq!(inner.dim(), cut.dim());
+            let worst = inner
+                .iter()
+                .zip(cut)
+                .map(|(x, y)| (x - y).abs())
+                .fold(0.0f32, f32::max);
+            assert!(
+                worst < 0.05 * level_noise,
+                "window {index}: LED images differ by {worst} (level noise {level_noise})"
             );
         }
     }

@@ -76,6 +76,13 @@ pub struct VideoArgs {
     /// --ground-truth stay in camera pixels; codes must be linear (no --linearize).
     #[arg(long, default_value_t = 1, value_parser = clap::value_parser!(u16).range(1..=64))]
     bin: u16,
+    /// Decode every N-th window over the whole frame and the others only around the object
+    /// (the box of the previous window's lit pixels, grown by 32 pixels; a window whose object
+    /// leaves that box is decoded whole): an object appearing elsewhere is found within N
+    /// windows. 1 decodes every window whole. Without effect with --roi.
+    #[arg(long, default_value_t = meb::video::FULL_FRAME_EVERY as u32,
+          value_parser = clap::value_parser!(u32).range(1..))]
+    full_frame_every: u32,
     /// Normal integrator.
     #[arg(long, value_enum, default_value = "least-squares")]
     integrator: IntegratorArg,
@@ -194,6 +201,7 @@ pub fn run(args: &VideoArgs) -> Result<()> {
         "rig": args.rig,
         "camera_fps": fps,
         "bin": config.bin,
+        "full_frame_every": config.full_frame_every,
         "rate_3d_fps": rate,
         "schedule": config.schedule,
         "motion": config.motion,
@@ -283,6 +291,7 @@ fn video_config(args: &VideoArgs, rig: &Rig) -> Result<VideoConfig> {
     config.carry_timing = !args.fit_every_window;
     config.warm_start = !args.cold_start;
     config.bin = usize::from(args.bin);
+    config.full_frame_every = args.full_frame_every as usize;
     config.schedule = WindowSchedule::new(
         args.window,
         args.drop,

@@ -92,7 +92,7 @@ pub(crate) use matched::CodeLimits;
 use nalgebra::DMatrix;
 use ndarray::Array2;
 use rayon::prelude::*;
-use sample::PixelSample;
+use sample::{PixelSample, RowGrid};
 use spectrum::{SignalSpace, Spectrum};
 use stats::PixelStats;
 use waveform::ReceivedWaveform;
@@ -451,6 +451,8 @@ pub struct WindowDecode {
 #[derive(Debug, Clone)]
 pub struct WindowDecoder {
     roi: Roi,
+    /// Pixels of the whole frame (the pixel sample's rows lie on its grid).
+    frame_pixels: usize,
     map: CodeMap,
     code_limits: CodeLimits,
     fit_limits: FitLimits,
@@ -465,6 +467,7 @@ impl WindowDecoder {
         let roi = validate(config, format)?;
         Ok(Self {
             roi,
+            frame_pixels: format.pixels(),
             map: CodeMap::new(format, config.linearize)?,
             code_limits: CodeLimits::new(format, config.underexposed_below),
             fit_limits: FitLimits {
@@ -490,10 +493,16 @@ impl WindowDecoder {
 
     /// Picks the pixel sample of a window of frames cropped to the region.
     pub fn sample(&self, frames: &[Samples]) -> WindowSample {
-        let sample = PixelSample::gather(
-            frames,
+        let grid = RowGrid::new(
+            self.frame_pixels,
+            self.roi.y,
             self.roi.width,
             self.roi.height,
+        );
+        let sample = PixelSample::gather(
+            frames,
+            (self.roi.width, self.roi.height),
+            grid,
             &self.map,
             self.code_limits,
         );

@@ -9,6 +9,15 @@
 //! variance and drop out, so a small object in a wide view still drives the fit; a saturated
 //! pixel's waveform is clipped and is left out. Each kept pixel's F values are converted to
 //! linear fractions of full scale and centred (its mean, the background B, removed).
+//!
+//! The rows lie on the whole frame's grid ([`RowGrid`]): a region of the frame (a decoding
+//! region, or `meb video`'s region around the object) examines the frame's candidate rows that
+//! cross it, so the sample of a region holding the modulated pixels is the whole frame's sample
+//! and its fit the whole frame's. (Examined on a grid of its own, denser, a region ranks many
+//! more of the object's pixels and keeps the most variable few, which on a turning object are
+//! its moving silhouette: a window of the turning ellipsoid fitted one LED's shift 7 chips off.)
+//! Only a region too small to hold [`MIN_PIXELS`] candidates on the frame's grid is examined on
+//! a denser grid of its own.
 
 use super::matched::CodeLimits;
 use super::window::CodeMap;
@@ -37,6 +46,40 @@ pub struct PixelSample {
     rows: Vec<usize>,
 }
 
+/// The candidate rows of a region of a frame (module docs).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct RowGrid {
+    /// Every this many frame rows is examined.
+    stride: usize,
+    /// Frame row of the region's first row.
+    top: usize,
+}
+
+impl RowGrid {
+    /// The grid of a region of `width` × `height` pixels whose first row is row `top` of a
+    /// frame of `frame_pixels`.
+    pub fn new(frame_pixels: usize, top: usize, width: usize, height: usize) -> Self {
+        let frame = Self {
+            stride: (frame_pixels / CANDIDATE_PIXELS).max(1),
+            top,
+        };
+        if frame.rows(height).count() * width >= MIN_PIXELS {
+            frame
+        } else {
+            Self {
+                stride: (width * height / CANDIDATE_PIXELS).max(1),
+                top: 0,
+            }
+        }
+    }
+
+    /// The region rows examined, of a region of `height` rows.
+    fn rows(&self, height: usize) -> impl Iterator<Item = usize> + '_ {
+        let first = (self.stride - self.top % self.stride) % self.stride;
+        (first..height).step_by(self.stride)
+    }
+}
+
 /// One candidate pixel's temporal statistics.
 #[derive(Clone, Copy)]
 struct Candidate {
@@ -46,17 +89,17 @@ struct Candidate {
 }
 
 impl PixelSample {
-    /// Picks the sample from `frames` (cropped to the region: `width × height` each).
+    /// Picks the sample from `frames` (cropped to the region: `width × height` each) on the
+    /// candidate rows of `grid`.
     pub fn gather(
         frames: &[Samples],
-        width: usize,
-        height: usize,
+        (width, height): (usize, usize),
+        grid: RowGrid,
         map: &CodeMap,
         limits: CodeLimits,
     ) -> Self {
         let count = frames.len();
-        let stride = (width * height / CANDIDATE_PIXELS).max(1);
-        let rows: Vec<usize> = (0..height).step_by(stride).collect();
+        let rows: Vec<usize> = grid.rows(height).collect();
         let mut candidates: Vec<Candidate> = rows
             .par_iter()
             .flat_map_iter(|&row| row_candidates(frames, width, row, map, limits))
@@ -264,5 +307,31 @@ impl RowSums {
             self.code_sum[col] as f64 + self.value_sum[col],
             self.code_squares[col] as f64 + self.value_squares[col],
         )
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn a_region_examines_the_frames_candidate_rows_that_cross_it() {
+        // 1280×720: every 28th frame row.
+        let frame = 1280 * 720;
+        let whole: Vec<usize> = RowGrid::new(frame, 0, 1280, 720).rows(720).collect();
+        assert_eq!(whole.len(), 720usize.div_ceil(28));
+        assert!(whole.iter().all(|r| r % 28 == 0));
+        // A region from row 211: the same frame rows, counted from its top.
+        let region: Vec<usize> = RowGrid::new(frame, 211, 448, 251).rows(251).collect();
+        let expected: Vec<usize> = whole
+            .iter()
+            .filter(|&&r| (211..211 + 251).contains(&r))
+            .map(|r| r - 211)
+            .collect();
+        assert_eq!(region, expected);
+        // Too few candidates on the frame's grid (one row of 40 pixels): a denser grid of its
+        // own, every row of the region.
+        let small: Vec<usize> = RowGrid::new(frame, 5, 40, 30).rows(30).collect();
+        assert_eq!(small, (0..30).collect::<Vec<_>>());
     }
 }

@@ -119,9 +119,14 @@ pub fn level_noise(decoded: &Decoded) -> Array2<f32> {
     level_noise_in(decoded, None)
 }
 
+/// The factor √(2/frames) from a decode's σ to its level noise σ_A ([`level_noise`]).
+pub fn level_noise_factor(decoded: &Decoded) -> f32 {
+    let frames = decoded.report.frames_used.max(2) as f32;
+    (2.0 / frames).sqrt()
+}
+
 /// [`level_noise`] inside `roi` (the whole frame for `None`).
 fn level_noise_in(decoded: &Decoded, roi: Option<&Roi>) -> Array2<f32> {
-    let frames = decoded.report.frames_used.max(2) as f32;
-    let factor = (2.0 / frames).sqrt();
+    let factor = level_noise_factor(decoded);
     area(&decoded.noise, roi).mapv(|s| s * factor)
 }

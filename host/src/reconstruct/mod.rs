@@ -58,7 +58,7 @@ mod offset;
 mod roi;
 mod support;
 use inputs::Inputs;
-pub use inputs::{level_noise, usable_led_images};
+pub use inputs::{level_noise, level_noise_factor, usable_led_images};
 pub use offset::{
     OFFSET_PREFERENCE_T, WARM_OFFSET_BRACKET_MM, WARM_OFFSET_GAIN, WARM_WIDE_BRACKET_MM,
 };
@@ -197,6 +197,9 @@ pub enum ReconstructError {
     /// Integration failed.
     #[error(transparent)]
     Integrate(#[from] IntegrateError),
+    /// The images were decoded in a region of the frame that does not hold the whole object.
+    #[error("decoded region: {0}")]
+    Region(String),
 }
 
 /// Normals, albedo, depth and timings.
@@ -696,6 +699,61 @@ pub fn from_decoded_warm(
     warm: Option<&WarmStart>,
 ) -> Result<Reconstruction, ReconstructError> {
     reconstruct_inputs(&Inputs::Decoded(decoded), rig, mask, config, warm)
+}
+
+/// [`from_decoded_warm`] of a capture decoded only inside `region` of `rig`'s camera (the
+/// decoder's region of interest: `meb video` decodes around the object, [`crate::video::focus`]):
+/// reconstructed with the camera cut to the region ([`crate::rig::Camera::cropped`], every pixel
+/// keeps its ray) from the warm start cut to it, and pasted into full-frame results that hold,
+/// outside the region, what a full-frame reconstruction leaves outside its object. An object
+/// that reaches an edge of the region that is not an edge of the frame may go on beyond it, so
+/// its depth is refused ([`ReconstructError::Region`]).
+pub fn from_decoded_region(
+    decoded: &Decoded,
+    region: crate::demod::Roi,
+    rig: &Rig,
+    config: &ReconstructConfig,
+    warm: Option<&WarmStart>,
+) -> Result<Reconstruction, ReconstructError> {
+    let frame = (rig.camera.height, rig.camera.width);
+    let Some(roi) = Roi::of_rect(region, frame) else {
+        return Err(ReconstructError::Region(format!(
+            "{}x{}+{}+{} does not lie inside the camera's {}x{} frame",
+            region.width, region.height, region.x, region.y, frame.1, frame.0
+        )));
+    };
+    let region_rig = roi.cut_rig(rig);
+    let region_warm = warm
+        .filter(|w| w.depth_mm.dim() == frame)
+        .map(|w| WarmStart {
+            depth_mm: roi.cut(&w.depth_mm),
+        });
+    let inner = from_decoded_warm(decoded, &region_rig, None, config, region_warm.as_ref())?;
+    if roi.reached_edge(&inner.photometric.object_mask) {
+        return Err(ReconstructError::Region(format!(
+            "the object reaches an edge of the decoded region {}x{}+{}+{} inside the frame and \
+             may go on beyond it (decode the whole frame)",
+            region.width, region.height, region.x, region.y
+        )));
+    }
+    let started = Instant::now();
+    let (photometric, integration) = roi.paste(
+        inner.photometric,
+        inner.integration,
+        &rig.camera.projection(),
+    );
+    let mut timings = inner.timings;
+    timings.push(StageTiming::since(
+        "full frame from the decoded region".to_string(),
+        started,
+    ));
+    Ok(Reconstruction {
+        photometric,
+        integration,
+        timings,
+        start: inner.start,
+        support: inner.support,
+    })
 }
 
 #[cfg(test)]

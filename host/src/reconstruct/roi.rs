@@ -89,6 +89,15 @@ impl Roi {
         (share <= WORTHWHILE_SHARE).then_some(roi)
     }
 
+    /// The rows and columns of a frame of `frame` (rows, columns) that `rect` covers; `None`
+    /// when it is empty or does not lie inside the frame.
+    pub fn of_rect(rect: crate::demod::Roi, frame: (usize, usize)) -> Option<Self> {
+        let rows = rect.y..rect.y.checked_add(rect.height)?;
+        let cols = rect.x..rect.x.checked_add(rect.width)?;
+        let inside = !rows.is_empty() && !cols.is_empty() && rows.end <= frame.0;
+        (inside && cols.end <= frame.1).then_some(Self { rows, cols, frame })
+    }
+
     /// Whether arrays of these sizes are of the region's frame (and can be cut to it).
     pub fn fits(&self, mut sizes: impl Iterator<Item = (usize, usize)>) -> bool {
         sizes.all(|size| size == self.frame)

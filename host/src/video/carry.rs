@@ -13,6 +13,11 @@
 //! window is decoded freely too only when the carried timing explains it clearly worse than it
 //! explained its own window ([`SUSPICIOUS_RATIO`]), and the better of the two is kept (and
 //! carried on, when the free fit wins).
+//!
+//! A window decoded in a region around the object ([`super::focus`]) is judged against the
+//! median σ of the last whole-frame decode inside that region, not against the whole frame's
+//! ([`TimingCarry::decode_region`]); its free fit may serve the window but is never carried on,
+//! so the timing is learnt from whole frames alone.
 
 use crate::capture::{FrameFormat, Samples};
 use crate::demod::{DecodeConfig, Decoded, DemodError};
@@ -116,6 +121,54 @@ impl TimingCarry {
         }
         let free = crate::demod::decode_frames(frames, format, config);
         self.offer(&free);
+        match (&first, &free) {
+            (Ok(a), Ok(b)) if b.report.median_noise < a.report.median_noise => {
+                (free, TimingSource::Fitted)
+            }
+            (Ok(_), _) => (first, TimingSource::Carried),
+            _ => (free, TimingSource::Fitted),
+        }
+    }
+
+    /// Whether the carry has settled: later windows are decoded with the carried timing unless
+    /// it explains them clearly worse (or every window is fitted, or the timing is given).
+    pub fn settled(&self) -> bool {
+        !self.enabled || self.windows >= FREE_WINDOWS
+    }
+
+    /// Decodes `frames` over `config.roi`, a region around the object whose median σ in the
+    /// last whole-frame decode was `reference_noise` (module docs).
+    pub fn decode_region(
+        &mut self,
+        frames: &[Samples],
+        format: &FrameFormat,
+        config: &DecodeConfig,
+        reference_noise: f64,
+    ) -> DecodedWindow {
+        let given = config.rate_ratio.is_some() && config.exposure.is_some();
+        self.windows += 1;
+        let Some(carried) = self.best.filter(|_| self.enabled && !given) else {
+            let decoded = crate::demod::decode_frames(frames, format, config);
+            let source = if given {
+                TimingSource::Given
+            } else {
+                TimingSource::Fitted
+            };
+            return (decoded, source);
+        };
+        let with_carried = DecodeConfig {
+            rate_ratio: Some(carried.rate_ratio),
+            exposure: Some(carried.exposure),
+            ..config.clone()
+        };
+        let first = crate::demod::decode_frames(frames, format, &with_carried);
+        let trusted = first
+            .as_ref()
+            .is_ok_and(|d| d.report.median_noise <= SUSPICIOUS_RATIO * reference_noise);
+        if trusted {
+            return (first, TimingSource::Carried);
+        }
+        let free = crate::demod::decode_frames(frames, format, config);
         match (&first, &free) {
             (Ok(a), Ok(b)) if b.report.median_noise < a.report.median_noise => {
                 (free, TimingSource::Fitted)

@@ -79,7 +79,7 @@ impl VideoEncoder {
                 .args(["-f", "rawvideo", "-pix_fmt", "rgb24"])
                 .args(["-s", &format!("{width}x{height}")])
                 .args(["-framerate", &format!("{fps}"), "-i", "-"])
-                .args(["-c:v", "libx264", "-preset", "veryfast", "-crf", "18"])
+                .args(["-c:v", "libx264", "-preset", "ultrafast", "-crf", "18"])
                 .args(["-pix_fmt", "yuv420p", "-movflags", "+faststart"])
                 .arg(&path)
                 .stdin(Stdio::piped())

@@ -136,6 +136,36 @@ pub struct PeriodFrames<'a> {
     pub period: usize,
 }
 
+impl PeriodFrames<'_> {
+    /// Where the decoded region lies in the frame: the frame's width and pixels, and the
+    /// region (`None` when the frames hold no pixel).
+    fn placement(&self) -> Option<Placement> {
+        let pixels = self.frames.first()?.len();
+        let height = pixels / self.width.max(1);
+        Some(Placement {
+            width: self.width,
+            pixels,
+            region: self.roi.unwrap_or(Roi {
+                x: 0,
+                y: 0,
+                width: self.width,
+                height,
+            }),
+        })
+    }
+}
+
+/// Where a decoded image lies in its frame.
+#[derive(Debug, Clone, Copy)]
+struct Placement {
+    /// Frame width.
+    width: usize,
+    /// Frame pixels.
+    pixels: usize,
+    /// The decoded region.
+    region: Roi,
+}
+
 /// A lit pixel of the sample: index in the decoded image, brightness Σ A_i, residual σ.
 #[derive(Debug, Clone, Copy)]
 struct LitPixel {
@@ -151,7 +181,8 @@ pub fn detect_motion(
     frames: Option<&PeriodFrames>,
     config: &MotionConfig,
 ) -> MotionEstimate {
-    let Some(mut samples) = lit_sample(decoded, config.lit_fraction) else {
+    let placement = frames.and_then(PeriodFrames::placement);
+    let Some(mut samples) = lit_sample(decoded, placement, config.lit_fraction) else {
         return MotionEstimate::none(0);
     };
     let lit = samples.len();
@@ -210,9 +241,20 @@ pub fn detect_motion(
     }
 }
 
-/// The lit pixels of an evenly strided sample of the decoded image (`None` when the decode
-/// has no per-pixel noise or its images are not contiguous).
-fn lit_sample(decoded: &Decoded, lit_fraction: f32) -> Option<Vec<LitPixel>> {
+/// The lit pixels of an evenly strided sample of the frame (every k-th pixel in raster order)
+/// inside the decoded image, which lies in the frame as `placement` says (`None`: it is the
+/// frame); `None` when the decode has no per-pixel noise or its images are not contiguous.
+///
+/// A region of the frame ([`super::focus`]) takes the frame's sample pixels inside it, and
+/// its brightness reference is the frame's: the 99th percentile of the frame's sample with
+/// every sample pixel outside the region counted as dimmer than those inside (the region
+/// holds the lit pixels). So the region's lit pixels are those the whole frame's decode
+/// would have, at a fraction of the cost.
+fn lit_sample(
+    decoded: &Decoded,
+    placement: Option<Placement>,
+    lit_fraction: f32,
+) -> Option<Vec<LitPixel>> {
     let images = &decoded.leds.images;
     let noise = decoded.noise.as_slice_memory_order()?;
     let planes: Vec<&[f32]> = images
@@ -222,20 +264,52 @@ fn lit_sample(decoded: &Decoded, lit_fraction: f32) -> Option<Vec<LitPixel>> {
     if planes.len() != images.len() || planes.iter().any(|p| p.len() != noise.len()) {
         return None;
     }
-    let pixels = noise.len();
-    let stride = pixels.div_ceil(SAMPLE_PIXELS).max(1);
-    let mut samples: Vec<LitPixel> = (0..pixels)
-        .step_by(stride)
-        .filter_map(|p| {
+    let (rows, cols) = decoded.noise.dim();
+    let placement = placement.unwrap_or(Placement {
+        width: cols,
+        pixels: noise.len(),
+        region: Roi {
+            x: 0,
+            y: 0,
+            width: cols,
+            height: rows,
+        },
+    });
+    if (placement.region.width, placement.region.height) != (cols, rows) {
+        return None;
+    }
+    let stride = placement.pixels.div_ceil(SAMPLE_PIXELS).max(1);
+    let (x, y) = (placement.region.x, placement.region.y);
+    let mut inside = 0usize;
+    let mut samples = Vec::new();
+    for r in 0..rows {
+        let start = (r + y) * placement.width + x;
+        let first = (stride - start % stride) % stride;
+        for c in (first..cols).step_by(stride) {
+            inside += 1;
+            let p = r * cols + c;
             let level: f32 = planes.iter().map(|plane| plane[p]).sum();
-            (level.is_finite() && noise[p].is_finite()).then_some(LitPixel {
-                index: p,
-                level,
-                sigma: noise[p],
-            })
-        })
-        .collect();
-    let top = crate::stats::quantile(samples.iter().map(|s| s.level), 0.99).unwrap_or(0.0);
+            if level.is_finite() && noise[p].is_finite() {
+                samples.push(LitPixel {
+                    index: p,
+                    level,
+                    sigma: noise[p],
+                });
+            }
+        }
+    }
+    // The frame's sample pixels outside the region rank below every one inside.
+    let outside = placement.pixels.div_ceil(stride).saturating_sub(inside);
+    let total = samples.len() + outside;
+    let rank = ((total.saturating_sub(1)) as f64 * 0.99).round() as usize;
+    let mut levels: Vec<f32> = samples.iter().map(|s| s.level).collect();
+    let top = crate::stats::quantile_in_place(&mut levels, 0.0).map(|lowest| {
+        match rank.checked_sub(outside) {
+            Some(index) => *levels.select_nth_unstable_by(index, f32::total_cmp).1,
+            None => lowest,
+        }
+    });
+    let top = top.unwrap_or(0.0);
     samples.retain(|s| s.level > lit_fraction * top && top > 0.0);
     Some(samples)
 }
@@ -337,6 +411,60 @@ pub(super) mod tests {
         });
         let noise = levels.mapv(|l| 0.004 * (1.0 + 2.0 * l) * (1.0 + 0.1 * (l * 97.0).sin()));
         (levels, noise)
+    }
+
+    #[test]
+    fn a_region_takes_the_whole_frames_lit_sample() {
+        // 600×400 frame (a sample pixel every 2nd in raster order) with a bright block.
+        let (width, height) = (600, 400);
+        let inside = |r: usize, c: usize| (150..250).contains(&r) && (200..330).contains(&c);
+        let levels = Array2::from_shape_fn((height, width), |(r, c)| {
+            if inside(r, c) {
+                0.2 + 0.001 * ((r * 7 + c * 3) % 50) as f32
+            } else {
+                0.001
+            }
+        });
+        let noise = Array2::from_elem((height, width), 0.002f32);
+        let whole = decoded(levels.clone(), noise.clone());
+        let region = Roi {
+            x: 171,
+            y: 120,
+            width: 200,
+            height: 170,
+        };
+        let area = ndarray::s![120..290, 171..371];
+        let cut = decoded(levels.slice(area).to_owned(), noise.slice(area).to_owned());
+        let placement = Placement {
+            width,
+            pixels: width * height,
+            region,
+        };
+        let frame_pixels = |sample: Vec<LitPixel>, at: Roi, cols: usize| -> Vec<(usize, f32)> {
+            sample
+                .iter()
+                .map(|p| {
+                    (
+                        (p.index / cols + at.y) * width + p.index % cols + at.x,
+                        p.level,
+                    )
+                })
+                .collect()
+        };
+        let all = Roi {
+            x: 0,
+            y: 0,
+            width,
+            height,
+        };
+        let expected = frame_pixels(lit_sample(&whole, None, 0.05).unwrap(), all, width);
+        let got = frame_pixels(
+            lit_sample(&cut, Some(placement), 0.05).unwrap(),
+            region,
+            200,
+        );
+        assert!(expected.len() > 5000, "{}", expected.len());
+        assert_eq!(got, expected);
     }
 
     #[test]
