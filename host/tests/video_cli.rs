@@ -7,7 +7,9 @@
 
 use meb::capture::{OpenOptions, open};
 use meb::demod::{DecodeConfig, decode};
-use meb::reconstruct::{Start, WarmStart, from_decoded, from_decoded_warm};
+use meb::reconstruct::{
+    Start, WarmStart, bin_decoded, from_decoded, from_decoded_coarse, from_decoded_warm,
+};
 use meb::rig::Rig;
 use meb::video::{FrameStatus, TimingSource, VideoConfig, WindowSchedule, process};
 use ndarray::{Array2, Array3};
@@ -574,6 +576,67 @@ fn a_warm_started_window_equals_a_cold_one_on_a_still_object() {
         rms < 7.2 && shared > 0.99,
         "kept vs cold: {rms} mm RMS, {shared} shared"
     );
+}
+
+/// A cold window of the still ellipsoid at 640×360 started from its own reconstruction binned
+/// 2×2 (what `meb video` does for its first window): the cold reconstruction's depth, to a
+/// fraction of the accuracy, and as close to the truth. A frame below 640×360 is
+/// reconstructed cold.
+#[test]
+fn a_coarse_started_window_equals_a_cold_one() {
+    let tmp = tempfile::tempdir().unwrap();
+    let rig_path = dynamic_rig(tmp.path(), 640, 360);
+    let clip = ellipsoid_with(tmp.path(), &rig_path, "still", 40, 0.0, "0,1,0", &[]);
+    let rig = Rig::load(&rig_path).unwrap();
+    let config = VideoConfig::thesis(4);
+    let mut source = open(&clip.join("capture.y4m"), &OpenOptions::default()).unwrap();
+    let decoded = decode(
+        source.as_mut(),
+        &DecodeConfig {
+            start: 4,
+            frames: Some(32),
+            ..config.decode.clone()
+        },
+        &mut |_, _| {},
+    )
+    .unwrap();
+    let cold = from_decoded(&decoded, &rig, None, &config.reconstruct).unwrap();
+    let coarse = from_decoded_coarse(&decoded, &rig, &config.reconstruct).unwrap();
+    let Start::Coarse { passes, moved_mm } = coarse.start else {
+        panic!("the coarse start was not kept: {:?}", coarse.start);
+    };
+    assert!(
+        passes <= 2 && moved_mm < 1.0,
+        "{passes} passes, moved {moved_mm} mm"
+    );
+    let (depth, cold_depth) = (
+        &coarse.integration.depth.depth_mm,
+        &cold.integration.depth.depth_mm,
+    );
+    let (rms, shared) = depth_difference(depth, cold_depth);
+    assert!(
+        rms < 0.1 && shared > 0.99,
+        "coarse vs cold: {rms} mm RMS, {shared} shared"
+    );
+    let truth: Array2<f32> = ndarray_npy::read_npy(clip.join("depth.npy")).unwrap();
+    let error = |d: &Array2<f32>| {
+        meb::metrics::compare_depth(d, &truth, None)
+            .unwrap()
+            .rmse_mm
+    };
+    let (coarse_error, cold_error) = (error(depth), error(cold_depth));
+    assert!(
+        coarse_error < cold_error + 0.05,
+        "coarse start {coarse_error} mm against the truth, cold {cold_error} mm"
+    );
+    // The same window binned, 320×180: below the coarse start's size, reconstructed cold.
+    let small = from_decoded_coarse(
+        &bin_decoded(&decoded, 2),
+        &rig.binned(2),
+        &config.reconstruct,
+    )
+    .unwrap();
+    assert_eq!(small.start, Start::Cold);
 }
 
 #[test]

@@ -90,8 +90,9 @@ pub struct VideoArgs {
     /// carrying the best fit so far from window to window.
     #[arg(long)]
     fit_every_window: bool,
-    /// Reconstruct every window from scratch instead of starting from the previous window's
-    /// depth (slower; each 3-D frame is then independent of the ones before it).
+    /// Reconstruct every window from scratch at full resolution instead of starting from the
+    /// previous window's depth, or the first window from its own reconstruction binned 2×2
+    /// (slower; each 3-D frame is then independent of the ones before it).
     #[arg(long)]
     cold_start: bool,
     /// Use distant light vectors L_i(0) (the thesis' model) instead of near-field refinement.

@@ -30,7 +30,9 @@
 //! inside the previous depth's bounding box grown by [`ROI_MARGIN_PX`] (its region of interest,
 //! module `roi`; a decode's usable images are made for that region alone, module `inputs`) and
 //! pasted back into the full frame; an object that reaches the region's edge is reconstructed on
-//! the full frame instead.
+//! the full frame instead. A window of `meb video` with nothing to start from (the first) starts
+//! from its own reconstruction binned 2×2 ([`from_decoded_coarse`], module `coarse`), and a
+//! window decoded only around the object is reconstructed there ([`from_decoded_region`]).
 //!
 //! Every result carries a verdict on whether its depth rests on what the LEDs measured (module
 //! `support`: enough of the surface lit by three or more LEDs, every part placed by its
@@ -53,10 +55,12 @@ use rayon::prelude::*;
 use std::time::Instant;
 use thiserror::Error;
 
+mod coarse;
 mod inputs;
 mod offset;
 mod roi;
 mod support;
+pub use coarse::{COARSE_BIN, COARSE_MIN_PIXELS, bin_decoded, from_decoded_coarse};
 use inputs::Inputs;
 pub use inputs::{level_noise, level_noise_factor, usable_led_images};
 pub use offset::{
@@ -229,6 +233,14 @@ pub enum Start {
         /// Passes run.
         passes: usize,
         /// Median absolute depth difference from the warm start, mm.
+        moved_mm: f64,
+    },
+    /// From the window's own reconstruction binned 2×2 (a cold window, module `coarse`),
+    /// accepted.
+    Coarse {
+        /// Full-resolution passes run.
+        passes: usize,
+        /// Median absolute depth difference from the binned depth, mm.
         moved_mm: f64,
     },
     /// A warm start was rejected and the reconstruction redone cold.

@@ -355,14 +355,14 @@ fn period_ratio(frames: &PeriodFrames, decoded: &Decoded, lit: &[LitPixel]) -> O
 }
 
 #[cfg(test)]
-pub(super) mod tests {
+pub(crate) mod tests {
     use super::*;
     use crate::demod::{DecodeReport, Estimator};
     use crate::types::LedImages;
     use ndarray::Array2;
 
     /// A decode of three LEDs with these levels (LED 2 at half) and per-pixel noise.
-    pub(in crate::video) fn decoded(levels: Array2<f32>, noise: Array2<f32>) -> Decoded {
+    pub(crate) fn decoded(levels: Array2<f32>, noise: Array2<f32>) -> Decoded {
         let dim = levels.dim();
         Decoded {
             leds: LedImages {
