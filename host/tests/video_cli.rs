@@ -8,7 +8,7 @@
 use meb::capture::{OpenOptions, open};
 use meb::demod::{DecodeConfig, decode};
 use meb::reconstruct::{
-    Start, WarmStart, bin_decoded, from_decoded, from_decoded_coarse, from_decoded_warm,
+    ReconstructConfig, Start, WarmStart, bin_decoded, from_decoded, from_decoded_warm,
 };
 use meb::rig::Rig;
 use meb::video::{FrameStatus, TimingSource, VideoConfig, WindowSchedule, process};
@@ -580,8 +580,8 @@ fn a_warm_started_window_equals_a_cold_one_on_a_still_object() {
 
 /// A cold window of the still ellipsoid at 640×360 started from its own reconstruction binned
 /// 2×2 (what `meb video` does for its first window): the cold reconstruction's depth, to a
-/// fraction of the accuracy, and as close to the truth. A frame below 640×360 is
-/// reconstructed cold.
+/// fraction of the accuracy, and as close to the truth; a warm start far off is redone the
+/// same way. A frame below 640×360 is reconstructed cold.
 #[test]
 fn a_coarse_started_window_equals_a_cold_one() {
     let tmp = tempfile::tempdir().unwrap();
@@ -600,8 +600,14 @@ fn a_coarse_started_window_equals_a_cold_one() {
         &mut |_, _| {},
     )
     .unwrap();
-    let cold = from_decoded(&decoded, &rig, None, &config.reconstruct).unwrap();
-    let coarse = from_decoded_coarse(&decoded, &rig, &config.reconstruct).unwrap();
+    let cold_config = ReconstructConfig {
+        coarse_start: false,
+        ..config.reconstruct.clone()
+    };
+    assert!(config.reconstruct.coarse_start, "meb video starts coarse");
+    let cold = from_decoded(&decoded, &rig, None, &cold_config).unwrap();
+    assert_eq!(cold.start, Start::Cold);
+    let coarse = from_decoded(&decoded, &rig, None, &config.reconstruct).unwrap();
     let Start::Coarse { passes, moved_mm } = coarse.start else {
         panic!("the coarse start was not kept: {:?}", coarse.start);
     };
@@ -629,10 +635,25 @@ fn a_coarse_started_window_equals_a_cold_one() {
         coarse_error < cold_error + 0.05,
         "coarse start {coarse_error} mm against the truth, cold {cold_error} mm"
     );
+    // Warm-started 30 mm off, out of both brackets: redone from the coarse start.
+    let mut off = WarmStart::of(&cold);
+    off.depth_mm.mapv_inplace(|z| z + 30.0);
+    let redone = from_decoded_warm(&decoded, &rig, None, &config.reconstruct, Some(&off)).unwrap();
+    assert!(
+        matches!(&redone.start, Start::Redone { reason } if reason.contains("binned 2×2")),
+        "{:?}",
+        redone.start
+    );
+    let (rms, shared) = depth_difference(&redone.integration.depth.depth_mm, cold_depth);
+    assert!(
+        rms < 0.1 && shared > 0.99,
+        "redone vs cold: {rms} mm RMS, {shared} shared"
+    );
     // The same window binned, 320×180: below the coarse start's size, reconstructed cold.
-    let small = from_decoded_coarse(
+    let small = from_decoded(
         &bin_decoded(&decoded, 2),
         &rig.binned(2),
+        None,
         &config.reconstruct,
     )
     .unwrap();

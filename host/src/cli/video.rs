@@ -291,6 +291,7 @@ fn video_config(args: &VideoArgs, rig: &Rig) -> Result<VideoConfig> {
     config.max_frames = max_frames;
     config.carry_timing = !args.fit_every_window;
     config.warm_start = !args.cold_start;
+    config.reconstruct.coarse_start = !args.cold_start;
     config.bin = usize::from(args.bin);
     config.full_frame_every = args.full_frame_every as usize;
     config.schedule = WindowSchedule::new(

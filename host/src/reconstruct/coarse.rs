@@ -7,10 +7,12 @@
 //! ([`crate::rig::Rig::binned`]: every binned pixel keeps the ray of its block's centre) at a
 //! quarter of the cost, and its depth, spread back over the blocks and two pixels beyond the
 //! rim ([`spread`]), starts the full-resolution window as a previous window's would
-//! ([`super::WarmStart`]). A warm result that strays from that start is redone cold by the warm
-//! path itself, so a coarse start never gives a result a cold one would have refused.
+//! ([`super::WarmStart`]). A result that strays from that start is redone cold, so a coarse
+//! start never gives a result the warm checks would have refused. A window whose previous
+//! window's warm start strayed is redone this way too.
 
-use super::{ReconstructConfig, ReconstructError, Reconstruction, Start, WarmStart};
+use super::inputs::Inputs;
+use super::{ReconstructConfig, StageTiming, WarmStart};
 use crate::demod::Decoded;
 use crate::rig::Rig;
 use crate::types::LedImages;
@@ -28,38 +30,37 @@ pub const COARSE_MIN_PIXELS: usize = 640 * 360;
 /// to a background block, which the binned decode did not see as object.
 const RIM_PX: usize = 2;
 
-/// A cold reconstruction of `decoded` started from its reconstruction binned by
-/// [`COARSE_BIN`] (module docs); a plain cold one ([`super::from_decoded`]) for frames below
-/// [`COARSE_MIN_PIXELS`] or when the binned window cannot be reconstructed.
-pub fn from_decoded_coarse(
-    decoded: &Decoded,
+/// The warm start of a cold window of `inputs` (module docs): its reconstruction binned by
+/// [`COARSE_BIN`] spread over the frame, its stages added to `timings`; `None` below
+/// [`COARSE_MIN_PIXELS`], for inputs other than a decoded capture of the rig's frame, or when
+/// the binned window cannot be reconstructed.
+pub(super) fn start(
+    inputs: &Inputs,
     rig: &Rig,
     config: &ReconstructConfig,
-) -> Result<Reconstruction, ReconstructError> {
+    timings: &mut Vec<StageTiming>,
+) -> Option<WarmStart> {
     let frame = (rig.camera.height, rig.camera.width);
-    let cold = || super::from_decoded(decoded, rig, None, config);
+    let Inputs::Decoded(decoded) = inputs else {
+        return None;
+    };
     if frame.0 * frame.1 < COARSE_MIN_PIXELS || decoded.noise.dim() != frame {
-        return cold();
+        return None;
     }
     let binned = bin_decoded(decoded, COARSE_BIN);
-    let Ok(coarse) = super::from_decoded(&binned, &rig.binned(COARSE_BIN), None, config) else {
-        return cold();
+    let binned_config = ReconstructConfig {
+        coarse_start: false,
+        ..config.clone()
     };
-    let warm = WarmStart {
+    let coarse = super::from_decoded(&binned, &rig.binned(COARSE_BIN), None, &binned_config);
+    let coarse = coarse.ok()?;
+    timings.extend(coarse.timings.into_iter().map(|mut t| {
+        t.stage = format!("{}, binned", t.stage);
+        t
+    }));
+    Some(WarmStart {
         depth_mm: spread(&coarse.integration.depth.depth_mm, COARSE_BIN, frame),
-    };
-    let mut result = super::from_decoded_warm(decoded, rig, None, config, Some(&warm))?;
-    result.timings.splice(
-        0..0,
-        coarse.timings.into_iter().map(|mut t| {
-            t.stage = format!("{}, binned", t.stage);
-            t
-        }),
-    );
-    if let Start::Warm { passes, moved_mm } = result.start {
-        result.start = Start::Coarse { passes, moved_mm };
-    }
-    Ok(result)
+    })
 }
 
 /// One binned row: LED levels (LED-major), σ, saturated and under-exposed flags.

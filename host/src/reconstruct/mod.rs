@@ -31,7 +31,8 @@
 //! module `roi`; a decode's usable images are made for that region alone, module `inputs`) and
 //! pasted back into the full frame; an object that reaches the region's edge is reconstructed on
 //! the full frame instead. A window of `meb video` with nothing to start from (the first) starts
-//! from its own reconstruction binned 2×2 ([`from_decoded_coarse`], module `coarse`), and a
+//! from its own reconstruction binned 2×2 ([`ReconstructConfig::coarse_start`], module
+//! `coarse`; a window whose warm start strayed is redone that way too), and a
 //! window decoded only around the object is reconstructed there ([`from_decoded_region`]).
 //!
 //! Every result carries a verdict on whether its depth rests on what the LEDs measured (module
@@ -60,7 +61,7 @@ mod inputs;
 mod offset;
 mod roi;
 mod support;
-pub use coarse::{COARSE_BIN, COARSE_MIN_PIXELS, bin_decoded, from_decoded_coarse};
+pub use coarse::{COARSE_BIN, COARSE_MIN_PIXELS, bin_decoded};
 use inputs::Inputs;
 pub use inputs::{level_noise, level_noise_factor, usable_led_images};
 pub use offset::{
@@ -140,6 +141,11 @@ pub struct ReconstructConfig {
     pub light_model: LightModel,
     /// Half-width in mm of the search for the depth offset in near-field passes (0 = off).
     pub offset_search_mm: f64,
+    /// Start a decoded capture of 640×360 pixels or more that has no warm start (or whose warm
+    /// start strayed) from its own reconstruction binned 2×2 instead of four cold passes at
+    /// full resolution (module `coarse`; `meb video`).
+    #[serde(default)]
+    pub coarse_start: bool,
 }
 
 impl Default for ReconstructConfig {
@@ -155,6 +161,7 @@ impl Default for ReconstructConfig {
             },
             light_model: LightModel::default(),
             offset_search_mm: 60.0,
+            coarse_start: false,
         }
     }
 }
@@ -358,9 +365,10 @@ fn reconstruct_inputs(
     // The full frame's images and noise, made once if a pass needs them.
     let full = std::cell::OnceCell::new();
     let full_frame = || full.get_or_init(|| inputs.full());
-    if let Some(warm) = warm.filter(|w| near_field && w.depth_mm.dim() == shape) {
+    // The warm passes from `warm`: the reconstruction, or why it cannot be trusted.
+    let attempt = |warm: &WarmStart, timings: &mut Vec<StageTiming>| {
         let in_region = Roi::around(&warm.depth_mm, mask, ROI_MARGIN_PX)
-            .and_then(|roi| warm_in_region(&roi, inputs, rig, mask, config, warm, &mut timings));
+            .and_then(|roi| warm_in_region(&roi, inputs, rig, mask, config, warm, timings));
         let result = match in_region {
             Some(result) => result,
             None => {
@@ -372,12 +380,21 @@ fn reconstruct_inputs(
                     noise.as_deref(),
                     config,
                     Some(warm),
-                    &mut timings,
+                    timings,
                 )
             }
         };
-        let reason = match result {
+        match result {
             Ok((photometric, integration, Ok(start), support)) => {
+                Ok((photometric, integration, start, support))
+            }
+            Ok((_, _, Err(reason), _)) => Err(reason),
+            Err(error) => Err(format!("the warm-started reconstruction failed: {error}")),
+        }
+    };
+    if let Some(warm) = warm.filter(|w| near_field && w.depth_mm.dim() == shape) {
+        match attempt(warm, &mut timings) {
+            Ok((photometric, integration, start, support)) => {
                 return Ok(Reconstruction {
                     photometric,
                     integration,
@@ -386,10 +403,41 @@ fn reconstruct_inputs(
                     support,
                 });
             }
-            Ok((_, _, Err(reason), _)) => reason,
-            Err(error) => format!("the warm-started reconstruction failed: {error}"),
-        };
-        start = Start::Redone { reason };
+            Err(reason) => start = Start::Redone { reason },
+        }
+    }
+    let coarse = (near_field && config.coarse_start && mask.is_none())
+        .then(|| coarse::start(inputs, rig, config, &mut timings))
+        .flatten();
+    if let Some(coarse) = coarse {
+        match attempt(&coarse, &mut timings) {
+            Ok((photometric, integration, kept, support)) => {
+                let start = match (start, kept) {
+                    (Start::Redone { reason }, _) => Start::Redone {
+                        reason: format!("{reason}; redone from the window binned 2×2"),
+                    },
+                    (_, Start::Warm { passes, moved_mm }) => Start::Coarse { passes, moved_mm },
+                    (_, kept) => kept,
+                };
+                return Ok(Reconstruction {
+                    photometric,
+                    integration,
+                    timings,
+                    start,
+                    support,
+                });
+            }
+            Err(reason) => {
+                start = match start {
+                    Start::Redone { reason: first } => Start::Redone {
+                        reason: format!("{first}; the start from the window binned 2×2: {reason}"),
+                    },
+                    _ => Start::Redone {
+                        reason: format!("the start from the window binned 2×2: {reason}"),
+                    },
+                }
+            }
+        }
     }
     let (images, noise) = full_frame();
     let (photometric, integration, _, support) = passes(

@@ -8,8 +8,8 @@
 //! motion ([`motion`]) and reconstructed by the one decoded → reconstruction path
 //! ([`crate::reconstruct::from_decoded`]), warm-started from the previous reconstructed window
 //! ([`crate::reconstruct::WarmStart`]: the object moves little in 40 ms; a warm result that strays
-//! is redone cold; a window with nothing to start from starts from its own reconstruction at
-//! half the resolution, [`crate::reconstruct::from_decoded_coarse`]); with ground truth
+//! is redone; a window with nothing to start from starts from its own reconstruction at half
+//! the resolution, [`crate::reconstruct::ReconstructConfig::coarse_start`]); with ground truth
 //! ([`truth`]) each 3-D frame is scored. The caller gets every
 //! window's [`VideoFrame`] as soon as it is done (the CLI writes it with [`output`] on its own
 //! thread, [`writer`]: per-frame arrays, a colour-mapped depth video and a shaded-render video,
@@ -63,8 +63,7 @@ use crate::demod::{
 };
 use crate::metrics::{MetricsError, compare_depth};
 use crate::reconstruct::{
-    ReconstructConfig, Reconstruction, Start, WarmStart, from_decoded_coarse, from_decoded_region,
-    from_decoded_warm,
+    ReconstructConfig, Reconstruction, Start, WarmStart, from_decoded_region, from_decoded_warm,
 };
 use crate::rig::Rig;
 use crate::timing::StageTiming;
@@ -124,7 +123,10 @@ impl VideoConfig {
                 leds: crate::demod::LedCount::Fixed(leds),
                 ..DecodeConfig::default()
             },
-            reconstruct: ReconstructConfig::decoded_capture(),
+            reconstruct: ReconstructConfig {
+                coarse_start: true,
+                ..ReconstructConfig::decoded_capture()
+            },
             motion: MotionConfig::default(),
             read_ahead: None,
             max_frames: None,
@@ -994,16 +996,9 @@ fn reconstruct_window(
         });
     }
     let time = Instant::now();
-    // A window with nothing to start from (the first, or one after a failure) starts from its
-    // own reconstruction at half the resolution, unless every window is to be cold.
-    let reconstruction = match (chosen.region, warm) {
-        (Some(region), _) => {
-            from_decoded_region(&decoded, region.roi, rig, &config.reconstruct, warm)
-        }
-        (None, None) if config.warm_start => {
-            from_decoded_coarse(&decoded, rig, &config.reconstruct)
-        }
-        (None, _) => from_decoded_warm(&decoded, rig, None, &config.reconstruct, warm),
+    let reconstruction = match chosen.region {
+        Some(region) => from_decoded_region(&decoded, region.roi, rig, &config.reconstruct, warm),
+        None => from_decoded_warm(&decoded, rig, None, &config.reconstruct, warm),
     };
     timing.reconstruct_ms = time.elapsed().as_secs_f64() * 1e3;
     let reconstruction = match reconstruction {
