@@ -511,11 +511,15 @@ fn depth_difference(a: &Array2<f32>, b: &Array2<f32>) -> (f64, f64) {
     )
 }
 
-#[test]
-fn a_warm_started_window_equals_a_cold_one_on_a_still_object() {
-    let tmp = tempfile::tempdir().unwrap();
-    let rig_path = dynamic_rig(tmp.path(), 320, 180);
-    let clip = ellipsoid_with(tmp.path(), &rig_path, "still", 40, 0.0, "0,1,0", &[]);
+/// The still ellipsoid's first thesis window on the thesis' dynamic rig at `width` × `height`:
+/// the rig, the video settings, the window decoded, and the capture folder.
+fn still_window(
+    dir: &Path,
+    width: usize,
+    height: usize,
+) -> (Rig, VideoConfig, meb::demod::Decoded, PathBuf) {
+    let rig_path = dynamic_rig(dir, width, height);
+    let clip = ellipsoid_with(dir, &rig_path, "still", 40, 0.0, "0,1,0", &[]);
     let rig = Rig::load(&rig_path).unwrap();
     let config = VideoConfig::thesis(4);
     let mut source = open(&clip.join("capture.y4m"), &OpenOptions::default()).unwrap();
@@ -529,6 +533,13 @@ fn a_warm_started_window_equals_a_cold_one_on_a_still_object() {
         &mut |_, _| {},
     )
     .unwrap();
+    (rig, config, decoded, clip)
+}
+
+#[test]
+fn a_warm_started_window_equals_a_cold_one_on_a_still_object() {
+    let tmp = tempfile::tempdir().unwrap();
+    let (rig, config, decoded, _) = still_window(tmp.path(), 320, 180);
     let cold = from_decoded(&decoded, &rig, None, &config.reconstruct).unwrap();
     assert_eq!(cold.start, Start::Cold);
     let cold_depth = &cold.integration.depth.depth_mm;
@@ -585,21 +596,7 @@ fn a_warm_started_window_equals_a_cold_one_on_a_still_object() {
 #[test]
 fn a_coarse_started_window_equals_a_cold_one() {
     let tmp = tempfile::tempdir().unwrap();
-    let rig_path = dynamic_rig(tmp.path(), 640, 360);
-    let clip = ellipsoid_with(tmp.path(), &rig_path, "still", 40, 0.0, "0,1,0", &[]);
-    let rig = Rig::load(&rig_path).unwrap();
-    let config = VideoConfig::thesis(4);
-    let mut source = open(&clip.join("capture.y4m"), &OpenOptions::default()).unwrap();
-    let decoded = decode(
-        source.as_mut(),
-        &DecodeConfig {
-            start: 4,
-            frames: Some(32),
-            ..config.decode.clone()
-        },
-        &mut |_, _| {},
-    )
-    .unwrap();
+    let (rig, config, decoded, clip) = still_window(tmp.path(), 640, 360);
     let cold_config = ReconstructConfig {
         coarse_start: false,
         ..config.reconstruct.clone()

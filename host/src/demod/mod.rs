@@ -59,6 +59,8 @@ mod basis;
 pub mod config;
 mod error;
 pub mod fit;
+#[cfg(test)]
+pub(crate) mod fixture;
 mod levenberg;
 mod matched;
 pub mod output;

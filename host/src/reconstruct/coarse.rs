@@ -181,7 +181,7 @@ fn spread(coarse: &Array2<f32>, k: usize, frame: (usize, usize)) -> Array2<f32> 
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::video::motion::tests::decoded;
+    use crate::demod::fixture::decoded;
 
     #[test]
     fn blocks_average_their_usable_pixels() {

@@ -392,17 +392,16 @@ fn reconstruct_inputs(
             Err(error) => Err(format!("the warm-started reconstruction failed: {error}")),
         }
     };
+    let done = |(photometric, integration, start, support), timings| Reconstruction {
+        photometric,
+        integration,
+        timings,
+        start,
+        support,
+    };
     if let Some(warm) = warm.filter(|w| near_field && w.depth_mm.dim() == shape) {
         match attempt(warm, &mut timings) {
-            Ok((photometric, integration, start, support)) => {
-                return Ok(Reconstruction {
-                    photometric,
-                    integration,
-                    timings,
-                    start,
-                    support,
-                });
-            }
+            Ok(parts) => return Ok(done(parts, timings)),
             Err(reason) => start = Start::Redone { reason },
         }
     }
@@ -419,13 +418,7 @@ fn reconstruct_inputs(
                     (_, Start::Warm { passes, moved_mm }) => Start::Coarse { passes, moved_mm },
                     (_, kept) => kept,
                 };
-                return Ok(Reconstruction {
-                    photometric,
-                    integration,
-                    timings,
-                    start,
-                    support,
-                });
+                return Ok(done((photometric, integration, start, support), timings));
             }
             Err(reason) => {
                 start = match start {

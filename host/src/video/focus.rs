@@ -252,9 +252,22 @@ fn median_inside(decoded: &Decoded, roi: Roi) -> Option<f64> {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::video::motion::tests::decoded;
+    use crate::demod::fixture::decoded;
 
     const FRAME: (usize, usize) = (200, 120);
+    /// A region of [`FRAME`] away from its edges.
+    const REGION: Roi = Roi {
+        x: 30,
+        y: 20,
+        width: 100,
+        height: 80,
+    };
+
+    /// The lit box of a bright block at `rows`, `cols` of the frame decoded over `region`.
+    fn lit_in(region: Roi, rows: std::ops::Range<usize>, cols: std::ops::Range<usize>) -> LitBox {
+        let decoded = block(Some(region), rows, cols);
+        lit_box(&decoded, Some(region), FRAME, &MaskConfig::default())
+    }
 
     /// A decode over `region` (the whole frame for `None`) of a bright block at `rows`, `cols`
     /// of the frame, with σ 0.001 outside and 0.002 on the block.
@@ -303,19 +316,7 @@ mod tests {
         assert_eq!(lit.bounds, Some(expected));
         assert!(!lit.reaches_edge);
         // The same object decoded in a region around it: the same box, in frame pixels.
-        let region = Roi {
-            x: 30,
-            y: 20,
-            width: 100,
-            height: 80,
-        };
-        let inner = lit_box(
-            &block(Some(region), 40..70, 50..110),
-            Some(region),
-            FRAME,
-            &MaskConfig::default(),
-        );
-        assert_eq!(inner, lit);
+        assert_eq!(lit_in(REGION, 40..70, 50..110), lit);
         // Nothing lit: no box.
         let dark = block(None, 0..0, 0..0);
         assert_eq!(
@@ -326,20 +327,8 @@ mod tests {
 
     #[test]
     fn an_object_reaching_an_inner_edge_of_its_region_may_go_on_beyond_it() {
-        let region = Roi {
-            x: 30,
-            y: 20,
-            width: 100,
-            height: 80,
-        };
-        let config = MaskConfig::default();
         for (rows, cols) in [(40..70, 20..60), (10..40, 50..90), (40..70, 100..140)] {
-            let lit = lit_box(
-                &block(Some(region), rows.clone(), cols.clone()),
-                Some(region),
-                FRAME,
-                &config,
-            );
+            let lit = lit_in(REGION, rows.clone(), cols.clone());
             assert!(lit.reaches_edge, "{rows:?} {cols:?}");
         }
         // At an edge of the region that is the frame's edge, it cannot go on.
@@ -349,12 +338,7 @@ mod tests {
             width: 100,
             height: 80,
         };
-        let lit = lit_box(
-            &block(Some(corner), 0..30, 0..40),
-            Some(corner),
-            FRAME,
-            &config,
-        );
+        let lit = lit_in(corner, 0..30, 0..40);
         assert!(!lit.reaches_edge);
         assert_eq!(lit.bounds.map(|b| (b.x, b.y)), Some((0, 0)));
     }

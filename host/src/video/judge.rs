@@ -110,8 +110,7 @@ mod tests {
             .collect();
         problems.extend(extra.iter().map(|p| p.to_string()));
         let dim = (4, 4);
-        let mut decoded =
-            crate::video::motion::tests::decoded(Array2::zeros(dim), Array2::zeros(dim));
+        let mut decoded = crate::demod::fixture::decoded(Array2::zeros(dim), Array2::zeros(dim));
         decoded.leds = LedImages {
             images: vec![Array2::zeros(dim); unexplained.len()],
         };
