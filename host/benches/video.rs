@@ -352,6 +352,24 @@
 //! frames (a 200-frame clip repeated ten times; windows of 40, no `--save`), alternated: 9.7 /
 //! 12.9 → **15.1 / 15.2 3-D frames/s**, system time 3.9 / 1.8 → 0.9 / 0.8 s, the writer's mean
 //! 56 / 35 → 17 / 16 ms per window; with `--hop 8` 15.8 → 18.5 3-D frames/s.
+//!
+//! Session 38: profiled end to end (perf, frame pointers), the matched filter over the whole
+//! 1280×720 frame was 8.6 % of the run's CPU while the turning ellipsoid fills a tenth of it, and
+//! the cold first window took 0.41–0.54 s of a 3.4 s run. Once the timing carry settles, a window
+//! is now decoded only around the object (the box of the previous window's lit pixels grown by
+//! 32 px, [`meb::video::focus`]) and reconstructed there; the decoder's pixel sample and the
+//! motion test's sample lie on the whole frame's grid, so a region's fit and motion score are the
+//! whole frame's (a region sampled on its own, denser grid kept the moving silhouette's pixels
+//! and fitted one LED's shift 7 chips off in one window). A window with nothing to start from
+//! starts from its own reconstruction binned 2×2 ([`meb::reconstruct::ReconstructConfig`]'s
+//! `coarse_start`): first window 0.41–0.54 → 0.23–0.30 s, its depth RMSE 0.734 → 0.706 mm. The
+//! preview videos are encoded with x264's `ultrafast` preset. On 2000 frames (a 200-frame clip
+//! repeated ten times, windows of 40, no `--save`), main ce1b9d1 and this code alternated:
+//! 13.6 / 14.8 → **17.7 / 17.0 3-D frames/s**, user CPU 4.67 / 4.57 → 3.85 / 3.88 s; the matched
+//! filter 8.6 → 2.6 % of the samples, motion detection 3.7 → 1.6 ms per window. With `--hop 8`
+//! 8.7 → 10.5 3-D frames/s: 36 of the 246 windows straddle the clip's repeats, where the object
+//! jumps back, and are redone (0.34 s each). Per-window RMSE of the 200-frame clip: 0.7064,
+//! 0.7011, 0.5165, 0.5318, 0.5381 mm (before 0.7344, 0.7087, 0.5160, 0.5318, 0.5381).
 use criterion::{BatchSize, Criterion, criterion_group, criterion_main};
 use meb::capture::binning::Binning;
 use meb::capture::memory::MemorySource;
