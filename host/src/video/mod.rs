@@ -362,7 +362,8 @@ pub struct FrameRecord {
 pub struct VideoFrame<'a> {
     /// What was recorded.
     pub record: FrameRecord,
-    /// The decoded LED images (when decoding succeeded).
+    /// The decoded LED images (when decoding succeeded): of the whole frame, or of the region
+    /// around the object the record names ([`FrameRecord::decode_region`]).
     pub decoded: Option<&'a Decoded>,
     /// The reconstruction (when it succeeded).
     pub reconstruction: Option<&'a Reconstruction>,
