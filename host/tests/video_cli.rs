@@ -8,7 +8,8 @@
 use meb::capture::{OpenOptions, open};
 use meb::demod::{DecodeConfig, decode};
 use meb::reconstruct::{
-    ReconstructConfig, Start, WarmStart, bin_decoded, from_decoded, from_decoded_warm,
+    ReconstructConfig, ReconstructError, Start, WarmStart, bin_decoded, from_decoded,
+    from_decoded_region, from_decoded_warm,
 };
 use meb::rig::Rig;
 use meb::video::{FrameStatus, TimingSource, VideoConfig, WindowSchedule, process};
@@ -378,7 +379,7 @@ fn windows_of(capture: &Path, rig: &Rig, config: &VideoConfig) -> Vec<Window> {
 /// are decoded around the object, the window after the jump (the object reaches out of its
 /// region) whole, and the next one around the object's new place. A window decoded around the
 /// object holds the whole frame's decode there, and its depth is the one of a run that decodes
-/// every window whole.
+/// every window whole; a region that cuts through the object is refused.
 #[test]
 fn windows_are_decoded_around_the_object_and_whole_when_it_jumps() {
     let tmp = tempfile::tempdir().unwrap();
@@ -490,6 +491,32 @@ fn windows_are_decoded_around_the_object_and_whole_when_it_jumps() {
             );
         }
     }
+    // A region that cuts through the object (the right half of the frame): its depth is
+    // refused, never pasted into a frame as if the object ended there.
+    let half = meb::demod::Roi {
+        x: 160,
+        y: 0,
+        width: 160,
+        height: 180,
+    };
+    let mut source = open(&capture, &OpenOptions::default()).unwrap();
+    let decoded_half = decode(
+        source.as_mut(),
+        &DecodeConfig {
+            start: 4,
+            frames: Some(32),
+            roi: Some(half),
+            ..config.decode.clone()
+        },
+        &mut |_, _| {},
+    )
+    .unwrap();
+    let refused = from_decoded_region(&decoded_half, half, &rig, &config.reconstruct, None);
+    assert!(
+        matches!(refused, Err(ReconstructError::Region(_))),
+        "{:?}",
+        refused.map(|r| r.start)
+    );
 }
 
 /// RMS difference (mm) of two depth maps where both are finite, and the share of `a`'s finite

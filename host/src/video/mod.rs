@@ -335,8 +335,8 @@ pub struct FrameRecord {
     /// `None`: the whole frame (or the decoding region given).
     #[serde(default)]
     pub decode_region: Option<Roi>,
-    /// Whether the object reached the edge of the region chosen for the window, which was then
-    /// decoded whole.
+    /// Whether a region was chosen for the window but given up for the whole frame (its decode
+    /// failed, it held no lit pixel, or the object reached its edge).
     #[serde(default)]
     pub widened: bool,
     /// What the decoder's verdict came to with the window's motion ([`judge`]; `None` when
