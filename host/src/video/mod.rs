@@ -428,14 +428,7 @@ struct Decode {
 /// One decoded try of a window (several with [`MotionPolicy::Place`]).
 struct Try {
     start: usize,
-    decoded: Result<Decoded, DemodError>,
-    timing_source: TimingSource,
-    /// The region it was decoded in (`None`: the whole frame).
-    region: Option<FocusRegion>,
-    /// Its lit pixels, when the video decodes around the object.
-    lit: Option<LitBox>,
-    /// Whether its region was given up for the whole frame.
-    widened: bool,
+    decode: Decode,
     motion: Option<MotionEstimate>,
     verdict: Option<WindowVerdict>,
 }
@@ -785,13 +778,7 @@ impl DecodeStage<'_> {
             };
             let time = Instant::now();
             let decoded_frames = schedule.drop..schedule.drop + decoded_len;
-            let Decode {
-                decoded,
-                source: timing_source,
-                region,
-                lit,
-                widened,
-            } = self.decode_try(
+            let mut decode = self.decode_try(
                 &window.samples[decoded_frames],
                 carry,
                 focus,
@@ -800,24 +787,25 @@ impl DecodeStage<'_> {
             );
             timing.decode_ms += time.elapsed().as_secs_f64() * 1e3;
             // A setting wrong for the stream fails every window alike: stop at once.
-            let decoded = match decoded {
+            decode.decoded = match decode.decoded {
                 Err(error @ (DemodError::InvalidConfig(_) | DemodError::Capture(_))) => {
                     return Err(VideoError::Decode(error));
                 }
                 other => other,
             };
             let time = Instant::now();
-            let motion = decoded.as_ref().ok().map(|d| {
+            let motion = decode.decoded.as_ref().ok().map(|d| {
                 let frames = PeriodFrames {
                     frames: window.samples,
                     map: self.code_map,
                     width: format.width,
-                    roi: region.map(|r| r.roi).or(config.decode.roi),
+                    roi: decode.region.map(|r| r.roi).or(config.decode.roi),
                     period: 1usize << (d.report.leds + 1),
                 };
                 detect_motion(d, Some(&frames), &config.motion)
             });
-            let verdict = decoded
+            let verdict = decode
+                .decoded
                 .as_ref()
                 .ok()
                 .map(|d| judge::judge(d, motion.as_ref(), force));
@@ -825,11 +813,7 @@ impl DecodeStage<'_> {
             timing.read_ms += stream.take_waited().as_secs_f64() * 1e3;
             let attempt = Try {
                 start,
-                decoded,
-                timing_source,
-                region,
-                lit,
-                widened,
+                decode,
                 motion,
                 verdict,
             };
@@ -852,10 +836,10 @@ impl DecodeStage<'_> {
         }
         if self.focusing() {
             let learnt = best.as_ref().and_then(|b| {
-                let decoded = b.decoded.as_ref().ok()?;
-                Some((decoded, b.lit?))
+                let decoded = b.decode.decoded.as_ref().ok()?;
+                Some((decoded, b.decode.lit?))
             });
-            focus.learn(learnt, best.as_ref().and_then(|b| b.region));
+            focus.learn(learnt, best.as_ref().and_then(|b| b.decode.region));
         }
         Ok(best.map(|attempt| Chosen {
             index: k,
@@ -915,17 +899,17 @@ fn reconstruct_window(
         status: FrameStatus::Failed,
         reason: None,
         placed_by: chosen.start - scheduled,
-        decode_region: chosen.region.map(|r| r.roi),
-        widened: chosen.widened,
+        decode_region: chosen.decode.region.map(|r| r.roi),
+        widened: chosen.decode.widened,
         verdict: chosen.verdict,
-        timing_source: chosen.timing_source,
+        timing_source: chosen.decode.source,
         motion: chosen.motion,
         decode: None,
         reconstruction: None,
         accuracy: None,
         timing: FrameTiming::default(),
     };
-    let decoded = match chosen.decoded {
+    let decoded = match chosen.decode.decoded {
         Ok(decoded) => decoded,
         Err(error) => {
             record.reason = Some(format!("decoding failed: {error}"));
@@ -947,6 +931,7 @@ fn reconstruct_window(
     record.decode = Some(quality);
     let shape = decoded.leds.shape().unwrap_or((0, 0));
     let expected = chosen
+        .decode
         .region
         .map_or((rig.camera.height, rig.camera.width), |r| {
             (r.roi.height, r.roi.width)
@@ -997,7 +982,7 @@ fn reconstruct_window(
         });
     }
     let time = Instant::now();
-    let reconstruction = match chosen.region {
+    let reconstruction = match chosen.decode.region {
         Some(region) => from_decoded_region(&decoded, region.roi, rig, &config.reconstruct, warm),
         None => from_decoded_warm(&decoded, rig, None, &config.reconstruct, warm),
     };
