@@ -334,7 +334,10 @@ fn run<const K: usize, T: Code>(
             out.clear_from(written);
             out.stats
         })
-        .reduce(|| PixelStats::new(K - 1), |a, b| a.merge(&b));
+        // Merged in row order: the sums do not depend on how the pool split the work.
+        .collect::<Vec<_>>()
+        .into_iter()
+        .fold(PixelStats::new(K - 1), |a, b| a.merge(&b));
     // SAFETY: every row's kernel wrote its first `written` pixels and `clear_from` the rest.
     let (leds, noise_variance, saturated, underexposed) = unsafe { planes.written() };
     WindowAmplitudes {

@@ -200,7 +200,10 @@ impl PixelSample {
                 let x = self.matrix(range);
                 x.tr_mul(&x)
             })
-            .reduce(|| DMatrix::zeros(f, f), |a, b| a + b)
+            // Summed in order: G does not depend on how the pool split the work.
+            .collect::<Vec<_>>()
+            .into_iter()
+            .fold(DMatrix::zeros(f, f), |a, b| a + b)
     }
 }
 

@@ -89,7 +89,10 @@ impl PixelStats {
                 }
                 stats
             })
-            .reduce(|| Self::new(leds.len()), |a, b| a.merge(&b))
+            // Merged in order: the sums do not depend on how the pool split the work.
+            .collect::<Vec<_>>()
+            .into_iter()
+            .fold(Self::new(leds.len()), |a, b| a.merge(&b))
     }
 }
 

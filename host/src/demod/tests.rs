@@ -246,3 +246,50 @@ fn frames_in_memory_decode_as_their_source_does() {
         "{error}"
     );
 }
+
+/// A decode is the same whatever the number of threads that run it (`meb video` decodes in a
+/// pool of one thread beside the reconstruction, `meb decode` in the shared pool): partial sums
+/// are merged in order, never in the order a pool happened to split the work.
+#[test]
+fn a_decode_does_not_depend_on_the_number_of_threads() {
+    // Large enough for several parallel blocks of every sum (16 384 pixels per block of the
+    // statistics, a row per task of the matched filter, 256 sample pixels per Gram block).
+    let scene = Scene {
+        width: 256,
+        height: 160,
+        frames: 64,
+        noise: 0.02,
+        ..Scene::default()
+    };
+    let decode_on = |threads: usize| {
+        let pool = rayon::ThreadPoolBuilder::new()
+            .num_threads(threads)
+            .build()
+            .expect("a pool");
+        pool.install(|| run(&scene, Estimator::Waveform).0)
+    };
+    let one = decode_on(1);
+    for threads in [2, 3] {
+        let many = decode_on(threads);
+        for (a, b) in one.leds.images.iter().zip(&many.leds.images) {
+            assert_eq!(
+                a.mapv(f32::to_bits),
+                b.mapv(f32::to_bits),
+                "{threads} threads"
+            );
+        }
+        assert_eq!(one.noise.mapv(f32::to_bits), many.noise.mapv(f32::to_bits));
+        assert_eq!(
+            one.report.rate_ratio.to_bits(),
+            many.report.rate_ratio.to_bits()
+        );
+        assert_eq!(
+            one.report.exposure.to_bits(),
+            many.report.exposure.to_bits()
+        );
+        assert_eq!(
+            one.report.fit_residual.to_bits(),
+            many.report.fit_residual.to_bits()
+        );
+    }
+}
