@@ -1,8 +1,8 @@
 //! How the process's allocator keeps freed memory.
 //!
 //! `meb video` allocates and frees the same large arrays for every window: the LED images, the
-//! region's results pasted into full-frame arrays (≈ 45 MB per window at 1280×720), the next
-//! window's frames. glibc returns a freed block of more than its mmap threshold to the kernel
+//! full-frame results (≈ 45 MB per window at 1280×720 when a window's region results were
+//! all pasted into the frame; now its depth alone), the next window's frames. glibc returns a freed block of more than its mmap threshold to the kernel
 //! at once, and trims a thread arena's top once more than its trim threshold is free, so each
 //! window faulted its arrays' pages in afresh and the kernel zeroed them: 566 000 page faults
 //! and a third of the CPU time in the kernel over a 2000-frame 1280×720 clip. Keeping freed

@@ -33,7 +33,8 @@
 //! the full frame instead. A window of `meb video` with nothing to start from (the first) starts
 //! from its own reconstruction binned 2×2 ([`ReconstructConfig::coarse_start`], module
 //! `coarse`; a window whose warm start strayed is redone that way too), and a
-//! window decoded only around the object is reconstructed there ([`from_decoded_region`]).
+//! window decoded only around the object is reconstructed there and kept there
+//! ([`from_decoded_region`], [`RegionReconstruction`]).
 //!
 //! Every result carries a verdict on whether its depth rests on what the LEDs measured (module
 //! `support`: enough of the surface lit by three or more LEDs, every part placed by its
@@ -59,6 +60,7 @@ use thiserror::Error;
 mod coarse;
 mod inputs;
 mod offset;
+mod region;
 mod roi;
 mod support;
 pub use coarse::{COARSE_BIN, COARSE_MIN_PIXELS, bin_decoded};
@@ -68,6 +70,7 @@ pub use offset::{
     OFFSET_PREFERENCE_T, WARM_OFFSET_BRACKET_MM, WARM_OFFSET_GAIN, WARM_WIDE_BRACKET_MM,
 };
 use offset::{OffsetPrior, Unplaced, place_parts};
+pub use region::{RegionReconstruction, from_decoded_region};
 pub use roi::ROI_MARGIN_PX;
 use roi::Roi;
 pub use support::{MIN_MEASURED_SHARE, Support};
@@ -754,61 +757,6 @@ pub fn from_decoded_warm(
     reconstruct_inputs(&Inputs::Decoded(decoded), rig, mask, config, warm)
 }
 
-/// [`from_decoded_warm`] of a capture decoded only inside `region` of `rig`'s camera (the
-/// decoder's region of interest: `meb video` decodes around the object, [`crate::video::focus`]):
-/// reconstructed with the camera cut to the region ([`crate::rig::Camera::cropped`], every pixel
-/// keeps its ray) from the warm start cut to it, and pasted into full-frame results that hold,
-/// outside the region, what a full-frame reconstruction leaves outside its object. An object
-/// that reaches an edge of the region that is not an edge of the frame may go on beyond it, so
-/// its depth is refused ([`ReconstructError::Region`]).
-pub fn from_decoded_region(
-    decoded: &Decoded,
-    region: crate::demod::Roi,
-    rig: &Rig,
-    config: &ReconstructConfig,
-    warm: Option<&WarmStart>,
-) -> Result<Reconstruction, ReconstructError> {
-    let frame = (rig.camera.height, rig.camera.width);
-    let Some(roi) = Roi::of_rect(region, frame) else {
-        return Err(ReconstructError::Region(format!(
-            "{}x{}+{}+{} does not lie inside the camera's {}x{} frame",
-            region.width, region.height, region.x, region.y, frame.1, frame.0
-        )));
-    };
-    let region_rig = roi.cut_rig(rig);
-    let region_warm = warm
-        .filter(|w| w.depth_mm.dim() == frame)
-        .map(|w| WarmStart {
-            depth_mm: roi.cut(&w.depth_mm),
-        });
-    let inner = from_decoded_warm(decoded, &region_rig, None, config, region_warm.as_ref())?;
-    if roi.reached_edge(&inner.photometric.object_mask) {
-        return Err(ReconstructError::Region(format!(
-            "the object reaches an edge of the decoded region {}x{}+{}+{} inside the frame and \
-             may go on beyond it (decode the whole frame)",
-            region.width, region.height, region.x, region.y
-        )));
-    }
-    let started = Instant::now();
-    let (photometric, integration) = roi.paste(
-        inner.photometric,
-        inner.integration,
-        &rig.camera.projection(),
-    );
-    let mut timings = inner.timings;
-    timings.push(StageTiming::since(
-        "full frame from the decoded region".to_string(),
-        started,
-    ));
-    Ok(Reconstruction {
-        photometric,
-        integration,
-        timings,
-        start: inner.start,
-        support: inner.support,
-    })
-}
-
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -984,7 +932,7 @@ mod tests {
     }
 
     /// The decode of the demodulator's default synthetic scene.
-    fn synthetic_decode() -> Decoded {
+    pub(super) fn synthetic_decode() -> Decoded {
         use crate::demod::synthetic::{Scene, render};
         use crate::demod::{DecodeConfig, LedCount, decode};
         let scene = Scene::default();

@@ -39,8 +39,8 @@ fn row_span(
 /// A rectangle of the frame.
 #[derive(Debug, Clone, PartialEq, Eq)]
 pub(crate) struct Roi {
-    rows: Range<usize>,
-    cols: Range<usize>,
+    pub(super) rows: Range<usize>,
+    pub(super) cols: Range<usize>,
     /// The frame's (rows, columns).
     frame: (usize, usize),
 }
@@ -141,7 +141,11 @@ impl Roi {
 
     /// A full-frame array holding `region` (of the region's size) inside the region and
     /// `outside` elsewhere.
-    fn paste2<T: Copy + Send + Sync>(&self, region: &Array2<T>, outside: T) -> Array2<T> {
+    pub(super) fn paste2<T: Copy + Send + Sync>(
+        &self,
+        region: &Array2<T>,
+        outside: T,
+    ) -> Array2<T> {
         region
             .as_slice()
             .and_then(|values| self.paste_rows(values, 1, outside))
@@ -155,7 +159,7 @@ impl Roi {
     }
 
     /// [`Self::paste2`] for per-pixel vectors (rows, columns, channels).
-    fn paste3(&self, region: &Array3<f32>, outside: f32) -> Array3<f32> {
+    pub(super) fn paste3(&self, region: &Array3<f32>, outside: f32) -> Array3<f32> {
         let channels = region.dim().2;
         let shape = (self.frame.0, self.frame.1, channels);
         region

@@ -22,9 +22,10 @@
 //!
 //! Once the timing carry has settled, a window is decoded only around the object (the box of
 //! the previous window's lit pixels grown by [`FOCUS_MARGIN_PX`], [`focus`]) and reconstructed
-//! there ([`crate::reconstruct::from_decoded_region`]); a window whose object leaves that box
-//! is decoded whole, as is every [`VideoConfig::full_frame_every`]-th window, so an object that
-//! appears elsewhere is found.
+//! there ([`crate::reconstruct::from_decoded_region`]; its arrays stay the region's and only
+//! the depth is pasted into the frame, [`WindowReconstruction`]); a window whose object leaves
+//! that box is decoded whole, as is every [`VideoConfig::full_frame_every`]-th window, so an
+//! object that appears elsewhere is found.
 //!
 //! With [`VideoConfig::bin`] every camera frame is binned into k×k pixel blocks as it is read
 //! ([`crate::capture::binning`]) and the 3-D frames are reconstructed for the binned camera
@@ -46,6 +47,7 @@ pub mod render;
 pub mod schedule;
 pub mod stream;
 pub mod truth;
+pub mod window;
 pub mod writer;
 
 pub use carry::{TimingCarry, TimingSource};
@@ -55,6 +57,7 @@ pub use motion::{MotionConfig, MotionEstimate, MotionPolicy, PeriodFrames, detec
 pub use schedule::{ScheduleError, WindowSchedule};
 pub use stream::{FrameStream, StreamEnd};
 pub use truth::{BinnedTruth, TruthDepth, TruthSource};
+pub use window::WindowReconstruction;
 
 use crate::capture::binning::BinnedSource;
 use crate::capture::{CaptureError, FrameSource};
@@ -365,8 +368,9 @@ pub struct VideoFrame<'a> {
     /// The decoded LED images (when decoding succeeded): of the whole frame, or of the region
     /// around the object the record names ([`FrameRecord::decode_region`]).
     pub decoded: Option<&'a Decoded>,
-    /// The reconstruction (when it succeeded).
-    pub reconstruction: Option<&'a Reconstruction>,
+    /// The reconstruction (when it succeeded): of the whole frame, or of the decode region
+    /// ([`WindowReconstruction`]).
+    pub reconstruction: Option<&'a WindowReconstruction>,
     /// Camera frames read so far.
     pub camera_frames: usize,
     /// Camera frames in the stream, when known.
@@ -572,7 +576,9 @@ pub fn process(
                     warm.as_ref().filter(|_| config.warm_start),
                 )?;
                 if let Some(reconstruction) = &outcome.reconstruction {
-                    warm = Some(WarmStart::of(reconstruction));
+                    warm = Some(WarmStart {
+                        depth_mm: reconstruction.depth_mm().clone(),
+                    });
                 }
                 summary.windows += 1;
                 match outcome.record.status {
@@ -890,7 +896,7 @@ fn too_short(stream: &mut FrameStream, base: usize, schedule: WindowSchedule) ->
 struct Outcome {
     record: FrameRecord,
     decoded: Option<Decoded>,
-    reconstruction: Option<Reconstruction>,
+    reconstruction: Option<WindowReconstruction>,
 }
 
 /// Applies the motion policy to the chosen try, reconstructs it and scores it.
@@ -1003,8 +1009,10 @@ fn reconstruct_window(
     }
     let time = Instant::now();
     let reconstruction = match chosen.decode.region {
-        Some(region) => from_decoded_region(&decoded, region.roi, rig, &config.reconstruct, warm),
-        None => from_decoded_warm(&decoded, rig, None, &config.reconstruct, warm),
+        Some(region) => from_decoded_region(&decoded, region.roi, rig, &config.reconstruct, warm)
+            .map(WindowReconstruction::of_region),
+        None => from_decoded_warm(&decoded, rig, None, &config.reconstruct, warm)
+            .map(WindowReconstruction::of_frame),
     };
     timing.reconstruct_ms = time.elapsed().as_secs_f64() * 1e3;
     let reconstruction = match reconstruction {
@@ -1019,9 +1027,9 @@ fn reconstruct_window(
             });
         }
     };
-    record.reconstruction = Some(ReconstructionQuality::of(&reconstruction));
-    timing.stages = reconstruction.timings.clone();
-    let support = &reconstruction.support.verdict;
+    record.reconstruction = Some(ReconstructionQuality::of(reconstruction.reconstruction()));
+    timing.stages = reconstruction.reconstruction().timings.clone();
+    let support = &reconstruction.reconstruction().support.verdict;
     if !support.is_plausible() {
         let problems = support.problems.join("; ");
         if config.decode.on_implausible != OnImplausible::Keep {
@@ -1062,15 +1070,14 @@ fn reconstruct_window(
 /// The accuracy of a reconstruction against the truth for `decoded` frames, when there is
 /// truth for them and the two overlap.
 fn score(
-    reconstruction: &Reconstruction,
+    reconstruction: &WindowReconstruction,
     truth: &mut dyn TruthSource,
     decoded: Range<usize>,
 ) -> Result<Option<FrameAccuracy>, VideoError> {
     let Some(t) = truth.depth_for(decoded)? else {
         return Ok(None);
     };
-    let depth = &reconstruction.integration.depth.depth_mm;
-    match compare_depth(depth, &t.depth_mm, None) {
+    match compare_depth(reconstruction.depth_mm(), &t.depth_mm, None) {
         Ok(errors) => Ok(Some(FrameAccuracy {
             rmse_mm: Some(errors.rmse_mm),
             nrmse: errors.nrmse,

@@ -192,15 +192,17 @@ impl VideoOutput {
         let reconstruction = frame
             .reconstruction
             .filter(|_| frame.record.status == FrameStatus::Reconstructed);
+        let normals = reconstruction
+            .filter(|_| self.options.normals)
+            .map(|r| r.normals());
+        let albedo = reconstruction
+            .filter(|_| self.options.albedo)
+            .map(|r| r.albedo());
         self.add_arrays(FrameArrays {
             record: frame.record.clone(),
-            depth: reconstruction.map(|r| &r.integration.depth.depth_mm),
-            normals: reconstruction
-                .filter(|_| self.options.normals)
-                .map(|r| &r.photometric.field.normals),
-            albedo: reconstruction
-                .filter(|_| self.options.albedo)
-                .map(|r| &r.photometric.field.albedo),
+            depth: reconstruction.map(|r| r.depth_mm()),
+            normals: normals.as_deref(),
+            albedo: albedo.as_deref(),
         })
     }
 

@@ -67,13 +67,13 @@ impl OutputThread {
             .filter(|_| frame.record.status == FrameStatus::Reconstructed);
         let arrays = OwnedArrays {
             record: frame.record.clone(),
-            depth: reconstruction.map(|r| r.integration.depth.depth_mm.clone()),
+            depth: reconstruction.map(|r| r.depth_mm().clone()),
             normals: reconstruction
                 .filter(|_| self.normals)
-                .map(|r| r.photometric.field.normals.clone()),
+                .map(|r| r.normals().into_owned()),
             albedo: reconstruction
                 .filter(|_| self.albedo)
-                .map(|r| r.photometric.field.albedo.clone()),
+                .map(|r| r.albedo().into_owned()),
         };
         let sent = match &self.sender {
             Some(sender) => sender.send(arrays).is_ok(),
