@@ -845,15 +845,8 @@ mod tests {
         )
         .expect("in the region");
         assert_warm_in_its_region(&region);
-        let (a, b) = (&region.integration.depth.depth_mm, &full.depth.depth_mm);
-        assert_eq!(a.dim(), b.dim());
-        let mut worst = 0.0f32;
-        for ((p, x), y) in a.indexed_iter().zip(b) {
-            assert_eq!(x.is_finite(), y.is_finite(), "pixel {p:?}: {x} vs {y}");
-            if x.is_finite() {
-                worst = worst.max((x - y).abs());
-            }
-        }
+        let worst =
+            largest_depth_difference(&region.integration.depth.depth_mm, &full.depth.depth_mm);
         assert!(worst < 1e-3, "region vs full frame: {worst} mm");
         assert_eq!(region.integration.kept, full.kept);
         assert_eq!(region.integration.part, full.part);
@@ -932,6 +925,20 @@ mod tests {
     }
 
     /// The decode of the demodulator's default synthetic scene.
+    /// The largest difference in mm of two depth maps of one size, which must have depths at
+    /// the same pixels.
+    pub(super) fn largest_depth_difference(a: &Array2<f32>, b: &Array2<f32>) -> f32 {
+        assert_eq!(a.dim(), b.dim());
+        let mut worst = 0.0f32;
+        for ((p, x), y) in a.indexed_iter().zip(b) {
+            assert_eq!(x.is_finite(), y.is_finite(), "pixel {p:?}: {x} vs {y}");
+            if x.is_finite() {
+                worst = worst.max((x - y).abs());
+            }
+        }
+        worst
+    }
+
     pub(super) fn synthetic_decode() -> Decoded {
         use crate::demod::synthetic::{Scene, render};
         use crate::demod::{DecodeConfig, LedCount, decode};

@@ -107,12 +107,12 @@ pub fn from_decoded_region(
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::reconstruct::tests::{still_sphere, synthetic_decode};
+    use crate::reconstruct::tests::{
+        StillSphere, largest_depth_difference, still_sphere, synthetic_decode,
+    };
 
     /// The still sphere (320×180) decoded whole, and the same decode cut to `rect`.
-    fn sphere_decodes(
-        rect: crate::demod::Roi,
-    ) -> (Decoded, Decoded, super::super::tests::StillSphere) {
+    fn sphere_decodes(rect: crate::demod::Roi) -> (Decoded, Decoded, StillSphere) {
         let sphere = still_sphere();
         let mut whole = synthetic_decode();
         whole.leds = sphere.images.clone();
@@ -164,14 +164,7 @@ mod tests {
         let from_whole =
             crate::reconstruct::from_decoded_warm(&whole, &sphere.rig, None, &sphere.config, warm)
                 .expect("the whole frame");
-        let (a, b) = (&framed, &from_whole.integration.depth.depth_mm);
-        let mut worst = 0.0f32;
-        for ((p, x), y) in a.indexed_iter().zip(b) {
-            assert_eq!(x.is_finite(), y.is_finite(), "pixel {p:?}: {x} vs {y}");
-            if x.is_finite() {
-                worst = worst.max((x - y).abs());
-            }
-        }
+        let worst = largest_depth_difference(&framed, &from_whole.integration.depth.depth_mm);
         assert!(worst < 1e-3, "region vs whole frame: {worst} mm");
     }
 }
