@@ -370,6 +370,22 @@
 //! 8.7 → 10.5 3-D frames/s: 36 of the 246 windows straddle the clip's repeats, where the object
 //! jumps back, and are redone (0.34 s each). Per-window RMSE of the 200-frame clip: 0.7064,
 //! 0.7011, 0.5165, 0.5318, 0.5381 mm (before 0.7344, 0.7087, 0.5160, 0.5318, 0.5381).
+//!
+//! Session 39: per thread (perf), the reconstruction took 58 % of the CPU, decoding 19 %, FFmpeg
+//! 9 %, the reader 7.5 % and the writer 6 %; the decoding stage's parallel loops queued in the
+//! shared pool between the reconstruction's. Decoding now runs in a pool of its own with one
+//! thread ([`meb::video::process`]), which first needed a decode that does not depend on the
+//! number of threads (its partial sums are merged in order; with one thread a cube clip of
+//! `video_cli` decoded differently and was refused). A window decoded around the object keeps
+//! its reconstruction in the region and pastes only its depth into the frame
+//! ([`meb::video::WindowReconstruction`]): 2.2 → 0.25 ms per window. On a continuous 2000-frame
+//! clip of the turning ellipsoid (1280×720, windows of 40, no `--save`; main cb3b830 and this
+//! code alternated six times, the first run of main after an idle spell at 11.4 left out):
+//! **18.3 → 20.7 3-D frames/s** (means; medians 18.4 → 20.9), reconstruction 46.8 → 41.2 ms and
+//! decoding 28.5 → 22.6 ms per window, user CPU 3.56 → 3.38 s; per-window depth RMSE against
+//! the truth unchanged (median 0.677, mean 0.743, worst 1.195 mm over 50 windows). The 200-frame
+//! clip repeated ten times: 15.2 / 16.2 → 17.6 / 18.0 / 19.1. With `--hop 8` on the continuous
+//! clip (246 windows): **22.9 → 25.4 3-D frames/s**.
 use criterion::{BatchSize, Criterion, criterion_group, criterion_main};
 use meb::capture::binning::Binning;
 use meb::capture::memory::MemorySource;
