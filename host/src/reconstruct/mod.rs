@@ -924,7 +924,6 @@ mod tests {
         assert!(result.is_none(), "a cut-off object was pasted back");
     }
 
-    /// The decode of the demodulator's default synthetic scene.
     /// The largest difference in mm of two depth maps of one size, which must have depths at
     /// the same pixels.
     pub(super) fn largest_depth_difference(a: &Array2<f32>, b: &Array2<f32>) -> f32 {
@@ -939,6 +938,7 @@ mod tests {
         worst
     }
 
+    /// The decode of the demodulator's default synthetic scene.
     pub(super) fn synthetic_decode() -> Decoded {
         use crate::demod::synthetic::{Scene, render};
         use crate::demod::{DecodeConfig, LedCount, decode};
