@@ -575,11 +575,6 @@ pub fn process(
                     chosen.timing,
                     warm.as_ref().filter(|_| config.warm_start),
                 )?;
-                if let Some(reconstruction) = &outcome.reconstruction {
-                    warm = Some(WarmStart {
-                        depth_mm: reconstruction.depth_mm().clone(),
-                    });
-                }
                 summary.windows += 1;
                 match outcome.record.status {
                     FrameStatus::Reconstructed => summary.reconstructed += 1,
@@ -604,6 +599,12 @@ pub fn process(
                     camera_frames: chosen.camera_frames,
                     total_frames: chosen.total_frames,
                 })?;
+                // The next window starts from this one's depth, moved rather than copied.
+                if let Some(reconstruction) = outcome.reconstruction {
+                    warm = Some(WarmStart {
+                        depth_mm: reconstruction.into_depth_mm(),
+                    });
+                }
             }
         })();
         // Hanging up stops the decoding thread at its next window.
@@ -1012,7 +1013,7 @@ fn reconstruct_window(
         Some(region) => from_decoded_region(&decoded, region.roi, rig, &config.reconstruct, warm)
             .map(WindowReconstruction::of_region),
         None => from_decoded_warm(&decoded, rig, None, &config.reconstruct, warm)
-            .map(WindowReconstruction::of_frame),
+            .map(WindowReconstruction::Frame),
     };
     timing.reconstruct_ms = time.elapsed().as_secs_f64() * 1e3;
     let reconstruction = match reconstruction {

@@ -24,11 +24,6 @@ pub enum WindowReconstruction {
 }
 
 impl WindowReconstruction {
-    /// A reconstruction of the whole frame.
-    pub fn of_frame(reconstruction: Reconstruction) -> Self {
-        Self::Frame(reconstruction)
-    }
-
     /// A reconstruction of a region, its depth pasted into the frame (timed as a stage of its
     /// reconstruction).
     pub fn of_region(mut region: RegionReconstruction) -> Self {
@@ -49,18 +44,18 @@ impl WindowReconstruction {
         }
     }
 
-    /// The region of the frame it covers (`None`: the whole frame).
-    pub fn region(&self) -> Option<crate::demod::Roi> {
-        match self {
-            Self::Frame(_) => None,
-            Self::Region { region, .. } => Some(region.region()),
-        }
-    }
-
     /// Depth in mm over the whole frame (NaN where nothing was reconstructed).
     pub fn depth_mm(&self) -> &Array2<f32> {
         match self {
             Self::Frame(reconstruction) => &reconstruction.integration.depth.depth_mm,
+            Self::Region { depth_mm, .. } => depth_mm,
+        }
+    }
+
+    /// Its depth over the whole frame, moved out (the next window's warm start).
+    pub fn into_depth_mm(self) -> Array2<f32> {
+        match self {
+            Self::Frame(reconstruction) => reconstruction.integration.depth.depth_mm,
             Self::Region { depth_mm, .. } => depth_mm,
         }
     }
