@@ -450,8 +450,8 @@ impl Try {
 /// Two stages overlap: a decoding thread (with a pool of its own, [`DECODING_THREADS`]) reads
 /// each window ([`FrameStream`]), decodes it with the carried timing ([`carry`]), measures its
 /// motion and, with [`MotionPolicy::Place`], places it; the calling thread reconstructs the
-/// chosen windows in order (each warm-started from the one before), scores them and hands them
-/// to `sink`. At most [`DECODED_AHEAD`] decoded windows wait between the two, so memory stays
+/// chosen windows in order (each warm-started from the one before, in a pool on every core,
+/// [`stage_pool`]), scores them and hands them to `sink`. At most [`DECODED_AHEAD`] decoded windows wait between the two, so memory stays
 /// bounded by a few windows.
 pub fn process(
     source: Box<dyn FrameSource>,
@@ -528,22 +528,16 @@ pub fn process(
     };
     let mut first_failure: Option<String> = None;
     let mut warm: Option<WarmStart> = None;
+    let reconstruction_pool = stage_pool("reconstruct", rayon::current_num_threads())?;
     let decoding = DecodeStage {
         schedule,
         format: &format,
         code_map: &code_map,
         config,
+        first_pool: &reconstruction_pool,
     };
     let (sender, receiver) = sync_channel::<Result<Chosen, VideoError>>(DECODED_AHEAD);
-    let decoding_pool = rayon::ThreadPoolBuilder::new()
-        .num_threads(DECODING_THREADS)
-        .thread_name(|i| format!("meb-video-decode-{i}"))
-        .build()
-        .map_err(|e| {
-            VideoError::Capture(CaptureError::Other(format!(
-                "cannot start the decoding stage's threads: {e}"
-            )))
-        })?;
+    let decoding_pool = stage_pool("decode", DECODING_THREADS)?;
     let (stream_end, reconstructed) = std::thread::scope(|scope| {
         let decoder = std::thread::Builder::new()
             .name("meb-video-decode".into())
@@ -574,6 +568,7 @@ pub fn process(
                     truth.as_deref_mut(),
                     chosen.timing,
                     warm.as_ref().filter(|_| config.warm_start),
+                    &reconstruction_pool,
                 )?;
                 summary.windows += 1;
                 match outcome.record.status {
@@ -635,6 +630,29 @@ pub fn process(
     Ok(summary)
 }
 
+/// A pool of `threads` named `meb-video-{stage}-N` for one stage of the pipeline.
+///
+/// Each window's reconstruction runs inside its pool (`install`), so its parallel loops are
+/// split by a worker and stolen by the others. Called from the pipeline's thread, outside any
+/// pool, each of the hundreds of parallel loops of a window was injected into the global pool
+/// with the caller asleep until it finished: two thread switches and a wake-up per loop.
+/// `meb video`, 2000 frames of 1280×720 in windows of 40, four runs alternated: 21.1 → 22.6
+/// 3-D frames/s (means), reconstruction 39.7 → 37.2 ms per window, system CPU 0.80 → 0.58 s.
+fn stage_pool(stage: &str, threads: usize) -> Result<rayon::ThreadPool, VideoError> {
+    rayon::ThreadPoolBuilder::new()
+        .num_threads(threads)
+        .thread_name({
+            let stage = stage.to_string();
+            move |i| format!("meb-video-{stage}-{i}")
+        })
+        .build()
+        .map_err(|e| {
+            VideoError::Capture(CaptureError::Other(format!(
+                "cannot start the {stage} stage's threads: {e}"
+            )))
+        })
+}
+
 /// Decoded windows that may wait for the reconstruction (each holds its LED images).
 pub const DECODED_AHEAD: usize = 1;
 
@@ -677,6 +695,10 @@ struct DecodeStage<'a> {
     format: &'a crate::capture::FrameFormat,
     code_map: &'a CodeMap,
     config: &'a VideoConfig,
+    /// The reconstruction's pool, idle until the first window is decoded: that window is
+    /// decoded there, on every core (a decode does not depend on its thread count). The first
+    /// window's decode, 2000 frames of 1280×720: 71 → 56 ms.
+    first_pool: &'a rayon::ThreadPool,
 }
 
 impl DecodeStage<'_> {
@@ -693,7 +715,13 @@ impl DecodeStage<'_> {
             (self.format.width, self.format.height),
         );
         for k in 0.. {
-            match self.window(&mut stream, &mut carry, &mut focus, k) {
+            let window = if k == 0 {
+                self.first_pool
+                    .install(|| self.window(&mut stream, &mut carry, &mut focus, k))
+            } else {
+                self.window(&mut stream, &mut carry, &mut focus, k)
+            };
+            match window {
                 Ok(Some(chosen)) => {
                     if sender.send(Ok(chosen)).is_err() {
                         break;
@@ -913,6 +941,7 @@ fn reconstruct_window(
     truth: Option<&mut (dyn TruthSource + '_)>,
     mut timing: FrameTiming,
     warm: Option<&WarmStart>,
+    pool: &rayon::ThreadPool,
 ) -> Result<Outcome, VideoError> {
     let decoded_range =
         chosen.start + schedule.drop..chosen.start + schedule.window - schedule.drop;
@@ -1009,12 +1038,12 @@ fn reconstruct_window(
         });
     }
     let time = Instant::now();
-    let reconstruction = match chosen.decode.region {
+    let reconstruction = pool.install(|| match chosen.decode.region {
         Some(region) => from_decoded_region(&decoded, region.roi, rig, &config.reconstruct, warm)
             .map(WindowReconstruction::of_region),
         None => from_decoded_warm(&decoded, rig, None, &config.reconstruct, warm)
             .map(WindowReconstruction::Frame),
-    };
+    });
     timing.reconstruct_ms = time.elapsed().as_secs_f64() * 1e3;
     let reconstruction = match reconstruction {
         Ok(r) => r,
