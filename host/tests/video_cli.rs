@@ -1015,3 +1015,70 @@ fn a_clip_shorter_than_a_window_and_a_cut_stream_are_reported() {
     ]);
     assert!(stderr.contains("28 frames are left to decode"), "{stderr}");
 }
+
+/// The first picture of a written video as RGB bytes: decoded by FFmpeg for an MP4, by the
+/// `png` crate for an APNG.
+fn first_picture(path: &Path) -> Vec<u8> {
+    if path.extension().is_some_and(|e| e == "mp4") {
+        let out = Command::new("ffmpeg")
+            .args(["-v", "error", "-i"])
+            .arg(path)
+            .args(["-frames:v", "1", "-f", "rawvideo", "-pix_fmt", "rgb24", "-"])
+            .output()
+            .unwrap();
+        assert!(
+            out.status.success(),
+            "{}",
+            String::from_utf8_lossy(&out.stderr)
+        );
+        return out.stdout;
+    }
+    let file = std::io::BufReader::new(std::fs::File::open(path).unwrap());
+    let mut reader = png::Decoder::new(file).read_info().unwrap();
+    let mut buffer = vec![0; reader.output_buffer_size().unwrap()];
+    reader.next_frame(&mut buffer).unwrap();
+    buffer
+}
+
+#[test]
+fn videos_written_together_each_get_their_own_pictures() {
+    use image::{Rgb, RgbImage};
+    use meb::video::encode::{VideoContainer, VideoEncoder};
+    let tmp = tempfile::tempdir().unwrap();
+    let stems = ["red", "green", "blue"].map(|n| tmp.path().join(n));
+    let colours = [[200u8, 30, 30], [30, 200, 30], [30, 30, 200]];
+    let mut videos = VideoEncoder::create(&stems, 64, 32, 25.0, VideoContainer::Auto).unwrap();
+    if std::env::var("CI").as_deref() == Ok("true") {
+        assert_eq!(videos.container(), "mp4", "CI installs FFmpeg");
+    }
+    let pictures = colours.map(|c| RgbImage::from_pixel(64, 32, Rgb(c)));
+    for _ in 0..3 {
+        videos
+            .push(&[&pictures[0], &pictures[1], &pictures[2]])
+            .unwrap();
+    }
+    // A step must give every video its picture, all of the videos' size.
+    assert!(videos.push(&[&pictures[0]]).is_err());
+    let small = RgbImage::new(8, 8);
+    assert!(videos.push(&[&pictures[0], &small, &pictures[2]]).is_err());
+    let paths = videos.finish().unwrap();
+    assert_eq!(paths.len(), 3);
+    for ((path, colour), stem) in paths.iter().zip(colours).zip(&stems) {
+        let path = path.as_ref().expect("each video is written");
+        assert_eq!(path.file_stem(), stem.file_name());
+        let picture = first_picture(path);
+        assert_eq!(picture.len(), 64 * 32 * 3, "{}", path.display());
+        // H.264's 4:2:0 colour moves flat colours by a few levels at most.
+        for (pixel, k) in picture.chunks(3).zip(0..) {
+            for (got, want) in pixel.iter().zip(colour) {
+                assert!(
+                    got.abs_diff(want) <= 8,
+                    "{} pixel {k}: {pixel:?}, expected {colour:?}",
+                    path.display()
+                );
+            }
+        }
+    }
+    let left: Vec<_> = std::fs::read_dir(tmp.path()).unwrap().collect();
+    assert_eq!(left.len(), 3, "only the three videos are left");
+}

@@ -1,11 +1,16 @@
-//! Writing a sequence of pictures as a video: H.264 MP4 through the `ffmpeg` program, or an
-//! animated PNG (APNG, the `png` crate) when FFmpeg is not installed.
+//! Writing sequences of pictures as videos: H.264 MP4 through the `ffmpeg` program, or
+//! animated PNGs (APNG, the `png` crate) when FFmpeg is not installed.
 //!
-//! MP4: RGB frames are piped to `ffmpeg -f rawvideo -pix_fmt rgb24 … -c:v libx264 -pix_fmt
-//! yuv420p` as they are made, so nothing accumulates in memory. APNG needs its frame count
-//! before the first frame, which a stream does not know: each picture is stored as a PNG
-//! under a hidden folder as it comes, and [`VideoEncoder::finish`] assembles them one at a
-//! time into the animation and deletes them.
+//! A [`VideoEncoder`] writes several videos of the same picture size side by side, one picture
+//! of each per step. MP4: one FFmpeg process takes them all, stacked one above the other as
+//! one `rgb24` raw frame, and splits and crops them back into one `libx264`/`yuv420p` MP4 each
+//! (`-filter_complex split,crop`). Each picture is piped as it is made, so nothing accumulates
+//! in memory, and the process starts once: FFmpeg's start-up (dynamic linking of its 200-odd
+//! libraries) costs about 60 ms of CPU, which a second process would pay again while the
+//! first window is being read and decoded. APNG needs its frame count before the first frame,
+//! which a stream does not know: each picture is stored as a PNG under a hidden folder as it
+//! comes, and [`VideoEncoder::finish`] assembles them one at a time into the animation and
+//! deletes them.
 
 use super::VideoError;
 use image::RgbImage;
@@ -25,12 +30,20 @@ pub enum VideoContainer {
     Apng,
 }
 
-/// A video being written.
+/// Pictures stored for one APNG.
+pub struct ApngStore {
+    /// The video file.
+    pub path: PathBuf,
+    /// Folder of the stored pictures.
+    pub frames: PathBuf,
+}
+
+/// Videos being written, one picture of each per step.
 pub enum VideoEncoder {
-    /// Frames piped to FFmpeg.
+    /// Pictures piped to one FFmpeg, stacked.
     Mp4 {
-        /// The video file.
-        path: PathBuf,
+        /// The video files, in the order of the pictures.
+        paths: Vec<PathBuf>,
         /// FFmpeg.
         child: Child,
         /// Its standard input.
@@ -40,13 +53,11 @@ pub enum VideoEncoder {
         /// Picture size.
         size: (u32, u32),
     },
-    /// Pictures stored for an APNG.
+    /// Pictures stored for APNGs.
     Apng {
-        /// The video file.
-        path: PathBuf,
-        /// Folder of the stored pictures.
-        frames: PathBuf,
-        /// Pictures stored.
+        /// One store per video.
+        stores: Vec<ApngStore>,
+        /// Steps stored.
         count: usize,
         /// Picture size.
         size: (u32, u32),
@@ -57,31 +68,57 @@ pub enum VideoEncoder {
     },
 }
 
+/// FFmpeg's filter graph that splits `videos` pictures stacked in one frame of `width` ×
+/// (`videos` · `height`) into outputs `[v0]`, `[v1]` …
+fn unstack_filter(videos: usize, width: u32, height: u32) -> String {
+    let split: String = (0..videos).map(|k| format!("[s{k}]")).collect();
+    let crops: Vec<String> = (0..videos)
+        .map(|k| format!("[s{k}]crop={width}:{height}:0:{}[v{k}]", k as u32 * height))
+        .collect();
+    format!("[0:v]split={videos}{split};{}", crops.join(";"))
+}
+
 impl VideoEncoder {
-    /// Starts a video `stem.mp4` (or `stem.png` as APNG) of `width` × `height` pictures shown
-    /// at `fps`.
+    /// Starts one video per stem, `stem.mp4` (or `stem.png` as APNG), of `width` × `height`
+    /// pictures shown at `fps`.
     pub fn create(
-        stem: &Path,
+        stems: &[PathBuf],
         width: u32,
         height: u32,
         fps: f64,
         container: VideoContainer,
     ) -> Result<Self, VideoError> {
+        if stems.is_empty() {
+            return Err(VideoError::Encode("no video to write".into()));
+        }
         let fps = if fps.is_finite() && fps > 0.0 {
             fps
         } else {
             25.0
         };
         if container == VideoContainer::Auto {
-            let path = stem.with_extension("mp4");
-            let spawned = Command::new("ffmpeg")
+            let paths: Vec<PathBuf> = stems.iter().map(|s| s.with_extension("mp4")).collect();
+            let stacked = height
+                .checked_mul(paths.len() as u32)
+                .ok_or_else(|| VideoError::Encode(format!("{height}-row pictures are too tall")))?;
+            let mut command = Command::new("ffmpeg");
+            command
                 .args(["-hide_banner", "-loglevel", "error", "-nostdin", "-y"])
                 .args(["-f", "rawvideo", "-pix_fmt", "rgb24"])
-                .args(["-s", &format!("{width}x{height}")])
+                .args(["-s", &format!("{width}x{stacked}")])
                 .args(["-framerate", &format!("{fps}"), "-i", "-"])
-                .args(["-c:v", "libx264", "-preset", "ultrafast", "-crf", "18"])
-                .args(["-pix_fmt", "yuv420p", "-movflags", "+faststart"])
-                .arg(&path)
+                .args([
+                    "-filter_complex",
+                    &unstack_filter(paths.len(), width, height),
+                ]);
+            for (k, path) in paths.iter().enumerate() {
+                command
+                    .args(["-map", &format!("[v{k}]")])
+                    .args(["-c:v", "libx264", "-preset", "ultrafast", "-crf", "18"])
+                    .args(["-pix_fmt", "yuv420p", "-movflags", "+faststart"])
+                    .arg(path);
+            }
+            let spawned = command
                 .stdin(Stdio::piped())
                 .stdout(Stdio::null())
                 .stderr(Stdio::piped())
@@ -97,7 +134,7 @@ impl VideoEncoder {
                         })
                     });
                     return Ok(Self::Mp4 {
-                        path,
+                        paths,
                         child,
                         stdin,
                         stderr,
@@ -109,29 +146,35 @@ impl VideoEncoder {
                 }
                 Err(e) => return Err(VideoError::Encode(format!("cannot run ffmpeg: {e}"))),
             };
-            return Self::apng(stem, width, height, fps, fallback);
+            return Self::apng(stems, width, height, fps, fallback);
         }
-        Self::apng(stem, width, height, fps, None)
+        Self::apng(stems, width, height, fps, None)
     }
 
-    /// Starts an APNG `stem.png`; `fallback` says why it replaces an MP4.
+    /// Starts one APNG `stem.png` per stem; `fallback` says why they replace MP4s.
     fn apng(
-        stem: &Path,
+        stems: &[PathBuf],
         width: u32,
         height: u32,
         fps: f64,
         fallback: Option<String>,
     ) -> Result<Self, VideoError> {
-        let name = stem
-            .file_name()
-            .map(|n| n.to_string_lossy().into_owned())
-            .unwrap_or_default();
-        let frames = stem.with_file_name(format!(".{name}-frames"));
-        std::fs::create_dir_all(&frames)
-            .map_err(|e| crate::export::files::FilesError::write(&frames, e))?;
+        let mut stores = Vec::with_capacity(stems.len());
+        for stem in stems {
+            let name = stem
+                .file_name()
+                .map(|n| n.to_string_lossy().into_owned())
+                .unwrap_or_default();
+            let frames = stem.with_file_name(format!(".{name}-frames"));
+            std::fs::create_dir_all(&frames)
+                .map_err(|e| crate::export::files::FilesError::write(&frames, e))?;
+            stores.push(ApngStore {
+                path: stem.with_extension("png"),
+                frames,
+            });
+        }
         Ok(Self::Apng {
-            path: stem.with_extension("png"),
-            frames,
+            stores,
             count: 0,
             size: (width, height),
             fps,
@@ -155,50 +198,69 @@ impl VideoEncoder {
         }
     }
 
-    /// The video file being written.
-    pub fn path(&self) -> &Path {
+    /// How many videos are written.
+    fn videos(&self) -> usize {
         match self {
-            Self::Mp4 { path, .. } | Self::Apng { path, .. } => path,
+            Self::Mp4 { paths, .. } => paths.len(),
+            Self::Apng { stores, .. } => stores.len(),
         }
     }
 
-    /// Adds a picture (of the video's size).
-    pub fn push(&mut self, picture: &RgbImage) -> Result<(), VideoError> {
+    /// Adds one picture (of the videos' size) to each video, in the order of their stems.
+    pub fn push(&mut self, pictures: &[&RgbImage]) -> Result<(), VideoError> {
+        if pictures.len() != self.videos() {
+            return Err(VideoError::Encode(format!(
+                "{} pictures for {} videos",
+                pictures.len(),
+                self.videos()
+            )));
+        }
         match self {
             Self::Mp4 {
-                stdin, size, path, ..
+                stdin, size, paths, ..
             } => {
-                check_size(picture, *size)?;
+                for picture in pictures {
+                    check_size(picture, *size)?;
+                }
                 let Some(stdin) = stdin.as_mut() else {
                     return Err(VideoError::Encode("ffmpeg's input is closed".into()));
                 };
-                stdin.write_all(picture.as_raw()).map_err(|e| {
-                    VideoError::Encode(format!(
-                        "ffmpeg stopped taking frames for {} ({e})",
-                        path.display()
-                    ))
-                })
+                // Pictures of one width stacked one above the other are their rows in turn.
+                for picture in pictures {
+                    stdin.write_all(picture.as_raw()).map_err(|e| {
+                        VideoError::Encode(format!(
+                            "ffmpeg stopped taking frames for {} ({e})",
+                            paths[0].display()
+                        ))
+                    })?;
+                }
+                Ok(())
             }
             Self::Apng {
-                frames,
+                stores,
                 count,
                 size,
                 ..
             } => {
-                check_size(picture, *size)?;
-                let file = frames.join(format!("{count:08}.png"));
-                write_png(&file, picture, png::Compression::Fast)?;
+                for picture in pictures {
+                    check_size(picture, *size)?;
+                }
+                for (store, picture) in stores.iter().zip(pictures) {
+                    let file = store.frames.join(format!("{count:08}.png"));
+                    write_png(&file, picture, png::Compression::Fast)?;
+                }
                 *count += 1;
                 Ok(())
             }
         }
     }
 
-    /// Ends the video and returns its path (`None` for an APNG without pictures).
-    pub fn finish(self) -> Result<Option<PathBuf>, VideoError> {
+    /// Ends the videos and returns their paths in the order of their stems (`None` for an
+    /// APNG without pictures).
+    pub fn finish(self) -> Result<Vec<Option<PathBuf>>, VideoError> {
         match self {
             Self::Mp4 {
-                path,
+                paths,
                 mut child,
                 stdin,
                 stderr,
@@ -214,30 +276,47 @@ impl VideoEncoder {
                     .map_err(|e| VideoError::Encode(format!("waiting for ffmpeg: {e}")))?;
                 let messages = stderr.and_then(|h| h.join().ok()).unwrap_or_default();
                 if !status.success() {
+                    let names: Vec<String> =
+                        paths.iter().map(|p| p.display().to_string()).collect();
                     return Err(VideoError::Encode(format!(
                         "ffmpeg could not write {} ({status}): {}",
-                        path.display(),
+                        names.join(", "),
                         messages.trim()
                     )));
                 }
-                Ok(Some(path))
+                Ok(paths.into_iter().map(Some).collect())
             }
             Self::Apng {
-                path,
-                frames,
+                stores,
                 count,
                 size,
                 fps,
                 ..
             } => {
-                let result = if count == 0 {
-                    Ok(None)
-                } else {
-                    assemble_apng(&path, &frames, count, size, fps).map(|()| Some(path))
-                };
-                std::fs::remove_dir_all(&frames)
-                    .map_err(|e| crate::export::files::FilesError::write(&frames, e))?;
-                result
+                let mut written = Vec::with_capacity(stores.len());
+                let mut first_error = None;
+                // Every store's folder goes, whether or not its animation could be written.
+                for store in stores {
+                    let result = if count == 0 {
+                        Ok(None)
+                    } else {
+                        assemble_apng(&store.path, &store.frames, count, size, fps)
+                            .map(|()| Some(store.path.clone()))
+                    };
+                    let removed = std::fs::remove_dir_all(&store.frames).map_err(|e| {
+                        VideoError::from(crate::export::files::FilesError::write(&store.frames, e))
+                    });
+                    match result.and_then(|path| removed.map(|()| path)) {
+                        Ok(path) => written.push(path),
+                        Err(error) => {
+                            first_error.get_or_insert(error);
+                        }
+                    }
+                }
+                match first_error {
+                    Some(error) => Err(error),
+                    None => Ok(written),
+                }
             }
         }
     }
@@ -319,20 +398,25 @@ mod tests {
     #[test]
     fn an_apng_holds_every_picture_in_order() {
         let dir = tempfile::tempdir().unwrap();
-        let mut video =
-            VideoEncoder::create(&dir.path().join("depth"), 4, 2, 25.0, VideoContainer::Apng)
-                .unwrap();
+        let mut video = VideoEncoder::create(
+            &[dir.path().join("depth")],
+            4,
+            2,
+            25.0,
+            VideoContainer::Apng,
+        )
+        .unwrap();
         for k in 0..3u8 {
             video
-                .push(&RgbImage::from_pixel(
+                .push(&[&RgbImage::from_pixel(
                     4,
                     2,
                     image::Rgb([k * 50, 0, 255 - k]),
-                ))
+                )])
                 .unwrap();
         }
-        assert!(video.push(&RgbImage::new(2, 2)).is_err());
-        let path = video.finish().unwrap().unwrap();
+        assert!(video.push(&[&RgbImage::new(2, 2)]).is_err());
+        let path = video.finish().unwrap().remove(0).unwrap();
         assert_eq!(path, dir.path().join("depth.png"));
         let names: Vec<_> = std::fs::read_dir(dir.path()).unwrap().collect();
         assert_eq!(names.len(), 1, "the stored pictures are gone");

@@ -137,8 +137,8 @@ pub struct VideoOutput {
     size: PictureSize,
     pitch_mm: f64,
     range: Option<(f32, f32)>,
-    depth_video: VideoEncoder,
-    shaded_video: VideoEncoder,
+    /// The depth video and the shaded one, written together.
+    videos: VideoEncoder,
     records: BufWriter<std::fs::File>,
     timing: MeanTiming,
     accuracy: Vec<f64>,
@@ -156,15 +156,8 @@ impl VideoOutput {
     ) -> Result<Self, VideoError> {
         let size = PictureSize::fit(width, height, options.video_width);
         let (w, h) = (size.width as u32, size.height as u32);
-        let depth_video = VideoEncoder::create(
-            &dir.join("depth"),
-            w,
-            h,
-            options.display_fps,
-            options.container,
-        )?;
-        let shaded_video = VideoEncoder::create(
-            &dir.join("shaded"),
+        let videos = VideoEncoder::create(
+            &[dir.join("depth"), dir.join("shaded")],
             w,
             h,
             options.display_fps,
@@ -178,8 +171,7 @@ impl VideoOutput {
             options,
             size,
             pitch_mm,
-            depth_video,
-            shaded_video,
+            videos,
             records: BufWriter::new(records),
             timing: MeanTiming::default(),
             accuracy: Vec::new(),
@@ -226,16 +218,15 @@ impl VideoOutput {
                     self.range = depth_range(depth);
                 }
                 let (lo, hi) = self.range.unwrap_or((0.0, 1.0));
-                self.depth_video
-                    .push(&depth_picture(depth, self.size, lo, hi))?;
-                self.shaded_video
-                    .push(&shaded_picture(depth, self.pitch_mm, self.size))?;
+                self.videos.push(&[
+                    &depth_picture(depth, self.size, lo, hi),
+                    &shaded_picture(depth, self.pitch_mm, self.size),
+                ])?;
                 self.written += 1;
             }
             None => {
                 let blank = blank_picture(self.size);
-                self.depth_video.push(&blank)?;
-                self.shaded_video.push(&blank)?;
+                self.videos.push(&[&blank, &blank])?;
             }
         }
         record.timing.write_ms = started.elapsed().as_secs_f64() * 1e3;
@@ -276,13 +267,14 @@ impl VideoOutput {
         let name = |p: Option<PathBuf>| {
             p.and_then(|p| p.file_name().map(|n| n.to_string_lossy().into_owned()))
         };
-        let video_container = self.depth_video.container().to_string();
-        let video_fallback = self.depth_video.fallback().map(str::to_string);
+        let video_container = self.videos.container().to_string();
+        let video_fallback = self.videos.fallback().map(str::to_string);
+        let mut videos = self.videos.finish()?.into_iter();
         let written = WrittenVideo {
             video_container,
             video_fallback,
-            depth_video: name(self.depth_video.finish()?),
-            shaded_video: name(self.shaded_video.finish()?),
+            depth_video: name(videos.next().flatten()),
+            shaded_video: name(videos.next().flatten()),
             depth_range_mm: self.range,
             frames_written: self.written,
         };
