@@ -70,7 +70,7 @@ pub use offset::{
     OFFSET_PREFERENCE_T, WARM_OFFSET_BRACKET_MM, WARM_OFFSET_GAIN, WARM_WIDE_BRACKET_MM,
 };
 use offset::{OffsetPrior, Unplaced, place_parts};
-pub use region::{RegionReconstruction, from_decoded_region};
+pub use region::{Extent, RegionReconstruction, from_decoded_region};
 pub use roi::ROI_MARGIN_PX;
 use roi::Roi;
 pub use support::{MIN_MEASURED_SHARE, Support};
@@ -337,6 +337,7 @@ pub fn reconstruct_warm(
     warm: Option<&WarmStart>,
 ) -> Result<Reconstruction, ReconstructError> {
     reconstruct_inputs(&Inputs::Images { images, noise }, rig, mask, config, warm)
+        .map(|extent| extent.into_frame(&rig.camera.projection()))
 }
 
 /// [`reconstruct_warm`] of `inputs`.
@@ -346,7 +347,7 @@ fn reconstruct_inputs(
     mask: Option<&Array2<bool>>,
     config: &ReconstructConfig,
     warm: Option<&WarmStart>,
-) -> Result<Reconstruction, ReconstructError> {
+) -> Result<Extent, ReconstructError> {
     if rig.leds.len() < 3 {
         return Err(ReconstructError::Rig(format!(
             "photometric stereo needs at least 3 LEDs, the rig has {}",
@@ -368,15 +369,16 @@ fn reconstruct_inputs(
     // The full frame's images and noise, made once if a pass needs them.
     let full = std::cell::OnceCell::new();
     let full_frame = || full.get_or_init(|| inputs.full());
-    // The warm passes from `warm`: the reconstruction, or why it cannot be trusted.
+    // The warm passes from `warm`: the reconstruction (with the region of interest it is cut
+    // to, when it ran in one), or why it cannot be trusted.
     let attempt = |warm: &WarmStart, timings: &mut Vec<StageTiming>| {
         let in_region = Roi::around(&warm.depth_mm, mask, ROI_MARGIN_PX)
             .and_then(|roi| warm_in_region(&roi, inputs, rig, mask, config, warm, timings));
-        let result = match in_region {
-            Some(result) => result,
+        let (roi, result) = match in_region {
+            Some((roi, result)) => (Some(roi), result),
             None => {
                 let (images, noise) = full_frame();
-                passes(
+                let result = passes(
                     images,
                     rig,
                     mask,
@@ -384,23 +386,30 @@ fn reconstruct_inputs(
                     config,
                     Some(warm),
                     timings,
-                )
+                );
+                (None, result)
             }
         };
         match result {
             Ok((photometric, integration, Ok(start), support)) => {
-                Ok((photometric, integration, start, support))
+                Ok((roi, photometric, integration, start, support))
             }
             Ok((_, _, Err(reason), _)) => Err(reason),
             Err(error) => Err(format!("the warm-started reconstruction failed: {error}")),
         }
     };
-    let done = |(photometric, integration, start, support), timings| Reconstruction {
-        photometric,
-        integration,
-        timings,
-        start,
-        support,
+    let done = |(roi, photometric, integration, start, support), timings| {
+        let reconstruction = Reconstruction {
+            photometric,
+            integration,
+            timings,
+            start,
+            support,
+        };
+        match roi {
+            Some(roi) => Extent::Region(RegionReconstruction::new(roi, reconstruction)),
+            None => Extent::Frame(reconstruction),
+        }
     };
     if let Some(warm) = warm.filter(|w| near_field && w.depth_mm.dim() == shape) {
         match attempt(warm, &mut timings) {
@@ -413,7 +422,7 @@ fn reconstruct_inputs(
         .flatten();
     if let Some(coarse) = coarse {
         match attempt(&coarse, &mut timings) {
-            Ok((photometric, integration, kept, support)) => {
+            Ok((roi, photometric, integration, kept, support)) => {
                 let start = match (start, kept) {
                     (Start::Redone { reason }, _) => Start::Redone {
                         reason: format!("{reason}; redone from the window binned 2×2"),
@@ -421,7 +430,10 @@ fn reconstruct_inputs(
                     (_, Start::Warm { passes, moved_mm }) => Start::Coarse { passes, moved_mm },
                     (_, kept) => kept,
                 };
-                return Ok(done((photometric, integration, start, support), timings));
+                return Ok(done(
+                    (roi, photometric, integration, start, support),
+                    timings,
+                ));
             }
             Err(reason) => {
                 start = match start {
@@ -445,17 +457,17 @@ fn reconstruct_inputs(
         None,
         &mut timings,
     )?;
-    Ok(Reconstruction {
+    Ok(Extent::Frame(Reconstruction {
         photometric,
         integration,
         timings,
         start,
         support,
-    })
+    }))
 }
 
-/// The warm [`passes`] inside the region of interest `roi` ([`roi`]), pasted back into the full
-/// frame; `None` when the object reached the region's edge (the full frame is needed).
+/// The warm [`passes`] inside the region of interest `roi` ([`roi`]), with their results cut to
+/// it; `None` when the object reached the region's edge (the full frame is needed).
 #[allow(clippy::too_many_arguments)]
 fn warm_in_region(
     roi: &Roi,
@@ -465,7 +477,7 @@ fn warm_in_region(
     config: &ReconstructConfig,
     warm: &WarmStart,
     timings: &mut Vec<StageTiming>,
-) -> Option<PassesResult> {
+) -> Option<(Roi, PassesResult)> {
     let started = Instant::now();
     let (region_images, region_noise) = inputs.region(roi)?;
     let region_rig = roi.cut_rig(rig);
@@ -486,21 +498,10 @@ fn warm_in_region(
         Some(&region_warm),
         timings,
     );
-    let started = Instant::now();
-    let pasted = match result {
-        Ok((photometric, ..)) if roi.reached_edge(&photometric.object_mask) => return None,
-        Ok((photometric, integration, start, support)) => {
-            let (photometric, integration) =
-                roi.paste(photometric, integration, &rig.camera.projection());
-            Ok((photometric, integration, start, support))
-        }
-        Err(error) => Err(error),
-    };
-    timings.push(StageTiming::since(
-        "full frame from the region, warm".to_string(),
-        started,
-    ));
-    Some(pasted)
+    match result {
+        Ok((photometric, ..)) if roi.reached_edge(&photometric.object_mask) => None,
+        result => Some((roi.clone(), result)),
+    }
 }
 
 /// What [`passes`] returns: the last pass's photometric stereo and integration, how the result
@@ -754,6 +755,19 @@ pub fn from_decoded_warm(
     config: &ReconstructConfig,
     warm: Option<&WarmStart>,
 ) -> Result<Reconstruction, ReconstructError> {
+    from_decoded_extent(decoded, rig, mask, config, warm)
+        .map(|extent| extent.into_frame(&rig.camera.projection()))
+}
+
+/// [`from_decoded_warm`] with a result that ran in a region of interest kept there
+/// ([`Extent::Region`]; `meb video` pastes only what it needs into the frame).
+pub fn from_decoded_extent(
+    decoded: &Decoded,
+    rig: &Rig,
+    mask: Option<&Array2<bool>>,
+    config: &ReconstructConfig,
+    warm: Option<&WarmStart>,
+) -> Result<Extent, ReconstructError> {
     reconstruct_inputs(&Inputs::Decoded(decoded), rig, mask, config, warm)
 }
 

@@ -20,6 +20,14 @@ pub struct RegionReconstruction {
 }
 
 impl RegionReconstruction {
+    /// `reconstruction` of the camera cut to `roi`.
+    pub(super) fn new(roi: Roi, reconstruction: Reconstruction) -> Self {
+        Self {
+            roi,
+            reconstruction,
+        }
+    }
+
     /// The region of the frame.
     pub fn region(&self) -> crate::demod::Roi {
         crate::demod::Roi {
@@ -59,6 +67,38 @@ impl RegionReconstruction {
             photometric,
             integration,
             ..inner
+        }
+    }
+}
+
+/// A reconstruction of the camera's whole frame, or of the region of interest its warm passes
+/// ran in, kept there ([`super::from_decoded_extent`]). A warm window of `meb video` decoded
+/// over the whole frame (its first windows, and one in [`crate::video::FULL_FRAME_EVERY`])
+/// spent 11–12 ms of its reconstruction pasting every array of the region into the frame at
+/// 1280×720.
+#[derive(Debug, Clone)]
+pub enum Extent {
+    /// The whole frame.
+    Frame(Reconstruction),
+    /// A region of it.
+    Region(RegionReconstruction),
+}
+
+impl Extent {
+    /// The reconstruction of the whole frame, a region's pasted into it
+    /// ([`RegionReconstruction::into_frame`]; timed as "full frame from the region, warm").
+    pub fn into_frame(self, projection: &Projection) -> Reconstruction {
+        match self {
+            Self::Frame(reconstruction) => reconstruction,
+            Self::Region(region) => {
+                let started = std::time::Instant::now();
+                let mut reconstruction = region.into_frame(projection);
+                reconstruction.timings.push(super::StageTiming::since(
+                    "full frame from the region, warm".to_string(),
+                    started,
+                ));
+                reconstruction
+            }
         }
     }
 }
@@ -166,5 +206,60 @@ mod tests {
                 .expect("the whole frame");
         let worst = largest_depth_difference(&framed, &from_whole.integration.depth.depth_mm);
         assert!(worst < 1e-3, "region vs whole frame: {worst} mm");
+    }
+
+    /// A whole-frame decode's warm window runs in its region of interest and stays there
+    /// ([`Extent::Region`]); pasted into the frame it is what [`from_decoded_warm`] returns, bit
+    /// for bit, while a cold window is the whole frame's.
+    #[test]
+    fn a_warm_window_of_a_whole_decode_keeps_its_region() {
+        let rect = crate::demod::Roi {
+            x: 0,
+            y: 0,
+            width: 320,
+            height: 180,
+        };
+        let (whole, _, sphere) = sphere_decodes(rect);
+        let warm = Some(&sphere.warm);
+        let extent =
+            super::super::from_decoded_extent(&whole, &sphere.rig, None, &sphere.config, warm)
+                .expect("warm");
+        let Extent::Region(region) = extent.clone() else {
+            panic!("the warm window was not kept in its region");
+        };
+        let r = region.region();
+        assert!(r.width < 320 && r.height < 180, "{r:?}");
+        let depth = &region.reconstruction.integration.depth.depth_mm;
+        assert_eq!(depth.dim(), (r.height, r.width));
+        let pasted = extent.into_frame(&sphere.rig.camera.projection());
+        let framed = from_decoded_warm(&whole, &sphere.rig, None, &sphere.config, warm)
+            .expect("warm, in the frame");
+        let bits2 = |a: &Array2<f32>| a.mapv(f32::to_bits);
+        assert_eq!(
+            bits2(&pasted.integration.depth.depth_mm),
+            bits2(&framed.integration.depth.depth_mm)
+        );
+        assert_eq!(
+            pasted.photometric.field.normals.mapv(f32::to_bits),
+            framed.photometric.field.normals.mapv(f32::to_bits)
+        );
+        assert_eq!(
+            pasted.photometric.object_mask,
+            framed.photometric.object_mask
+        );
+        assert_eq!(pasted.integration.confidence, framed.integration.confidence);
+        assert!(
+            pasted
+                .timings
+                .iter()
+                .any(|t| t.stage == "full frame from the region, warm")
+        );
+        let cold =
+            super::super::from_decoded_extent(&whole, &sphere.rig, None, &sphere.config, None)
+                .expect("cold");
+        assert!(
+            matches!(cold, Extent::Frame(_)),
+            "a cold window is the frame's"
+        );
     }
 }
