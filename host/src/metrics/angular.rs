@@ -73,9 +73,44 @@ pub fn compare_normals(
 /// Unit normals of a depth map (mm, NaN = none) on an orthographic grid of pitch h:
 /// n ∝ (−∂z/∂x, −∂z/∂y, 1) by central differences (one-sided at edges), y up; NaN where a
 /// neighbour is missing on both sides.
+///
+/// It is [`normals_from_depth_seen_by`] of an orthographic projection ([`Projection::centred`]),
+/// worked out on the depths alone: the differences of the points along the columns, (h, 0, ∂z),
+/// and up the rows, (0, h, ∂z), cross to (−h·∂z/∂c, −h·∂z/∂r, h²) ∝ (−∂z/∂c, −∂z/∂r, h). Without a
+/// ray per neighbour it costs a fifth as much (`meb video` shades every 3-D frame with it).
 pub fn normals_from_depth(depth: &Array2<f32>, pitch_mm: f64) -> Array3<f32> {
     let (rows, cols) = depth.dim();
-    normals_from_depth_seen_by(depth, &Projection::centred(pitch_mm, (cols, rows)))
+    let z = |r: usize, c: usize| {
+        let v = depth[(r, c)];
+        v.is_finite().then(|| f64::from(v))
+    };
+    let diff = |minus: Option<f64>, centre: f64, plus: Option<f64>| match (minus, plus) {
+        (Some(m), Some(p)) => Some((p - m) / 2.0),
+        (None, Some(p)) => Some(p - centre),
+        (Some(m), None) => Some(centre - m),
+        (None, None) => None,
+    };
+    let mut out = Array3::from_elem((rows, cols, 3), f32::NAN);
+    for r in 0..rows {
+        for c in 0..cols {
+            let Some(centre) = z(r, c) else { continue };
+            let left = c.checked_sub(1).and_then(|c| z(r, c));
+            let right = (c + 1 < cols).then(|| z(r, c + 1)).flatten();
+            // Up the image: row − 1 is +y.
+            let above = r.checked_sub(1).and_then(|r| z(r, c));
+            let below = (r + 1 < rows).then(|| z(r + 1, c)).flatten();
+            let (Some(along), Some(up)) = (diff(left, centre, right), diff(below, centre, above))
+            else {
+                continue;
+            };
+            if let Some(n) = Vector3::new(-along, -up, pitch_mm).try_normalize(0.0) {
+                for j in 0..3 {
+                    out[(r, c, j)] = n[j] as f32;
+                }
+            }
+        }
+    }
+    out
 }
 
 /// Unit normals of a depth map seen through `projection`: the cross product of the central
@@ -141,6 +176,34 @@ mod tests {
         let e = compare_normals(&n, &flat, &mask).unwrap();
         let expected = (1.0 / len).acos().to_degrees();
         assert!((e.mean_deg - expected).abs() < 1e-4 && (e.median_deg - expected).abs() < 1e-4);
+    }
+
+    /// The orthographic shortcut gives what the projection's points give, holes and edges
+    /// included.
+    #[test]
+    fn orthographic_normals_are_those_of_the_projected_points() {
+        let depth = Array2::from_shape_fn((23, 31), |(r, c)| {
+            let (x, y) = (c as f32 - 14.0, r as f32 - 11.0);
+            let hole = (r * 7 + c * 3) % 11 == 0 || (r == 5 && c > 20);
+            if hole || x * x + y * y > 150.0 {
+                f32::NAN
+            } else {
+                0.3 * x * x - 0.2 * x * y + 5.0 * (0.3 * y).sin()
+            }
+        });
+        for pitch in [0.4, 1.0, 2.5] {
+            let fast = normals_from_depth(&depth, pitch);
+            let (rows, cols) = depth.dim();
+            let slow =
+                normals_from_depth_seen_by(&depth, &Projection::centred(pitch, (cols, rows)));
+            assert!(fast.iter().filter(|v| v.is_finite()).count() > 300);
+            for (a, b) in fast.iter().zip(&slow) {
+                assert!(
+                    (a.is_nan() && b.is_nan()) || (a - b).abs() < 1e-6,
+                    "pitch {pitch}: {a} vs {b}"
+                );
+            }
+        }
     }
 
     /// A plane seen by a pinhole camera: the normals of its depth map are the plane's normal.
