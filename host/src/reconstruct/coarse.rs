@@ -5,7 +5,8 @@
 //! 2000-frame `meb video` run for its first window alone. The same window binned 2×2 (each
 //! block's LED levels averaged, [`bin_decoded`]) is reconstructed cold on the binned camera
 //! ([`crate::rig::Rig::binned`]: every binned pixel keeps the ray of its block's centre) at a
-//! quarter of the cost, and its depth, spread back over the blocks and two pixels beyond the
+//! quarter of the cost, its passes stopped once they settle (`ColdPasses::UntilSettled`), and
+//! its depth, spread back over the blocks and two pixels beyond the
 //! rim ([`spread`]), starts the full-resolution window as a previous window's would
 //! ([`super::WarmStart`]). A result that strays from that start is redone cold, so a coarse
 //! start never gives a result the warm checks would have refused. A window whose previous
@@ -52,8 +53,17 @@ pub(super) fn start(
         coarse_start: false,
         ..config.clone()
     };
-    let coarse = super::from_decoded(&binned, &rig.binned(COARSE_BIN), None, &binned_config);
-    let coarse = coarse.ok()?;
+    let binned_rig = rig.binned(COARSE_BIN);
+    let coarse = super::reconstruct_inputs(
+        &Inputs::Decoded(&binned),
+        &binned_rig,
+        None,
+        &binned_config,
+        None,
+        super::ColdPasses::UntilSettled,
+    )
+    .ok()?
+    .into_frame(&binned_rig.camera.projection());
     timings.extend(coarse.timings.into_iter().map(|mut t| {
         t.stage = format!("{}, binned", t.stage);
         t
