@@ -386,6 +386,25 @@
 //! the truth unchanged (median 0.677, mean 0.743, worst 1.195 mm over 50 windows). The 200-frame
 //! clip repeated ten times: 15.2 / 16.2 → 17.6 / 18.0 / 19.1. With `--hop 8` on the continuous
 //! clip (246 windows): **22.9 → 25.4 3-D frames/s**.
+//!
+//! Session 40: per-thread samples (`perf script`, 20 ms buckets) showed the two cores 81–83 %
+//! busy in the steady state. Where they idled, the reconstruction was in a serial stretch while
+//! decoding waited for it (its queue full), and the first 50 ms were half idle while FFmpeg's
+//! two processes started (≈ 60 ms of CPU each, most of it dynamic linking of 215 libraries).
+//! Six changes: each window's reconstruction runs inside a pool of its own, so its hundreds of
+//! parallel loops are split by a worker instead of being injected from the pipeline's thread
+//! (system CPU 0.80 → 0.58 s); the first window is decoded on that pool while it is idle; one
+//! FFmpeg process writes both preview videos; a warm window of a whole-frame decode keeps its
+//! region's results (11–12 ms of pasting less in each of the first three windows and every
+//! tenth); the coarse start's binned passes stop once settled (the first window's reconstruction
+//! 205–230 → 175–195 ms); and the shaded preview's normals come from the depths alone. On the
+//! continuous 2000-frame clip (main 4b40081 and this code alternated, five pairs after a first
+//! one left out): **20.3 → 21.9 3-D frames/s** (means; this machine ran main at 20.3 where
+//! session 39 measured 20.7), the first 3-D frame reconstructed 0.34 → 0.28 s after the start,
+//! steady reconstruction 41.9 → 39.0 ms per window; with `--hop 8`: 23.4 → 24.9 (two runs each,
+//! 23.6/23.2 → 26.0/23.7). Per-window depth RMSE: median 0.675, mean 0.742, worst 1.195 mm (50 windows;
+//! the first windows 0.7054, 0.7012, 0.5111 mm against 0.7064, 0.7011, 0.5165 mm before: the
+//! coarse start's settled pass leaves a slightly better first depth).
 use criterion::{BatchSize, Criterion, criterion_group, criterion_main};
 use meb::capture::binning::Binning;
 use meb::capture::memory::MemorySource;
