@@ -29,8 +29,9 @@
 //! at. A warm result that strays from its start is redone cold. A warm window is reconstructed
 //! inside the previous depth's bounding box grown by [`ROI_MARGIN_PX`] (its region of interest,
 //! module `roi`; a decode's usable images are made for that region alone, module `inputs`) and
-//! pasted back into the full frame; an object that reaches the region's edge is reconstructed on
-//! the full frame instead. A window of `meb video` with nothing to start from (the first) starts
+//! pasted back into the full frame, or kept there for a caller that pastes only what it needs
+//! ([`from_decoded_extent`], [`Extent`]); an object that reaches the region's edge is
+//! reconstructed on the full frame instead. A window of `meb video` with nothing to start from (the first) starts
 //! from its own reconstruction binned 2×2 ([`ReconstructConfig::coarse_start`], module
 //! `coarse`; a window whose warm start strayed is redone that way too), and a
 //! window decoded only around the object is reconstructed there and kept there
