@@ -76,8 +76,9 @@ pub fn compare_normals(
 ///
 /// It is [`normals_from_depth_seen_by`] of an orthographic projection ([`Projection::centred`]),
 /// worked out on the depths alone: the differences of the points along the columns, (h, 0, ∂z),
-/// and up the rows, (0, h, ∂z), cross to (−h·∂z/∂c, −h·∂z/∂r, h²) ∝ (−∂z/∂c, −∂z/∂r, h). Without a
-/// ray per neighbour it costs a fifth as much (`meb video` shades every 3-D frame with it).
+/// and up the rows, (0, h, ∂z), cross to (−h·∂z/∂c, −h·∂z/∂r, h²) ∝ (−∂z/∂c, −∂z/∂r, h). `meb
+/// video` shades every 3-D frame with it: through a ray per neighbour it took 1.2 % of the CPU
+/// of a 2000-frame 1280×720 run.
 pub fn normals_from_depth(depth: &Array2<f32>, pitch_mm: f64) -> Array3<f32> {
     let (rows, cols) = depth.dim();
     let z = |r: usize, c: usize| {

@@ -104,7 +104,7 @@ impl OutputThread {
 }
 
 impl Drop for OutputThread {
-    /// Lets the writer end (its FFmpeg processes with it) before the folder goes away.
+    /// Lets the writer end (its FFmpeg process with it) before the folder goes away.
     fn drop(&mut self) {
         let _ = self.join();
     }
