@@ -230,7 +230,7 @@ impl VideoEncoder {
                     stdin.write_all(picture.as_raw()).map_err(|e| {
                         VideoError::Encode(format!(
                             "ffmpeg stopped taking frames for {} ({e})",
-                            paths[0].display()
+                            listed(paths)
                         ))
                     })?;
                 }
@@ -276,11 +276,9 @@ impl VideoEncoder {
                     .map_err(|e| VideoError::Encode(format!("waiting for ffmpeg: {e}")))?;
                 let messages = stderr.and_then(|h| h.join().ok()).unwrap_or_default();
                 if !status.success() {
-                    let names: Vec<String> =
-                        paths.iter().map(|p| p.display().to_string()).collect();
                     return Err(VideoError::Encode(format!(
                         "ffmpeg could not write {} ({status}): {}",
-                        names.join(", "),
+                        listed(&paths),
                         messages.trim()
                     )));
                 }
@@ -320,6 +318,12 @@ impl VideoEncoder {
             }
         }
     }
+}
+
+/// The video files, for messages: "a.mp4, b.mp4".
+fn listed(paths: &[PathBuf]) -> String {
+    let names: Vec<String> = paths.iter().map(|p| p.display().to_string()).collect();
+    names.join(", ")
 }
 
 /// A picture of the wrong size is a bug in the caller, reported instead of encoded.
