@@ -452,8 +452,8 @@ impl Try {
 /// each window ([`FrameStream`]), decodes it with the carried timing ([`carry`]), measures its
 /// motion and, with [`MotionPolicy::Place`], places it; the calling thread reconstructs the
 /// chosen windows in order (each warm-started from the one before, in a pool on every core,
-/// [`stage_pool`]), scores them and hands them to `sink`. At most [`DECODED_AHEAD`] decoded windows wait between the two, so memory stays
-/// bounded by a few windows.
+/// [`stage_pool`]), scores them and hands them to `sink`. At most [`DECODED_AHEAD`] decoded
+/// windows wait between the two, so memory stays bounded by a few windows.
 pub fn process(
     source: Box<dyn FrameSource>,
     rig: &Rig,
@@ -633,10 +633,11 @@ pub fn process(
 
 /// A pool of `threads` named `meb-video-{stage}-N` for one stage of the pipeline.
 ///
-/// Each window's reconstruction runs inside its pool (`install`), so its parallel loops are
-/// split by a worker and stolen by the others. Called from the pipeline's thread, outside any
-/// pool, each of the hundreds of parallel loops of a window was injected into the global pool
-/// with the caller asleep until it finished: two thread switches and a wake-up per loop.
+/// Each window's reconstruction runs inside the reconstruction stage's pool (`install`), so its
+/// parallel loops are split by a worker and stolen by the others. Called from the pipeline's
+/// thread, outside any pool, each of the hundreds of parallel loops of a window was injected
+/// into the global pool with the caller asleep until it finished: two thread switches and a
+/// wake-up per loop.
 /// `meb video`, 2000 frames of 1280×720 in windows of 40, four runs alternated: 21.1 → 22.6
 /// 3-D frames/s (means), reconstruction 39.7 → 37.2 ms per window, system CPU 0.80 → 0.58 s.
 fn stage_pool(stage: &str, threads: usize) -> Result<rayon::ThreadPool, VideoError> {
