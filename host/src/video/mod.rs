@@ -66,8 +66,7 @@ use crate::demod::{
 };
 use crate::metrics::{MetricsError, compare_depth};
 use crate::reconstruct::{
-    Extent, ReconstructConfig, Reconstruction, Start, WarmStart, from_decoded_extent,
-    from_decoded_region,
+    ReconstructConfig, Reconstruction, Start, WarmStart, from_decoded_extent, from_decoded_region,
 };
 use crate::rig::Rig;
 use crate::timing::StageTiming;
@@ -1043,12 +1042,8 @@ fn reconstruct_window(
     let reconstruction = pool.install(|| match chosen.decode.region {
         Some(region) => from_decoded_region(&decoded, region.roi, rig, &config.reconstruct, warm)
             .map(WindowReconstruction::of_region),
-        None => from_decoded_extent(&decoded, rig, None, &config.reconstruct, warm).map(|extent| {
-            match extent {
-                Extent::Frame(reconstruction) => WindowReconstruction::Frame(reconstruction),
-                Extent::Region(region) => WindowReconstruction::of_region(region),
-            }
-        }),
+        None => from_decoded_extent(&decoded, rig, None, &config.reconstruct, warm)
+            .map(WindowReconstruction::of_extent),
     });
     timing.reconstruct_ms = time.elapsed().as_secs_f64() * 1e3;
     let reconstruction = match reconstruction {

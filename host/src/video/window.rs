@@ -4,7 +4,7 @@
 //! against the truth, the depth file and pictures) is pasted once; normals and albedo only when
 //! they are asked for (`--save`).
 
-use crate::reconstruct::{Reconstruction, RegionReconstruction, StageTiming};
+use crate::reconstruct::{Extent, Reconstruction, RegionReconstruction, StageTiming};
 use ndarray::{Array2, Array3};
 use std::borrow::Cow;
 use std::time::Instant;
@@ -34,6 +34,14 @@ impl WindowReconstruction {
             started,
         ));
         Self::Region { region, depth_mm }
+    }
+
+    /// A reconstruction of the whole frame, or of a region ([`Self::of_region`]).
+    pub fn of_extent(extent: Extent) -> Self {
+        match extent {
+            Extent::Frame(reconstruction) => Self::Frame(reconstruction),
+            Extent::Region(region) => Self::of_region(region),
+        }
     }
 
     /// The reconstruction itself: its arrays are the region's for [`Self::Region`].
