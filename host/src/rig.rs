@@ -508,18 +508,19 @@ impl Emitter {
     pub fn light_vector_at(&self, point: &Vector3<f64>) -> Vector3<f64> {
         let to_led = self.position - point;
         let d2 = to_led.norm_squared();
-        let inv_d = 1.0 / d2.sqrt();
-        let cos_theta = -self.axis.dot(&to_led) * inv_d;
-        if cos_theta <= 0.0 {
+        // d·cos θ: the distance along the emission axis.
+        let along_axis = -self.axis.dot(&to_led);
+        if along_axis <= 0.0 {
             return Vector3::zeros();
         }
-        // m = 1 (a Lambertian emitter, every preset) is the common case: powf costs more than
-        // the rest of this function and the near-field loops call it per pixel and LED.
-        let falloff = if self.lambert_order == 1.0 {
-            cos_theta
-        } else {
-            cos_theta.powf(self.lambert_order)
-        };
+        // m = 1 (a Lambertian emitter, every preset) is the common case, and the near-field
+        // loops call this per pixel and LED: Φ·cos θ/d³ = Φ·(d·cos θ)/d⁴ needs neither the
+        // square root nor powf.
+        if self.lambert_order == 1.0 {
+            return to_led * (self.intensity * along_axis / (d2 * d2));
+        }
+        let inv_d = 1.0 / d2.sqrt();
+        let falloff = (along_axis * inv_d).powf(self.lambert_order);
         to_led * (self.intensity * falloff * inv_d / d2)
     }
 }

@@ -60,6 +60,8 @@ pub(crate) struct PixelSolver {
     weights: Vec<f64>,
     with_noise: bool,
     cache: Option<Vec<Option<Matrix3<f64>>>>,
+    /// The consistency test's χ² quantile (step 4 of the module docs) by degrees of freedom.
+    chi2_limit: Vec<f64>,
 }
 
 impl PixelSolver {
@@ -78,18 +80,21 @@ impl PixelSolver {
                         if bits.count_ones() < 3 {
                             return None;
                         }
-                        well_conditioned_inverse(&normal_matrix(v, &weights, bits))
+                        well_conditioned_inverse(normal_matrix(v, &weights, bits))
                     })
                     .collect(),
             ),
             _ => None,
         };
+        let z = f64::from(config.consistency_sigmas);
+        let chi2_limit = (0..=gains.len()).map(|dof| chi2_quantile(dof, z)).collect();
         Self {
             config: config.clone(),
             gains,
             weights,
             with_noise,
             cache,
+            chi2_limit,
         }
     }
 
@@ -122,12 +127,25 @@ impl PixelSolver {
     /// Solves one pixel from its LED values `a`, light vectors `l`, view vector `v` (towards
     /// the camera) and level noise `sigma`.
     pub fn solve(&self, a: &[f64], l: &[Vector3<f64>], v: &Vector3<f64>, sigma: f64) -> Solution {
+        match self.fit(a, l, v, sigma) {
+            Fit::Solved { g, lit } => {
+                let rho = g.norm();
+                Solution::Solved(g / rho, rho, lit)
+            }
+            Fit::Other(solution) => solution,
+        }
+    }
+
+    /// [`Self::solve`] up to the scaled normal: G = ρn of a solved pixel. The decisions need
+    /// only signs and ratios of G (n·v and n·L_i have the signs of G·v and G·L_i), so the square
+    /// root and divisions of ρ and n are left to the caller, off the chain of dependent steps.
+    fn fit(&self, a: &[f64], l: &[Vector3<f64>], v: &Vector3<f64>, sigma: f64) -> Fit {
         if a.iter().any(|v| !v.is_finite()) {
-            return Solution::Failed(Outcome::Unusable);
+            return Fit::Other(Solution::Failed(Outcome::Unusable));
         }
         let brightest = a.iter().copied().fold(0.0, f64::max);
         if brightest <= 0.0 {
-            return Solution::Failed(Outcome::Dark);
+            return Fit::Other(Solution::Failed(Outcome::Dark));
         }
         let statistical = self.with_noise && sigma > 0.0;
         let sigma_of = |i: usize| self.gains[i] * sigma;
@@ -142,34 +160,31 @@ impl PixelSolver {
         for _ in 0..4 {
             let lit = bits.count_ones() as usize;
             if lit == 2 {
-                return two_led_plane(a, l, bits);
+                return Fit::Other(two_led_plane(a, l, bits));
             }
             if lit < min_lit {
-                return Solution::Failed(Outcome::Dark);
+                return Fit::Other(Solution::Failed(Outcome::Dark));
             }
             let Some(inverse) = self.inverse(l, bits) else {
-                return Solution::Failed(Outcome::Singular);
+                return Fit::Other(Solution::Failed(Outcome::Singular));
             };
-            let mut b = Vector3::zeros();
-            for i in members(bits) {
-                b += l[i] * (self.weights[i] * a[i]);
+            let g = inverse * self.weighted_sum(a, l, bits);
+            // ρ² = |G|² is finite and positive exactly when ρ is.
+            let rho2 = g.norm_squared();
+            if !rho2.is_finite() || rho2 <= 0.0 {
+                return Fit::Other(Solution::Failed(Outcome::Contradictory));
             }
-            let g = inverse * b;
-            let rho = g.norm();
-            if !rho.is_finite() || rho <= 0.0 {
-                return Solution::Failed(Outcome::Contradictory);
-            }
-            let n = g / rho;
-            if n.dot(v) <= 0.0 {
-                return Solution::Failed(Outcome::Contradictory); // a visible surface faces the camera
+            if g.dot(v) <= 0.0 {
+                // A visible surface faces the camera.
+                return Fit::Other(Solution::Failed(Outcome::Contradictory));
             }
             // Attached shadows: a lit LED the solution turns away from cannot light the pixel.
             let refined = members(bits)
-                .filter(|&i| n.dot(&l[i]) <= 0.0)
+                .filter(|&i| g.dot(&l[i]) <= 0.0)
                 .fold(bits, |acc, i| acc & !(1 << i));
             if refined != bits {
                 if refined.count_ones() < 2 {
-                    return Solution::Failed(Outcome::Contradictory);
+                    return Fit::Other(Solution::Failed(Outcome::Contradictory));
                 }
                 bits = refined;
                 continue;
@@ -181,17 +196,16 @@ impl PixelSolver {
                 let chi2: f64 = members(bits)
                     .map(|i| (a[i] - g.dot(&l[i])).powi(2) / variance(i))
                     .sum();
-                if chi2 > chi2_quantile(lit - 3, f64::from(self.config.consistency_sigmas)) {
+                let limit = self.chi2_limit.get(lit - 3).copied().unwrap_or_else(|| {
+                    chi2_quantile(lit - 3, f64::from(self.config.consistency_sigmas))
+                });
+                if chi2 > limit {
                     // The LED reading furthest below its prediction from the others.
                     let darkest = members(bits)
                         .filter_map(|i| {
                             let others = bits & !(1 << i);
                             let inv = self.inverse(l, others)?;
-                            let mut b = Vector3::zeros();
-                            for j in members(others) {
-                                b += l[j] * (self.weights[j] * a[j]);
-                            }
-                            let predicted = (inv * b).dot(&l[i]);
+                            let predicted = (inv * self.weighted_sum(a, l, others)).dot(&l[i]);
                             let deficit = (predicted - a[i]) / variance(i).sqrt();
                             (deficit > 0.0).then_some((deficit, i))
                         })
@@ -203,38 +217,50 @@ impl PixelSolver {
                     }
                 }
             }
-            return Solution::Solved(n, rho, lit as u8);
+            return Fit::Solved { g, lit: lit as u8 };
         }
-        Solution::Failed(Outcome::Contradictory)
+        Fit::Other(Solution::Failed(Outcome::Contradictory))
+    }
+
+    /// Σ_{i∈bits} w_i A_i L_i, the right-hand side of the normal equations.
+    fn weighted_sum(&self, a: &[f64], l: &[Vector3<f64>], bits: usize) -> Vector3<f64> {
+        members(bits).fold(Vector3::zeros(), |b, i| b + l[i] * (self.weights[i] * a[i]))
     }
 
     /// (Σ_{i∈bits} w_i L_i L_iᵀ)⁻¹, cached for distant lights.
     fn inverse(&self, l: &[Vector3<f64>], bits: usize) -> Option<Matrix3<f64>> {
         match &self.cache {
             Some(table) => table[bits],
-            None => well_conditioned_inverse(&normal_matrix(l, &self.weights, bits)),
+            None => well_conditioned_inverse(normal_matrix(l, &self.weights, bits)),
         }
     }
 
     /// Relative misfit Σ w‖A − L·G‖² and energy Σ w‖A‖² of one pixel over its lit LEDs
     /// (zero for pixels that are not solved from four or more).
     fn misfit(&self, a: &[f64], l: &[Vector3<f64>], v: &Vector3<f64>, sigma: f64) -> (f64, f64) {
-        let Solution::Solved(n, rho, used) = self.solve(a, l, v, sigma) else {
+        let Fit::Solved { g, lit } = self.fit(a, l, v, sigma) else {
             return (0.0, 0.0);
         };
-        if used < 4 {
+        if lit < 4 {
             return (0.0, 0.0);
         }
-        let g = n * rho;
         let (mut misfit, mut energy) = (0.0, 0.0);
         for (i, (v, li)) in a.iter().zip(l).enumerate() {
-            if g.dot(li) > 0.0 && *v > 0.0 {
-                misfit += self.weights[i] * (v - g.dot(li)).powi(2);
+            let predicted = g.dot(li);
+            if predicted > 0.0 && *v > 0.0 {
+                misfit += self.weights[i] * (v - predicted).powi(2);
                 energy += self.weights[i] * v * v;
             }
         }
         (misfit, energy)
     }
+}
+
+/// What [`PixelSolver::fit`] found: G = ρn of a pixel solved from `lit` LEDs, or the final
+/// outcome of any other pixel.
+enum Fit {
+    Solved { g: Vector3<f64>, lit: u8 },
+    Other(Solution),
 }
 
 /// Indices of the set bits.
@@ -249,12 +275,21 @@ fn members(bits: usize) -> impl Iterator<Item = usize> {
     })
 }
 
-/// Σ_{i∈bits} w_i L_i L_iᵀ.
-fn normal_matrix(l: &[Vector3<f64>], weights: &[f64], bits: usize) -> Matrix3<f64> {
+/// Σ_{i∈bits} w_i L_i L_iᵀ: its six distinct entries xx, xy, xz, yy, yz, zz.
+fn normal_matrix(l: &[Vector3<f64>], weights: &[f64], bits: usize) -> [f64; 6] {
     members(bits)
         .filter(|&i| i < l.len())
-        .fold(Matrix3::zeros(), |m, i| {
-            m + l[i] * l[i].transpose() * weights[i]
+        .fold([0.0; 6], |[xx, xy, xz, yy, yz, zz], i| {
+            let (x, y, z) = (l[i].x, l[i].y, l[i].z);
+            let (wx, wy, wz) = (weights[i] * x, weights[i] * y, weights[i] * z);
+            [
+                xx + wx * x,
+                xy + wx * y,
+                xz + wx * z,
+                yy + wy * y,
+                yz + wy * z,
+                zz + wz * z,
+            ]
         })
 }
 
@@ -288,13 +323,30 @@ fn chi2_quantile(dof: usize, z: f64) -> f64 {
     k * (1.0 - h + z * h.sqrt()).powi(3)
 }
 
-/// Inverse of a symmetric 3×3 matrix unless it is (nearly) singular.
-fn well_conditioned_inverse(m: &Matrix3<f64>) -> Option<Matrix3<f64>> {
-    let scale = m.trace();
-    if scale.is_nan() || scale <= 0.0 || m.determinant().abs() < 1e-9 * scale.powi(3) {
+/// Inverse of the symmetric 3×3 matrix with entries `[xx, xy, xz, yy, yz, zz]` unless it is
+/// (nearly) singular: |det| below 10⁻⁹ of the cube of its trace. The adjugate's six distinct
+/// cofactors give the determinant (expansion along the first row) and, times its one
+/// reciprocal, the inverse.
+fn well_conditioned_inverse([xx, xy, xz, yy, yz, zz]: [f64; 6]) -> Option<Matrix3<f64>> {
+    let scale = xx + yy + zz;
+    let (c_xx, c_xy, c_xz) = (yy * zz - yz * yz, xz * yz - xy * zz, xy * yz - yy * xz);
+    let (c_yy, c_yz, c_zz) = (xx * zz - xz * xz, xy * xz - xx * yz, xx * yy - xy * xy);
+    let det = xx * c_xx + xy * c_xy + xz * c_xz;
+    if scale.is_nan() || scale <= 0.0 || !det.is_finite() || det.abs() < 1e-9 * scale.powi(3) {
         return None;
     }
-    m.try_inverse()
+    let r = 1.0 / det;
+    Some(Matrix3::new(
+        c_xx * r,
+        c_xy * r,
+        c_xz * r,
+        c_xy * r,
+        c_yy * r,
+        c_yz * r,
+        c_xz * r,
+        c_yz * r,
+        c_zz * r,
+    ))
 }
 
 /// Per-pixel outcomes of a whole image set.
@@ -848,6 +900,48 @@ mod tests {
         eprintln!("worst tilt {worst:.3}° over {tested} solves");
         assert!(tested > 10_000, "{tested}");
         assert!(worst < WARM_LIGHTS_NORMAL_DEG, "{worst}° tilt");
+    }
+
+    #[test]
+    fn the_adjugate_inverse_inverts_normal_matrices_and_refuses_singular_ones() {
+        use rand::SeedableRng;
+        use rand_chacha::ChaCha8Rng;
+        use rand_distr::{Distribution, StandardNormal};
+        let mut rng = ChaCha8Rng::seed_from_u64(0x1ed5);
+        let mut normal = || -> f64 { StandardNormal.sample(&mut rng) };
+        for _ in 0..200 {
+            let l: Vec<Vector3<f64>> = (0..4)
+                .map(|_| Vector3::new(normal(), normal(), normal().abs() + 0.1))
+                .collect();
+            let weights: Vec<f64> = (0..4).map(|_| 0.5 + normal().abs()).collect();
+            for bits in [0b0111, 0b1011, 0b1101, 0b1110, 0b1111] {
+                let sum = members(bits).fold(Matrix3::zeros(), |m, i| {
+                    m + l[i] * l[i].transpose() * weights[i]
+                });
+                let [xx, xy, xz, yy, yz, zz] = normal_matrix(&l, &weights, bits);
+                let packed = Matrix3::new(xx, xy, xz, xy, yy, yz, xz, yz, zz);
+                assert!((packed - sum).norm() <= 1e-12 * sum.norm());
+                let conditioned = sum.determinant().abs() >= 1e-9 * sum.trace().powi(3);
+                match well_conditioned_inverse(normal_matrix(&l, &weights, bits)) {
+                    Some(inverse) => {
+                        assert!(conditioned);
+                        // Rounding grows with the condition number ‖M‖·‖M⁻¹‖.
+                        let condition = sum.norm() * inverse.norm();
+                        let identity = inverse * sum;
+                        assert!(
+                            (identity - Matrix3::identity()).norm() < 1e-13 * condition,
+                            "{identity} for {sum}"
+                        );
+                    }
+                    None => assert!(!conditioned, "{sum} was refused"),
+                }
+            }
+        }
+        // Three coplanar lights: rank 2.
+        let flat = [Vector3::x(), Vector3::y(), Vector3::new(1.0, 1.0, 0.0)];
+        assert!(well_conditioned_inverse(normal_matrix(&flat, &[1.0; 3], 0b111)).is_none());
+        assert!(well_conditioned_inverse([f64::NAN, 0.0, 0.0, 1.0, 0.0, 1.0]).is_none());
+        assert!(well_conditioned_inverse([0.0; 6]).is_none());
     }
 
     #[test]
