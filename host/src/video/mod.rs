@@ -43,7 +43,6 @@ pub mod focus;
 pub mod judge;
 pub mod motion;
 pub mod output;
-pub mod priority;
 pub mod render;
 pub mod schedule;
 pub mod stream;
@@ -529,11 +528,7 @@ pub fn process(
     };
     let mut first_failure: Option<String> = None;
     let mut warm: Option<WarmStart> = None;
-    let reconstruction_pool = stage_pool(
-        "reconstruct",
-        rayon::current_num_threads(),
-        StagePriority::Reconstruction,
-    )?;
+    let reconstruction_pool = stage_pool("reconstruct", rayon::current_num_threads())?;
     let decoding = DecodeStage {
         schedule,
         format: &format,
@@ -542,7 +537,7 @@ pub fn process(
         first_pool: &reconstruction_pool,
     };
     let (sender, receiver) = sync_channel::<Result<Chosen, VideoError>>(DECODED_AHEAD);
-    let decoding_pool = stage_pool("decode", DECODING_THREADS, StagePriority::Background)?;
+    let decoding_pool = stage_pool("decode", DECODING_THREADS)?;
     let (stream_end, reconstructed) = std::thread::scope(|scope| {
         let decoder = std::thread::Builder::new()
             .name("meb-video-decode".into())
@@ -644,20 +639,9 @@ pub fn process(
 /// wake-up per loop.
 /// `meb video`, 2000 frames of 1280×720 in windows of 40, four runs alternated: 21.1 → 22.6
 /// 3-D frames/s (means), reconstruction 39.7 → 37.2 ms per window, system CPU 0.80 → 0.58 s.
-/// The threads of a [`StagePriority::Background`] stage run at the lowest priority
-/// ([`priority`]).
-fn stage_pool(
-    stage: &str,
-    threads: usize,
-    priority: StagePriority,
-) -> Result<rayon::ThreadPool, VideoError> {
+fn stage_pool(stage: &str, threads: usize) -> Result<rayon::ThreadPool, VideoError> {
     rayon::ThreadPoolBuilder::new()
         .num_threads(threads)
-        .start_handler(move |_| {
-            if priority == StagePriority::Background {
-                priority::lower_this_thread();
-            }
-        })
         .thread_name({
             let stage = stage.to_string();
             move |i| format!("meb-video-{stage}-{i}")
@@ -668,16 +652,6 @@ fn stage_pool(
                 "cannot start the {stage} stage's threads: {e}"
             )))
         })
-}
-
-/// Whether a stage's threads keep normal priority or step back for the reconstruction
-/// ([`priority`]).
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
-enum StagePriority {
-    /// The reconstruction, which bounds the rate.
-    Reconstruction,
-    /// A stage that waits on its queue most of the time (decoding).
-    Background,
 }
 
 /// Decoded windows that may wait for the reconstruction (each holds its LED images).
@@ -1148,23 +1122,5 @@ fn score(
             truth_frame: t.frame,
         })),
         Err(error) => Err(error.into()),
-    }
-}
-
-#[cfg(all(test, target_os = "linux"))]
-mod tests {
-    use super::*;
-
-    #[test]
-    fn decoding_steps_back_for_the_reconstruction() {
-        let caller = priority::this_thread_nice();
-        let decode = stage_pool("decode", 1, StagePriority::Background).unwrap();
-        let reconstruct = stage_pool("reconstruct", 2, StagePriority::Reconstruction).unwrap();
-        assert_eq!(
-            decode.install(priority::this_thread_nice),
-            Some(priority::BACKGROUND_NICE)
-        );
-        let nice: Vec<Option<i32>> = reconstruct.broadcast(|_| priority::this_thread_nice());
-        assert_eq!(nice, vec![caller; 2]);
     }
 }

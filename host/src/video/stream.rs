@@ -8,8 +8,7 @@
 //! ring: memory is bounded by those two, never by the clip. Frames between windows (a hop
 //! longer than the window) are dropped as they arrive. A frame's storage, once dropped, goes
 //! back to the reader thread, which reads the next frame straight into it
-//! ([`FrameSource::read_frame_into`]): after the first window no frame is allocated. The
-//! reader runs at background priority ([`super::priority`]).
+//! ([`FrameSource::read_frame_into`]): after the first window no frame is allocated.
 //!
 //! Requests must move forward in time: [`FrameStream::window`] may not ask for a frame it has
 //! already dropped.
@@ -75,10 +74,7 @@ impl FrameStream {
         let (recycle, recycled) = channel();
         std::thread::Builder::new()
             .name("meb-video-reader".into())
-            .spawn(move || {
-                crate::video::priority::lower_this_thread();
-                read_frames(source, &sender, &recycled, limit)
-            })
+            .spawn(move || read_frames(source, &sender, &recycled, limit))
             .map_err(|e| CaptureError::Other(format!("cannot start the frame reader: {e}")))?;
         Ok(Self {
             format,
@@ -287,49 +283,6 @@ mod tests {
         assert!(stream.window(98..102).unwrap().is_none());
         assert!(matches!(stream.end(), Some(StreamEnd::Complete)));
         assert_eq!(stream.received(), 100);
-    }
-
-    /// Frames of two samples that record the nice value of the thread reading each.
-    #[cfg(target_os = "linux")]
-    struct PrioritySource {
-        format: FrameFormat,
-        next: usize,
-        seen: std::sync::Arc<std::sync::Mutex<Vec<Option<i32>>>>,
-    }
-
-    #[cfg(target_os = "linux")]
-    impl FrameSource for PrioritySource {
-        fn format(&self) -> &FrameFormat {
-            &self.format
-        }
-
-        fn next_frame(&mut self) -> Result<Option<Frame>, CaptureError> {
-            if let Ok(mut seen) = self.seen.lock() {
-                seen.push(crate::video::priority::this_thread_nice());
-            }
-            self.next += 1;
-            Ok((self.next <= 6).then(|| Frame {
-                index: self.next - 1,
-                samples: Samples::U8(vec![0, 0]),
-            }))
-        }
-    }
-
-    #[cfg(target_os = "linux")]
-    #[test]
-    fn frames_are_read_at_background_priority() {
-        let seen = std::sync::Arc::new(std::sync::Mutex::new(Vec::new()));
-        let source = PrioritySource {
-            format: FrameFormat::full_range(2, 1, 8, 100.0),
-            next: 0,
-            seen: seen.clone(),
-        };
-        let mut stream = FrameStream::new(Box::new(source), 2, None).unwrap();
-        assert!(stream.window(0..4).unwrap().is_some());
-        let seen = seen.lock().unwrap().clone();
-        assert!(seen.len() >= 4, "{seen:?}");
-        let background = Some(crate::video::priority::BACKGROUND_NICE);
-        assert!(seen.iter().all(|&n| n == background), "{seen:?}");
     }
 
     /// Frames of two samples that count how often a frame needed new storage.

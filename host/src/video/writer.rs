@@ -5,8 +5,7 @@
 //! when they are saved) and queues them; at most [`QUEUED_FRAMES`] wait, so memory stays bounded
 //! and a writer slower than the reconstruction slows the run down instead of piling frames up.
 //! The first error stops the writer; the next [`OutputThread::add`] or the
-//! [`OutputThread::finish`] returns it. The writer runs at background priority
-//! ([`super::priority`]); FFmpeg keeps the priority of the process that started it.
+//! [`OutputThread::finish`] returns it.
 
 use super::output::{FrameArrays, VideoOutput};
 use super::{FrameRecord, FrameStatus, VideoError, VideoFrame};
@@ -41,7 +40,6 @@ impl OutputThread {
         let handle = std::thread::Builder::new()
             .name("meb-video-writer".into())
             .spawn(move || {
-                super::priority::lower_this_thread();
                 for frame in receiver {
                     output.add_arrays(FrameArrays {
                         record: frame.record,
@@ -194,21 +192,6 @@ mod tests {
             .map(|f| f["index"].as_u64().unwrap())
             .collect();
         assert_eq!(indices, (0..7).collect::<Vec<_>>());
-    }
-
-    #[cfg(target_os = "linux")]
-    #[test]
-    fn the_writer_runs_at_background_priority() {
-        let dir = tempfile::tempdir().unwrap();
-        let thread = OutputThread::start(output(dir.path())).unwrap();
-        let nice = super::super::priority::wait_for_background_threads("meb-video-writer");
-        assert!(!nice.is_empty(), "no writer thread found");
-        assert!(
-            nice.iter()
-                .all(|&n| n == super::super::priority::BACKGROUND_NICE),
-            "{nice:?}"
-        );
-        thread.finish().unwrap();
     }
 
     #[test]
