@@ -406,27 +406,24 @@
 //! the first windows 0.7054, 0.7012, 0.5111 mm against 0.7064, 0.7011, 0.5165 mm before: the
 //! coarse start's settled pass leaves a slightly better first depth).
 //!
-//! Session 41: two changes. (1) The per-pixel solve of the near-field stages: the normal
-//! equations' inverse from the symmetric adjugate with one reciprocal instead of nalgebra's
-//! nine divisions after a separate determinant, the decisions on G = ρn with ρ and n formed
-//! once, the χ² limits tabulated, and a Lambertian emitter's light vector without a square root
-//! (`model_misfit_at_one_offset` in the reconstruct bench 1.61 → 1.39 ms; the warm
-//! photometric-stereo stage of a window 14 → 7.5 ms median in the video, with the next change).
-//! (2) Reading, decoding and writing run at nice 19 ([`meb::video::priority`]). The
-//! reconstruction bounds the rate: over a whole run it never waited for a decoded window
-//! (`wait_ms` 0.0 after the first), yet at equal priority the other stages took cores from
-//! its parallel loops while a core idled in its serial stretches. Session 36's try, the
-//! decoder alone at nice 10 while the reconstruction's loops were injected into the global pool
-//! from outside, changed nothing; with all three background stages and the reconstruction in its
-//! own pool it does. On the continuous 2000-frame clip (eight rounds alternated): main 22.2,
-//! (1) alone 22.6, both **24.3** 3-D frames/s (means; the runs spread 21.7–25.7); a sweep of
-//! the nice value alone (ten pairs): 21.2 at 0, 22.9 at 19, 8 of 10 pairs faster; FFmpeg at nice
-//! 19 as well: no further change (23.66 against 23.67, eight rounds), so it keeps the process's
-//! priority. With `--hop 8`: 28.0 → 29.6 (two runs each). The per-window depth RMSE against the
-//! truth is unchanged to 0.1 µm (median 0.6755, mean 0.7416, worst 1.1949 mm over 50 windows).
-//! Of a run's 2.09 s, 1.95 s are reconstruction on the pipeline's thread (0.2 s of it the first,
-//! cold window) and 0.11 s the wait for the first decoded window: the steady state is ≈ 35 ms
-//! per window, and the first window's start-up is what keeps the whole run below 25.
+//! Session 41: the per-pixel solve of the near-field stages. The normal equations' inverse
+//! comes from the symmetric adjugate with one reciprocal instead of nalgebra's nine divisions
+//! after a separate determinant, the decisions are taken on G = ρn with ρ and n formed once,
+//! the χ² limits are tabulated, and a Lambertian emitter's light vector needs no square root
+//! (`model_misfit_at_one_offset` in the reconstruct bench 1.61 → 1.39 ms). On the continuous
+//! 2000-frame clip, eight rounds alternated with main: 22.2 → 22.6 3-D frames/s (means; the
+//! runs spread 18.6–24.2). The per-window depth RMSE against the truth is unchanged to 0.1 µm
+//! (median 0.6755, mean 0.7416, worst 1.1949 mm over 50 windows). Of a run's wall time, all
+//! but the first window's wait is reconstruction on the pipeline's thread (`wait_ms` 0.0 after
+//! the first window); the first, cold window takes ≈ 0.2 s of it.
+//!
+//! Tried and not kept: reading, decoding and writing at nice 19, so that the reconstruction,
+//! which bounds the rate, keeps both cores in its parallel loops and the other stages fill its
+//! serial stretches. On an idle machine: 22.2 → 24.3 3-D frames/s (eight rounds), 29.6 with
+//! `--hop 8` (28.0 before). But a thread cannot raise its priority again, and next to two busy
+//! processes at normal priority the decoder starved: 11.2 3-D frames/s at nice 0, 6.2 at nice
+//! 10, 0.9 at nice 19 (two runs each). A tool that becomes twelve times slower beside a build
+//! is worse than one 9 % slower alone.
 use criterion::{BatchSize, Criterion, criterion_group, criterion_main};
 use meb::capture::binning::Binning;
 use meb::capture::memory::MemorySource;
