@@ -966,6 +966,33 @@ mod tests {
         let l1 = led.light_vector_at(&Vector3::new(100.0, 0.0, 0.0));
         let expected = Vector3::new(-1.0, 0.0, 1.0) / 2f64.sqrt() * (0.5f64.sqrt() / 2e4);
         assert!((l1 - expected).norm() < 1e-12);
+        // A narrower emitter (m = 2) falls off as cos² θ; the general path agrees with the
+        // Lambertian one's as m → 1; nothing is emitted behind the LED.
+        let narrow = Led {
+            lambert_order: 2.0,
+            ..led.clone()
+        };
+        let l2 = narrow.light_vector_at(&Vector3::new(100.0, 0.0, 0.0));
+        assert!((l2 - expected * 0.5f64.sqrt()).norm() < 1e-12);
+        let almost = Led {
+            lambert_order: 1.0 + 1e-12,
+            ..led.clone()
+        };
+        for point in [
+            Vector3::new(100.0, 0.0, 0.0),
+            Vector3::new(-30.0, 55.0, 20.0),
+        ] {
+            let (a, b) = (led.light_vector_at(&point), almost.light_vector_at(&point));
+            assert!((a - b).norm() < 1e-9 * a.norm(), "{a} {b}");
+        }
+        assert_eq!(
+            led.light_vector_at(&Vector3::new(0.0, 0.0, 150.0)),
+            Vector3::zeros()
+        );
+        assert_eq!(
+            narrow.light_vector_at(&Vector3::new(0.0, 0.0, 150.0)),
+            Vector3::zeros()
+        );
     }
 
     fn perspective() -> Camera {
