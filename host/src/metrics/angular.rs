@@ -85,12 +85,6 @@ pub fn normals_from_depth(depth: &Array2<f32>, pitch_mm: f64) -> Array3<f32> {
         let v = depth[(r, c)];
         v.is_finite().then(|| f64::from(v))
     };
-    let diff = |minus: Option<f64>, centre: f64, plus: Option<f64>| match (minus, plus) {
-        (Some(m), Some(p)) => Some((p - m) / 2.0),
-        (None, Some(p)) => Some(p - centre),
-        (Some(m), None) => Some(centre - m),
-        (None, None) => None,
-    };
     let mut out = Array3::from_elem((rows, cols, 3), f32::NAN);
     for r in 0..rows {
         for c in 0..cols {
@@ -100,8 +94,10 @@ pub fn normals_from_depth(depth: &Array2<f32>, pitch_mm: f64) -> Array3<f32> {
             // Up the image: row − 1 is +y.
             let above = r.checked_sub(1).and_then(|r| z(r, c));
             let below = (r + 1 < rows).then(|| z(r + 1, c)).flatten();
-            let (Some(along), Some(up)) = (diff(left, centre, right), diff(below, centre, above))
-            else {
+            let (Some(along), Some(up)) = (
+                difference(left, centre, right),
+                difference(below, centre, above),
+            ) else {
                 continue;
             };
             if let Some(n) = Vector3::new(-along, -up, pitch_mm).try_normalize(0.0) {
@@ -127,22 +123,13 @@ pub fn normals_from_depth_seen_by(depth: &Array2<f32>, projection: &Projection) 
         z.is_finite()
             .then(|| projection.ray(r as f64, c as f64).at(f64::from(z)))
     };
-    let diff =
-        |minus: Option<Vector3<f64>>, centre: Vector3<f64>, plus: Option<Vector3<f64>>| match (
-            minus, plus,
-        ) {
-            (Some(m), Some(p)) => Some((p - m) / 2.0),
-            (None, Some(p)) => Some(p - centre),
-            (Some(m), None) => Some(centre - m),
-            (None, None) => None,
-        };
     let mut out = Array3::from_elem((rows, cols, 3), f32::NAN);
     for r in 0..rows as isize {
         for c in 0..cols as isize {
             let Some(p) = point(r, c) else { continue };
-            let along = diff(point(r, c - 1), p, point(r, c + 1));
+            let along = difference(point(r, c - 1), p, point(r, c + 1));
             // Up the image: row − 1 is +y.
-            let up = diff(point(r + 1, c), p, point(r - 1, c));
+            let up = difference(point(r + 1, c), p, point(r - 1, c));
             if let (Some(a), Some(u)) = (along, up) {
                 let mut n = a.cross(&u);
                 let towards = projection.ray(r as f64, c as f64).slope;
@@ -158,6 +145,21 @@ pub fn normals_from_depth_seen_by(depth: &Array2<f32>, projection: &Projection) 
         }
     }
     out
+}
+
+/// The derivative at `centre` from its neighbours one step before (`minus`) and after (`plus`):
+/// the central difference, or the one-sided one where a neighbour is missing; `None` without
+/// either. Depths ([`normals_from_depth`]) and 3-D points ([`normals_from_depth_seen_by`]) alike.
+fn difference<T>(minus: Option<T>, centre: T, plus: Option<T>) -> Option<T>
+where
+    T: Copy + std::ops::Sub<Output = T> + std::ops::Div<f64, Output = T>,
+{
+    match (minus, plus) {
+        (Some(m), Some(p)) => Some((p - m) / 2.0),
+        (None, Some(p)) => Some(p - centre),
+        (Some(m), None) => Some(centre - m),
+        (None, None) => None,
+    }
 }
 
 #[cfg(test)]
