@@ -196,10 +196,8 @@ impl PixelSolver {
                 let chi2: f64 = members(bits)
                     .map(|i| (a[i] - g.dot(&l[i])).powi(2) / variance(i))
                     .sum();
-                let limit = self.chi2_limit.get(lit - 3).copied().unwrap_or_else(|| {
-                    chi2_quantile(lit - 3, f64::from(self.config.consistency_sigmas))
-                });
-                if chi2 > limit {
+                // Every lit LED has a gain (its σ was read above), so lit − 3 < gains + 1.
+                if chi2 > self.chi2_limit[lit - 3] {
                     // The LED reading furthest below its prediction from the others.
                     let darkest = members(bits)
                         .filter_map(|i| {
