@@ -8,7 +8,7 @@ pub mod depth;
 pub mod mesh;
 
 pub use angular::{AngularErrors, compare_normals, normals_from_depth, normals_from_depth_seen_by};
-pub use depth::{DepthErrors, compare_depth};
+pub use depth::{DepthErrors, DepthScore, compare_depth, score_depth};
 pub use mesh::{MeshDepth, load_mesh_triangles, render_mesh_depth};
 
 use thiserror::Error;

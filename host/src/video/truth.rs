@@ -23,8 +23,9 @@ pub struct TruthDepth {
     pub frame: f64,
 }
 
-/// Ground truth for windows of camera frames.
-pub trait TruthSource {
+/// Ground truth for windows of camera frames. `Send`: the decoding stage of [`super::process`]
+/// reads each window's truth on its own thread, ahead of the window's reconstruction.
+pub trait TruthSource: Send {
     /// The true depth for a window that decoded camera frames `decoded`, or `None` when
     /// there is none near its time.
     fn depth_for(&mut self, decoded: Range<usize>) -> Result<Option<TruthDepth>, VideoError>;
