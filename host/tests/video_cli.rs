@@ -8,8 +8,8 @@
 use meb::capture::{OpenOptions, open};
 use meb::demod::{DecodeConfig, decode};
 use meb::reconstruct::{
-    ReconstructConfig, ReconstructError, Start, WarmStart, bin_decoded, from_decoded,
-    from_decoded_region, from_decoded_warm,
+    ReconstructConfig, ReconstructError, Reconstruction, Start, WarmStart, bin_decoded,
+    from_decoded, from_decoded_region, from_decoded_warm,
 };
 use meb::rig::Rig;
 use meb::video::{FrameStatus, TimingSource, VideoConfig, WindowSchedule, process};
@@ -650,6 +650,49 @@ fn a_warm_started_window_equals_a_cold_one_on_a_still_object() {
     );
 }
 
+/// Asserts that `coarse` kept its coarse start (two passes at most, moving under 1 mm from it)
+/// and has the shape of the `cold` reconstruction of the same window (within 0.1 mm RMS once
+/// the mean difference is removed, over 99 % of its pixels) at the same distance (the mean
+/// difference within `max_offset_mm`: the depth offset search places the surface to a few
+/// tenths of a millimetre), and is as close to the truth of `clip` (within 0.05 mm).
+fn assert_coarse_like_cold(
+    coarse: &Reconstruction,
+    cold: &Reconstruction,
+    clip: &Path,
+    max_offset_mm: f64,
+) {
+    let Start::Coarse { passes, moved_mm } = coarse.start else {
+        panic!("the coarse start was not kept: {:?}", coarse.start);
+    };
+    assert!(
+        passes <= 2 && moved_mm < 1.0,
+        "{passes} passes, moved {moved_mm} mm"
+    );
+    let (depth, cold_depth) = (
+        &coarse.integration.depth.depth_mm,
+        &cold.integration.depth.depth_mm,
+    );
+    let (_, shared) = depth_difference(depth, cold_depth);
+    let against_cold = meb::metrics::compare_depth(depth, cold_depth, None).unwrap();
+    assert!(
+        against_cold.rmse_mm < 0.1 && against_cold.offset_mm.abs() < max_offset_mm && shared > 0.99,
+        "coarse vs cold: {} mm RMS about a mean difference of {} mm, {shared} shared",
+        against_cold.rmse_mm,
+        against_cold.offset_mm
+    );
+    let truth: Array2<f32> = ndarray_npy::read_npy(clip.join("depth.npy")).unwrap();
+    let error = |d: &Array2<f32>| {
+        meb::metrics::compare_depth(d, &truth, None)
+            .unwrap()
+            .rmse_mm
+    };
+    let (coarse_error, cold_error) = (error(depth), error(cold_depth));
+    assert!(
+        coarse_error < cold_error + 0.05,
+        "coarse start {coarse_error} mm against the truth, cold {cold_error} mm"
+    );
+}
+
 /// A cold window of the still ellipsoid at 640×360 started from its own reconstruction binned
 /// 2×2 (what `meb video` does for its first window): the cold reconstruction's depth, to a
 /// fraction of the accuracy, and as close to the truth; a warm start far off is redone the
@@ -666,33 +709,17 @@ fn a_coarse_started_window_equals_a_cold_one() {
     let cold = from_decoded(&decoded, &rig, None, &cold_config).unwrap();
     assert_eq!(cold.start, Start::Cold);
     let coarse = from_decoded(&decoded, &rig, None, &config.reconstruct).unwrap();
-    let Start::Coarse { passes, moved_mm } = coarse.start else {
-        panic!("the coarse start was not kept: {:?}", coarse.start);
-    };
+    assert_coarse_like_cold(&coarse, &cold, &clip, 0.1);
     assert!(
-        passes <= 2 && moved_mm < 1.0,
-        "{passes} passes, moved {moved_mm} mm"
+        coarse.timings.iter().any(|t| t.stage.ends_with(", binned"))
+            && !coarse
+                .timings
+                .iter()
+                .any(|t| t.stage.contains("binned, binned")),
+        "one level below 640×360: {:?}",
+        coarse.timings
     );
-    let (depth, cold_depth) = (
-        &coarse.integration.depth.depth_mm,
-        &cold.integration.depth.depth_mm,
-    );
-    let (rms, shared) = depth_difference(depth, cold_depth);
-    assert!(
-        rms < 0.1 && shared > 0.99,
-        "coarse vs cold: {rms} mm RMS, {shared} shared"
-    );
-    let truth: Array2<f32> = ndarray_npy::read_npy(clip.join("depth.npy")).unwrap();
-    let error = |d: &Array2<f32>| {
-        meb::metrics::compare_depth(d, &truth, None)
-            .unwrap()
-            .rmse_mm
-    };
-    let (coarse_error, cold_error) = (error(depth), error(cold_depth));
-    assert!(
-        coarse_error < cold_error + 0.05,
-        "coarse start {coarse_error} mm against the truth, cold {cold_error} mm"
-    );
+    let cold_depth = &cold.integration.depth.depth_mm;
     // Warm-started 30 mm off, out of both brackets: redone from the coarse start.
     let mut off = WarmStart::of(&cold);
     off.depth_mm.mapv_inplace(|z| z + 30.0);
@@ -716,6 +743,37 @@ fn a_coarse_started_window_equals_a_cold_one() {
     )
     .unwrap();
     assert_eq!(small.start, Start::Cold);
+}
+
+/// The first window of a 1280×720 video starts from a pyramid: the window binned 2×2 is itself
+/// started from the window binned 4×4, whose cold passes cost a sixteenth of the full frame's.
+/// The result has the cold reconstruction's shape and accuracy, as at one level.
+#[test]
+fn a_two_level_coarse_start_at_1280x720_equals_a_cold_one() {
+    let tmp = tempfile::tempdir().unwrap();
+    let (rig, config, decoded, clip) = still_window(tmp.path(), 1280, 720);
+    let cold_config = ReconstructConfig {
+        coarse_start: false,
+        ..config.reconstruct.clone()
+    };
+    let cold = from_decoded(&decoded, &rig, None, &cold_config).unwrap();
+    let coarse = from_decoded(&decoded, &rig, None, &config.reconstruct).unwrap();
+    // One level already placed this window's surface 0.27 mm from the cold one; two, 0.39 mm.
+    assert_coarse_like_cold(&coarse, &cold, &clip, 0.5);
+    let stages = |level: &str| {
+        coarse
+            .timings
+            .iter()
+            .filter(|t| t.stage.ends_with(level))
+            .count()
+    };
+    // Cold passes at 320×180, then a warm pass at 640×360 (its stages end "warm (pass 1),
+    // binned"), then the full frame.
+    assert!(
+        stages(", binned, binned") >= 3 && stages("warm (pass 1), binned") >= 2,
+        "{:?}",
+        coarse.timings
+    );
 }
 
 #[test]

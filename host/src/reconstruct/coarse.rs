@@ -1,16 +1,21 @@
-//! A cold window started from its own reconstruction at half the resolution.
+//! A cold window started from its own reconstruction at half the resolution, itself started
+//! the same way: a pyramid down to [`COARSE_MIN_PIXELS`].
 //!
 //! A cold reconstruction runs four near-field passes on the full frame; the first, from light
 //! vectors at z = 0, with the widest offset search. At 1280×720 that is ≈ 0.45 s, a tenth of a
 //! 2000-frame `meb video` run for its first window alone. The same window binned 2×2 (each
-//! block's LED levels averaged, [`bin_decoded`]) is reconstructed cold on the binned camera
+//! block's LED levels averaged, [`bin_decoded`]) is reconstructed on the binned camera
 //! ([`crate::rig::Rig::binned`]: every binned pixel keeps the ray of its block's centre) at a
-//! quarter of the cost, its passes stopped once they settle (`ColdPasses::UntilSettled`), and
-//! its depth, spread back over the blocks and two pixels beyond the
+//! quarter of the cost, and its depth, spread back over the blocks and two pixels beyond the
 //! rim ([`spread`]), starts the full-resolution window as a previous window's would
-//! ([`super::WarmStart`]). A result that strays from that start is redone cold, so a coarse
-//! start never gives a result the warm checks would have refused. A window whose previous
-//! window's warm start strayed is redone this way too.
+//! ([`super::WarmStart`]). The binned window is reconstructed by the same rule: a frame of at
+//! least [`COARSE_MIN_PIXELS`] starts from its own binned reconstruction, a smaller one runs its
+//! cold passes until they settle (`ColdPasses::UntilSettled`). So a 1280×720 window starts from
+//! 320×180, whose cold passes cost a sixteenth of the full frame's, through one warm pass at
+//! 640×360; its first window's binned stages went from ≈ 150–230 ms (three cold passes at
+//! 640×360) to ≈ 70–110 ms. A result that strays from its start is redone cold at its own
+//! resolution, so a coarse start never gives a result the warm checks would have refused. A
+//! window whose previous window's warm start strayed is redone this way too.
 
 use super::inputs::Inputs;
 use super::{ReconstructConfig, StageTiming, WarmStart};
@@ -24,7 +29,8 @@ use rayon::prelude::*;
 pub const COARSE_BIN: usize = 2;
 
 /// Fewest camera pixels for which a coarse start is used: 640×360 (the binned frame is then at
-/// least 320×180; smaller frames are reconstructed cold, which costs little there).
+/// least 320×180; smaller frames, the pyramid's last level among them, are reconstructed cold,
+/// which costs little there).
 pub const COARSE_MIN_PIXELS: usize = 640 * 360;
 
 /// Pixels the spread depth reaches beyond the coarse depth's rim: a block's object pixels next
@@ -32,9 +38,10 @@ pub const COARSE_MIN_PIXELS: usize = 640 * 360;
 const RIM_PX: usize = 2;
 
 /// The warm start of a cold window of `inputs` (module docs): its reconstruction binned by
-/// [`COARSE_BIN`] spread over the frame, its stages added to `timings`; `None` below
-/// [`COARSE_MIN_PIXELS`], for inputs other than a decoded capture of the rig's frame, or when
-/// the binned window cannot be reconstructed.
+/// [`COARSE_BIN`] (coarse-started in turn when the binned frame is large enough) spread over
+/// the frame, its stages added to `timings` (each level's labelled "binned" once more);
+/// `None` below [`COARSE_MIN_PIXELS`], for inputs other than a decoded capture of the rig's
+/// frame, or when the binned window cannot be reconstructed.
 pub(super) fn start(
     inputs: &Inputs,
     rig: &Rig,
@@ -49,16 +56,12 @@ pub(super) fn start(
         return None;
     }
     let binned = bin_decoded(decoded, COARSE_BIN);
-    let binned_config = ReconstructConfig {
-        coarse_start: false,
-        ..config.clone()
-    };
     let binned_rig = rig.binned(COARSE_BIN);
     let coarse = super::reconstruct_inputs(
         &Inputs::Decoded(&binned),
         &binned_rig,
         None,
-        &binned_config,
+        config,
         None,
         super::ColdPasses::UntilSettled,
     )

@@ -31,11 +31,12 @@
 //! module `roi`; a decode's usable images are made for that region alone, module `inputs`) and
 //! pasted back into the full frame, or kept there for a caller that pastes only what it needs
 //! ([`from_decoded_extent`], [`Extent`]); an object that reaches the region's edge is
-//! reconstructed on the full frame instead. A window of `meb video` with nothing to start from (the first) starts
-//! from its own reconstruction binned 2×2 ([`ReconstructConfig::coarse_start`], module
-//! `coarse`; a window whose warm start strayed is redone that way too), and a
-//! window decoded only around the object is reconstructed there and kept there
-//! ([`from_decoded_region`], [`RegionReconstruction`]).
+//! reconstructed on the full frame instead. A window of `meb video` with nothing to start
+//! from (the first) starts from its own reconstruction binned 2×2, itself started the same
+//! way while large enough ([`ReconstructConfig::coarse_start`], module `coarse`; a window
+//! whose warm start strayed is redone that way too), and a window decoded only around the
+//! object is reconstructed there and kept there ([`from_decoded_region`],
+//! [`RegionReconstruction`]).
 //!
 //! Every result carries a verdict on whether its depth rests on what the LEDs measured (module
 //! `support`: enough of the surface lit by three or more LEDs, every part placed by its
@@ -146,8 +147,8 @@ pub struct ReconstructConfig {
     /// Half-width in mm of the search for the depth offset in near-field passes (0 = off).
     pub offset_search_mm: f64,
     /// Start a decoded capture of 640×360 pixels or more that has no warm start (or whose warm
-    /// start strayed) from its own reconstruction binned 2×2 instead of four cold passes at
-    /// full resolution (module `coarse`; `meb video`).
+    /// start strayed) from its own reconstruction binned 2×2 (started the same way while large
+    /// enough) instead of four cold passes at full resolution (module `coarse`; `meb video`).
     #[serde(default)]
     pub coarse_start: bool,
 }
