@@ -650,6 +650,24 @@ fn a_warm_started_window_equals_a_cold_one_on_a_still_object() {
     );
 }
 
+/// A decoded window reconstructed as `meb video` reconstructs its first window (coarse
+/// start) and cold.
+fn coarse_and_cold(
+    rig: &Rig,
+    config: &VideoConfig,
+    decoded: &meb::demod::Decoded,
+) -> (Reconstruction, Reconstruction) {
+    assert!(config.reconstruct.coarse_start, "meb video starts coarse");
+    let cold_config = ReconstructConfig {
+        coarse_start: false,
+        ..config.reconstruct.clone()
+    };
+    let cold = from_decoded(decoded, rig, None, &cold_config).unwrap();
+    assert_eq!(cold.start, Start::Cold);
+    let coarse = from_decoded(decoded, rig, None, &config.reconstruct).unwrap();
+    (coarse, cold)
+}
+
 /// Asserts that `coarse` kept its coarse start (two passes at most, moving under 1 mm from it)
 /// and has the shape of the `cold` reconstruction of the same window (within 0.1 mm RMS once
 /// the mean difference is removed, over 99 % of its pixels) at the same distance (the mean
@@ -701,14 +719,7 @@ fn assert_coarse_like_cold(
 fn a_coarse_started_window_equals_a_cold_one() {
     let tmp = tempfile::tempdir().unwrap();
     let (rig, config, decoded, clip) = still_window(tmp.path(), 640, 360);
-    let cold_config = ReconstructConfig {
-        coarse_start: false,
-        ..config.reconstruct.clone()
-    };
-    assert!(config.reconstruct.coarse_start, "meb video starts coarse");
-    let cold = from_decoded(&decoded, &rig, None, &cold_config).unwrap();
-    assert_eq!(cold.start, Start::Cold);
-    let coarse = from_decoded(&decoded, &rig, None, &config.reconstruct).unwrap();
+    let (coarse, cold) = coarse_and_cold(&rig, &config, &decoded);
     assert_coarse_like_cold(&coarse, &cold, &clip, 0.1);
     assert!(
         coarse.timings.iter().any(|t| t.stage.ends_with(", binned"))
@@ -752,12 +763,7 @@ fn a_coarse_started_window_equals_a_cold_one() {
 fn a_two_level_coarse_start_at_1280x720_equals_a_cold_one() {
     let tmp = tempfile::tempdir().unwrap();
     let (rig, config, decoded, clip) = still_window(tmp.path(), 1280, 720);
-    let cold_config = ReconstructConfig {
-        coarse_start: false,
-        ..config.reconstruct.clone()
-    };
-    let cold = from_decoded(&decoded, &rig, None, &cold_config).unwrap();
-    let coarse = from_decoded(&decoded, &rig, None, &config.reconstruct).unwrap();
+    let (coarse, cold) = coarse_and_cold(&rig, &config, &decoded);
     // One level already placed this window's surface 0.27 mm from the cold one; two, 0.39 mm.
     assert_coarse_like_cold(&coarse, &cold, &clip, 0.5);
     let stages = |level: &str| {
