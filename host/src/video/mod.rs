@@ -455,8 +455,8 @@ impl Try {
 ///
 /// Two stages overlap: a decoding thread (with a pool of its own, [`DECODING_THREADS`]) reads
 /// each window ([`FrameStream`]), decodes it with the carried timing ([`carry`]), measures its
-/// motion and, with [`MotionPolicy::Place`], places it; the calling thread reconstructs the
-/// chosen windows in order (each warm-started from the one before, in a pool on every core,
+/// motion and, with [`MotionPolicy::Place`], places it, and reads the truth for the chosen
+/// window; the calling thread reconstructs the chosen windows in order (each warm-started from the one before, in a pool on every core,
 /// [`stage_pool`]), scores them and hands them to `sink`. At most [`DECODED_AHEAD`] decoded
 /// windows wait between the two, so memory stays bounded by a few windows.
 pub fn process(
@@ -714,7 +714,7 @@ impl DecodeStage<'_> {
     /// Sends every window's chosen try to `sender`, with the truth for it when there is a
     /// `truth` source and the try decoded, until the stream ends, an error (sent too) or the
     /// reconstruction hangs up; returns where the stream was left. The truth is read here, off
-    /// the reconstruction's thread: reading a 1280×720 depth file took ≈ 3 ms of each window.
+    /// the reconstruction's thread: reading a 1280×720 depth file took ≈ 3–4 ms of each window.
     fn run(
         self,
         mut stream: FrameStream,
