@@ -428,15 +428,17 @@
 //! Session 42, on a machine ≈ 1.7× slower than session 41's (main's 22.2 3-D frames/s measured
 //! 7–13 on the same clip): the coarse start is a pyramid (a 1280×720 window starts from
 //! 320×180 through one warm pass at 640×360; the first window's binned stages ≈ 150–230 → ≈ 70
-//! ms, its whole reconstruction 323 → 268 ms, means of twelve runs), and each window's truth
-//! is read by the decoding stage and scored in one parallel pass without an error map.
-//! Twelve rounds alternated with main: 11.5 → 12.1 3-D frames/s (means; the runs spread
+//! ms, its whole reconstruction ≈ 340 → ≈ 270 ms, means of nineteen runs each), and each
+//! window's truth is read by the decoding stage and scored in one parallel pass without an
+//! error map. Throughput did not change measurably: 11.5 → 12.1 3-D frames/s over twelve
+//! rounds alternated with main, 10.85 → 10.96 over seven more (means; the runs spread
 //! 7.1–13.4). The per-window depth RMSE against the truth: median 0.6755 → 0.6837, mean 0.7416
 //! → 0.7448, worst 1.1949 → 1.1953 mm (the first window's surface lies 0.39 mm from the cold
 //! one's instead of 0.27 mm, and later windows start from it). The run is bound by the CPU as
-//! a whole (≈ 87 % of both cores busy): moving the truth's reading off the pipeline's thread
-//! shortened its serial path, but the reading now meets the reconstruction's parallel loops
-//! (median reconstruction per window 65.6 → 72.9 ms).
+//! a whole (≈ 87 % of both cores busy): reading the truth off the pipeline's thread shortened
+//! its serial path by the read (≈ 3–4 ms per window, 8–9 ms with the files out of the page
+//! cache), but the read now meets the reconstruction's parallel loops (median reconstruction
+//! per window ≈ 73 → ≈ 78 ms).
 use criterion::{BatchSize, Criterion, criterion_group, criterion_main};
 use meb::capture::binning::Binning;
 use meb::capture::memory::MemorySource;
