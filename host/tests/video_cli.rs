@@ -841,9 +841,9 @@ fn motion_is_found_while_the_object_turns_and_not_once_it_stops() {
     let rig = small_dynamic_rig(tmp.path());
     // 128 frames turning at 60 rpm in the image plane, then 128 frames still. The carriers'
     // code period is 32 frames, so the two clips join without a jump in the modulation.
-    let moving = ellipsoid(tmp.path(), &rig, "moving", 128, 60.0, "0,0,1");
+    let turning = ellipsoid(tmp.path(), &rig, "moving", 128, 60.0, "0,0,1");
     let still = ellipsoid(tmp.path(), &rig, "still", 128, 0.0, "0,1,0");
-    let a = std::fs::read(moving.join("capture.y4m")).unwrap();
+    let a = std::fs::read(turning.join("capture.y4m")).unwrap();
     let b = std::fs::read(still.join("capture.y4m")).unwrap();
     let header = b.iter().position(|&c| c == b'\n').unwrap() + 1;
     let joined = tmp.path().join("moves-then-stops.y4m");
@@ -892,9 +892,22 @@ fn motion_is_found_while_the_object_turns_and_not_once_it_stops() {
         assert!(f["motion"]["period_ratio"].is_null(), "{f:#}");
     }
 
+    // Skipping, scored against the joined clips' truth: a skipped window's truth is not
+    // even read (no time spent comparing), a reconstructed one's is.
+    let truth = tmp.path().join("joined-truth");
+    std::fs::create_dir(&truth).unwrap();
+    for (clip, first) in [(&turning, 0), (&still, 128)] {
+        for entry in std::fs::read_dir(clip.join("truth")).unwrap() {
+            let path = entry.unwrap().path();
+            let name = path.file_name().unwrap().to_str().unwrap();
+            let frame: usize = name[6..name.len() - 4].parse().unwrap();
+            std::fs::copy(&path, truth.join(format!("depth_{:05}.npy", first + frame))).unwrap();
+        }
+    }
     let out = tmp.path().join("skipped");
     let skipped: Vec<String> = args(&out, "skip").to_vec();
-    run_ok(&skipped.iter().map(String::as_str).collect::<Vec<_>>());
+    let scored = [&skipped[..], &["--ground-truth".into(), s(&truth)]].concat();
+    run_ok(&scored.iter().map(String::as_str).collect::<Vec<_>>());
     let json = video_json(&out);
     let status: Vec<&str> = frames(&json)
         .iter()
@@ -902,6 +915,14 @@ fn motion_is_found_while_the_object_turns_and_not_once_it_stops() {
         .collect();
     assert_eq!(status[..4], ["skipped"; 4]);
     assert_eq!(status[4..], ["reconstructed"; 4]);
+    for f in &frames(&json)[..4] {
+        assert_eq!(f["timing"]["compare_ms"], 0.0, "{f:#}");
+        assert!(f["accuracy"].is_null(), "{f:#}");
+    }
+    for f in &frames(&json)[4..] {
+        assert!(f["timing"]["compare_ms"].as_f64().unwrap() > 0.0, "{f:#}");
+        assert!(f["accuracy"]["rmse_mm"].as_f64().unwrap() < 2.0, "{f:#}");
+    }
     assert!(!out.join("depth_00000.npy").exists());
     assert!(out.join("depth_00004.npy").exists());
     assert_eq!(

@@ -448,6 +448,38 @@ impl Try {
     fn is_plausible(&self) -> bool {
         self.verdict == Some(WindowVerdict::Plausible)
     }
+
+    /// Whether the object moved during the try, by its motion estimate.
+    fn moving(&self) -> bool {
+        self.motion.is_some_and(|m| m.moving)
+    }
+
+    /// Why a decoded try is not reconstructed, if it is not: its verdict refuses it, or
+    /// `policy` skips it for motion.
+    fn left_out(&self, policy: MotionPolicy) -> Option<LeftOut> {
+        if self.verdict == Some(WindowVerdict::Refused) {
+            Some(LeftOut::Refused)
+        } else if policy == MotionPolicy::Skip && self.moving() {
+            Some(LeftOut::Skipped)
+        } else {
+            None
+        }
+    }
+
+    /// Whether the try goes on to a reconstruction: it decoded and is not left out
+    /// ([`Try::left_out`]). The decoding stage reads the truth only for such tries.
+    fn would_reconstruct(&self, policy: MotionPolicy) -> bool {
+        self.decode.decoded.is_ok() && self.left_out(policy).is_none()
+    }
+}
+
+/// Why [`reconstruct_window`] does not reconstruct a decoded try.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+enum LeftOut {
+    /// The decode is implausible and motion does not explain it.
+    Refused,
+    /// The object moved and the policy is [`MotionPolicy::Skip`].
+    Skipped,
 }
 
 /// Runs the video pipeline over `source` (module docs), calling `sink` with every window as
@@ -685,7 +717,8 @@ struct Chosen {
     camera_frames: usize,
     /// Camera frames in the stream, when known.
     total_frames: Option<usize>,
-    /// The true depth for the decoded frames, when there is truth and the decode succeeded.
+    /// The true depth for the decoded frames, when there is truth and the try goes on to a
+    /// reconstruction ([`Try::would_reconstruct`]).
     truth: Option<TruthDepth>,
 }
 
@@ -712,7 +745,7 @@ struct DecodeStage<'a> {
 
 impl DecodeStage<'_> {
     /// Sends every window's chosen try to `sender`, with the truth for it when there is a
-    /// `truth` source and the try decoded, until the stream ends, an error (sent too) or the
+    /// `truth` source and the try goes on to a reconstruction ([`Try::would_reconstruct`]), until the stream ends, an error (sent too) or the
     /// reconstruction hangs up; returns where the stream was left. The truth is read here, off
     /// the reconstruction's thread: reading a 1280×720 depth file took ≈ 3–4 ms of each window.
     fn run(
@@ -734,7 +767,9 @@ impl DecodeStage<'_> {
                 self.window(&mut stream, &mut carry, &mut focus, k)
             };
             let window = window.and_then(|chosen| match (chosen, truth.as_deref_mut()) {
-                (Some(mut chosen), Some(truth)) if chosen.attempt.decode.decoded.is_ok() => {
+                (Some(mut chosen), Some(truth))
+                    if chosen.attempt.would_reconstruct(self.config.motion.policy) =>
+                {
                     let time = Instant::now();
                     chosen.truth =
                         truth.depth_for(chosen.attempt.decoded_frames(&self.schedule))?;
@@ -987,6 +1022,7 @@ fn reconstruct_window(
         accuracy: None,
         timing: FrameTiming::default(),
     };
+    let (moving, left_out) = (chosen.moving(), chosen.left_out(config.motion.policy));
     let decoded = match chosen.decode.decoded {
         Ok(decoded) => decoded,
         Err(error) => {
@@ -1021,22 +1057,6 @@ fn reconstruct_window(
             rig.camera.width, rig.camera.height, shape.1, shape.0
         )));
     }
-    if chosen.verdict == Some(WindowVerdict::Refused) {
-        let verdict = &decoded.report.verdict;
-        record.reason = Some(format!(
-            "the decode is implausible and the window's motion does not explain it: {} (try: \
-             {}; --force keeps such windows)",
-            verdict.problems.join("; "),
-            verdict.advice.join("; ")
-        ));
-        record.timing = timing;
-        return Ok(Outcome {
-            record,
-            decoded: Some(decoded),
-            reconstruction: None,
-        });
-    }
-    let moving = chosen.motion.is_some_and(|m| m.moving);
     record.reason = match (moving, chosen.verdict) {
         (_, Some(WindowVerdict::Forced)) => Some(format!(
             "the decode is implausible ({}) and was kept on request (--force)",
@@ -1050,8 +1070,19 @@ fn reconstruct_window(
         (true, _) => Some("the object moved during the window".into()),
         (false, _) => None,
     };
-    if config.motion.policy == MotionPolicy::Skip && moving {
-        record.status = FrameStatus::Skipped;
+    if let Some(left_out) = left_out {
+        match left_out {
+            LeftOut::Refused => {
+                let verdict = &decoded.report.verdict;
+                record.reason = Some(format!(
+                    "the decode is implausible and the window's motion does not explain it: {} \
+                     (try: {}; --force keeps such windows)",
+                    verdict.problems.join("; "),
+                    verdict.advice.join("; ")
+                ));
+            }
+            LeftOut::Skipped => record.status = FrameStatus::Skipped,
+        }
         record.timing = timing;
         return Ok(Outcome {
             record,
