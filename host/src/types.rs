@@ -19,6 +19,21 @@ impl LedImages {
     pub fn shape(&self) -> Option<(usize, usize)> {
         self.images.first().map(|im| im.dim())
     }
+
+    /// The brightest LED's value at each pixel of row `r`, written to `out` (one value per
+    /// column): the maximum over the LED images, NaN values ignored (−∞ where every image
+    /// is NaN or there is none). Contiguous rows are read as slices, which the compiler
+    /// vectorises.
+    pub fn brightest_in_row(&self, r: usize, out: &mut [f32]) {
+        out.fill(f32::NEG_INFINITY);
+        for image in &self.images {
+            let row = image.row(r);
+            match row.as_slice() {
+                Some(values) => out.iter_mut().zip(values).for_each(|(b, &v)| *b = b.max(v)),
+                None => out.iter_mut().zip(&row).for_each(|(b, &v)| *b = b.max(v)),
+            }
+        }
+    }
 }
 
 /// Unit surface normals and albedo per pixel.
@@ -130,5 +145,40 @@ impl ConfidenceCounts {
         } else {
             self.measured as f64 / reconstructed as f64
         }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// The brightest value ignores NaN images, is −∞ where all are NaN, and reads a
+    /// column-major image (rows not contiguous) as a row-major one.
+    #[test]
+    fn the_brightest_led_of_a_row_ignores_nan_and_any_layout() {
+        let a =
+            Array2::from_shape_vec((2, 3), vec![0.1, f32::NAN, 0.5, 0.2, f32::NAN, 0.0]).unwrap();
+        let b = Array2::from_shape_vec((2, 3), vec![0.3, f32::NAN, 0.4, 0.1, 0.7, -1.0]).unwrap();
+        let column_major = b
+            .clone()
+            .reversed_axes()
+            .as_standard_layout()
+            .t()
+            .to_owned();
+        assert!(column_major.row(0).as_slice().is_none());
+        let mut out = [0.0f32; 3];
+        for second in [b, column_major] {
+            let images = LedImages {
+                images: vec![a.clone(), second],
+            };
+            images.brightest_in_row(0, &mut out);
+            assert_eq!(out[0], 0.3);
+            assert_eq!(out[1], f32::NEG_INFINITY);
+            assert_eq!(out[2], 0.5);
+            images.brightest_in_row(1, &mut out);
+            assert_eq!(out, [0.2, 0.7, 0.0]);
+        }
+        LedImages { images: Vec::new() }.brightest_in_row(0, &mut out);
+        assert_eq!(out, [f32::NEG_INFINITY; 3]);
     }
 }

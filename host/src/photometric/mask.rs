@@ -201,19 +201,17 @@ fn found_over_noise(
     flat.par_chunks_mut(cols.max(1))
         .enumerate()
         .with_min_len(ROWS_PER_TASK)
-        .for_each(|(r, inside)| {
-            let image_rows: Vec<_> = images.images.iter().map(|im| im.row(r)).collect();
+        .for_each_init(Vec::new, |brightest, (r, inside)| {
+            brightest.resize(inside.len(), 0.0);
+            images.brightest_in_row(r, brightest);
             let (outcome, albedo, noise) = (outcome.row(r), albedo.row(r), noise.row(r));
             for (c, inside) in inside.iter_mut().enumerate() {
                 let Some(albedo_ok) = albedo_passes(outcome[c], albedo[c], albedo_ref, config)
                 else {
                     continue;
                 };
-                let brightest = image_rows
-                    .iter()
-                    .fold(f32::NEG_INFINITY, |b, image| b.max(image[c]));
                 *inside = albedo_ok
-                    && brightest >= config.snr_threshold * noise[c].max(f32::MIN_POSITIVE);
+                    && brightest[c] >= config.snr_threshold * noise[c].max(f32::MIN_POSITIVE);
             }
         });
     object

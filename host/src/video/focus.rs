@@ -116,26 +116,29 @@ fn lit_pixels(decoded: &Decoded, config: &MaskConfig) -> Array2<bool> {
     let Some(flat) = lit.as_slice_mut() else {
         unreachable!("a new array is in standard layout")
     };
-    let images = &decoded.leds.images;
+    let threshold = config.snr_threshold * factor;
     flat.par_chunks_mut(cols.max(1))
         .enumerate()
         .with_min_len(ROWS_PER_TASK)
-        .for_each(|(r, row)| {
-            let image_rows: Vec<_> = images.iter().map(|im| im.row(r)).collect();
-            let noise = decoded.noise.row(r);
-            for (c, lit) in row.iter_mut().enumerate() {
-                let brightest = image_rows
-                    .iter()
-                    .fold(f32::NEG_INFINITY, |b, image| b.max(image[c]));
-                // NaN σ or levels fail the comparison: not lit.
-                *lit = brightest >= config.snr_threshold * factor * noise[c];
+        .for_each_init(Vec::new, |brightest, (r, row)| {
+            brightest.resize(row.len(), 0.0);
+            decoded.leds.brightest_in_row(r, brightest);
+            // NaN σ or levels fail the comparison: not lit.
+            for ((lit, &b), &noise) in row
+                .iter_mut()
+                .zip(brightest.iter())
+                .zip(&decoded.noise.row(r))
+            {
+                *lit = b >= threshold * noise;
             }
         });
     lit
 }
 
 /// Rows and columns holding a set pixel of `mask` (`None`: none is set).
-fn bounds(mask: &Array2<bool>) -> Option<(std::ops::Range<usize>, std::ops::Range<usize>)> {
+pub(super) fn bounds(
+    mask: &Array2<bool>,
+) -> Option<(std::ops::Range<usize>, std::ops::Range<usize>)> {
     let spans: Vec<(usize, usize, usize)> = mask
         .outer_iter()
         .enumerate()
