@@ -7,11 +7,13 @@
 //! left shoulder. Frames are drawn at an integer fraction of the camera's resolution (every
 //! f-th pixel), with even sizes as H.264's 4:2:0 sampling needs.
 
+use super::focus::bounds;
 use crate::export::files::colour::ramp;
 use crate::export::files::preview::NO_DATA;
 use crate::metrics::normals_from_depth;
 use image::{Rgb, RgbImage};
 use ndarray::{Array2, s};
+use std::ops::Range;
 
 /// Size of the output pictures for a camera of `width` × `height`.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
@@ -50,37 +52,60 @@ impl PictureSize {
     }
 }
 
-/// Depth between `lo` and `hi` mm through the colour ramp; no data is dark grey.
-pub fn depth_picture(depth: &Array2<f32>, size: PictureSize, lo: f32, hi: f32) -> RgbImage {
+/// The sampled depth of a picture and the box of its finite values (rows, columns): the
+/// object fills a tenth of a video frame, and only the box is drawn, on a no-data picture.
+fn sampled_object(
+    depth: &Array2<f32>,
+    size: PictureSize,
+) -> Option<(Array2<f32>, Range<usize>, Range<usize>)> {
     let sampled = size.sample(depth);
-    let span = (hi - lo).max(f32::MIN_POSITIVE);
-    RgbImage::from_fn(size.width as u32, size.height as u32, |c, r| {
-        let z = sampled[(r as usize, c as usize)];
-        if z.is_finite() {
-            ramp((z - lo) / span)
-        } else {
-            NO_DATA
-        }
-    })
+    let (rows, cols) = bounds(&sampled.mapv(f32::is_finite))?;
+    let object = sampled.slice(s![rows.clone(), cols.clone()]).to_owned();
+    Some((object, rows, cols))
 }
 
-/// The surface of `depth` (grid pitch `pitch_mm`) shaded from the camera's viewpoint.
+/// Depth between `lo` and `hi` mm through the colour ramp; no data is dark grey.
+pub fn depth_picture(depth: &Array2<f32>, size: PictureSize, lo: f32, hi: f32) -> RgbImage {
+    let mut picture = blank_picture(size);
+    let Some((object, rows, cols)) = sampled_object(depth, size) else {
+        return picture;
+    };
+    let span = (hi - lo).max(f32::MIN_POSITIVE);
+    for ((r, c), &z) in object.indexed_iter() {
+        if z.is_finite() {
+            picture.put_pixel(
+                (cols.start + c) as u32,
+                (rows.start + r) as u32,
+                ramp((z - lo) / span),
+            );
+        }
+    }
+    picture
+}
+
+/// The surface of `depth` (grid pitch `pitch_mm`) shaded from the camera's viewpoint. The
+/// normals are those of the object's box alone: a neighbour beyond it is no data either way,
+/// so they equal the whole picture's.
 pub fn shaded_picture(depth: &Array2<f32>, pitch_mm: f64, size: PictureSize) -> RgbImage {
-    let sampled = size.sample(depth);
-    let normals = normals_from_depth(&sampled, pitch_mm * size.factor as f64);
+    let mut picture = blank_picture(size);
+    let Some((object, rows, cols)) = sampled_object(depth, size) else {
+        return picture;
+    };
+    let normals = normals_from_depth(&object, pitch_mm * size.factor as f64);
     let light = [-0.4f32, 0.5, 1.0];
     let norm = light.iter().map(|v| v * v).sum::<f32>().sqrt();
     let light = light.map(|v| v / norm);
-    RgbImage::from_fn(size.width as u32, size.height as u32, |c, r| {
-        let (r, c) = (r as usize, c as usize);
+    for (r, c) in ndarray::indices(object.dim()) {
         let n = [0, 1, 2].map(|j| normals[(r, c, j)]);
         if n.iter().any(|v| !v.is_finite()) {
-            return NO_DATA;
+            continue;
         }
         let lambert: f32 = n.iter().zip(&light).map(|(a, b)| a * b).sum();
         let shade = 0.15 + 0.85 * lambert.max(0.0);
-        Rgb([215.0, 205.0, 190.0].map(|v: f32| (v * shade).round() as u8))
-    })
+        let colour = Rgb([215.0, 205.0, 190.0].map(|v: f32| (v * shade).round() as u8));
+        picture.put_pixel((cols.start + c) as u32, (rows.start + r) as u32, colour);
+    }
+    picture
 }
 
 /// A picture with no data (a window without a reconstruction).
@@ -110,6 +135,53 @@ mod tests {
                 f32::NAN
             }
         })
+    }
+
+    /// The shaded picture drawn whole, as before pictures were drawn in the object's box.
+    fn shaded_whole(depth: &Array2<f32>, pitch_mm: f64, size: PictureSize) -> RgbImage {
+        let normals = normals_from_depth(&size.sample(depth), pitch_mm * size.factor as f64);
+        let light = [-0.4f32, 0.5, 1.0];
+        let norm = light.iter().map(|v| v * v).sum::<f32>().sqrt();
+        let light = light.map(|v| v / norm);
+        RgbImage::from_fn(size.width as u32, size.height as u32, |c, r| {
+            let n = [0, 1, 2].map(|j| normals[(r as usize, c as usize, j)]);
+            if n.iter().any(|v| !v.is_finite()) {
+                return NO_DATA;
+            }
+            let lambert: f32 = n.iter().zip(&light).map(|(a, b)| a * b).sum();
+            let shade = 0.15 + 0.85 * lambert.max(0.0);
+            Rgb([215.0, 205.0, 190.0].map(|v: f32| (v * shade).round() as u8))
+        })
+    }
+
+    /// Drawn in the object's box, the pictures equal the whole picture's: for the dome, an
+    /// object touching the frame's corner with a lone pixel apart, at full size and every
+    /// third pixel, and for no object at all.
+    #[test]
+    fn pictures_drawn_in_the_object_box_equal_whole_ones() {
+        let mut cornered = dome().slice(s![20.., 25..]).to_owned();
+        cornered[(0, 55)] = 3.0;
+        let empty = Array2::from_elem((61, 81), f32::NAN);
+        for depth in [dome(), cornered, empty] {
+            let (height, width) = depth.dim();
+            for max_width in [0, 30] {
+                let size = PictureSize::fit(width, height, max_width);
+                assert_eq!(
+                    shaded_picture(&depth, 0.7, size),
+                    shaded_whole(&depth, 0.7, size)
+                );
+                let sampled = size.sample(&depth);
+                let whole = RgbImage::from_fn(size.width as u32, size.height as u32, |c, r| {
+                    let z = sampled[(r as usize, c as usize)];
+                    if z.is_finite() {
+                        ramp(z / 25.0)
+                    } else {
+                        NO_DATA
+                    }
+                });
+                assert_eq!(depth_picture(&depth, size, 0.0, 25.0), whole);
+            }
+        }
     }
 
     #[test]
