@@ -439,6 +439,22 @@
 //! its serial path by the read (≈ 3–4 ms per window, 8–9 ms with the files out of the page
 //! cache), but the read now meets the reconstruction's parallel loops (median reconstruction
 //! per window ≈ 73 → ≈ 78 ms).
+//!
+//! Session 43 (callgrind instruction counts: the wall clock of this machine drifted by 1.5×
+//! within the session). Main's whole 2000-frame run: 29.8 G instructions, 595 M per window;
+//! reconstruction 60 % (integration 31 %, photometric stereo 15 %, depth-offset search 12 %),
+//! decoding stage 26 % (the decoder 19.5 %, of it the LED-count probe 9.6 %; the focus's lit
+//! test 4.7 %), the scores against the truth 5.8 %, the writer 5.7 %. Three costs proportional
+//! to the whole frame rather than the object were cut, results unchanged (same per-window
+//! RMSE to 10⁻⁴ mm): the score reads rows as slices instead of through `ArrayView1`
+//! iterators, the lit test and the object mask share a vectorised brightest-LED row kernel
+//! (`LedImages::brightest_in_row`), and the two output pictures are drawn in the object's box.
+//! The first 480 frames (12 windows): 9.10 G → 8.33 G instructions (−8.4 %): score 281 → 97 M,
+//! lit test 568 → 334 M (171 M of it the speck removal), pictures 360 → 223 M. Five rounds
+//! alternated with main on the whole clip: 8.9 → 9.8 3-D frames/s, CPU 9.8 → 9.2 s per run
+//! (means, on the slow machine). Not kept: skipping the LED-count probe in region windows
+//! saved only 0.6 % — the probe's 5-LED fit (300 M over the run) had seeded the 4-LED fit, and
+//! the fit without it cost 241 M.
 use criterion::{BatchSize, Criterion, criterion_group, criterion_main};
 use meb::capture::binning::Binning;
 use meb::capture::memory::MemorySource;
