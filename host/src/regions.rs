@@ -1,5 +1,5 @@
-//! Connected regions of pixel masks (4-connectivity): labelling, dropping small pieces and finding
-//! the holes a mask encloses. Shared by the object mask of photometric stereo and the per-piece
+//! Connected regions of pixel masks (4-connectivity): labelling, dropping small pieces, finding
+//! the holes a mask encloses, and a mask's bounding box. Shared by the object mask of photometric stereo and the per-piece
 //! integration of normals, so neither depends on the other.
 
 use ndarray::Array2;
@@ -138,6 +138,25 @@ fn root(parent: &mut [u32], mut i: u32) -> u32 {
     i
 }
 
+/// Rows and columns holding a set pixel of `mask` (`None`: none is set).
+pub fn bounding_box(
+    mask: &Array2<bool>,
+) -> Option<(std::ops::Range<usize>, std::ops::Range<usize>)> {
+    let spans: Vec<(usize, usize, usize)> = mask
+        .outer_iter()
+        .enumerate()
+        .filter_map(|(r, row)| {
+            let first = row.iter().position(|&m| m)?;
+            let last = row.iter().rposition(|&m| m).unwrap_or(first);
+            Some((r, first, last))
+        })
+        .collect();
+    let (top, bottom) = (spans.first()?.0, spans.last()?.0);
+    let left = spans.iter().map(|s| s.1).min()?;
+    let right = spans.iter().map(|s| s.2).max()?;
+    Some((top..bottom + 1, left..right + 1))
+}
+
 /// Clears the regions of `mask` with fewer than `min_pixels` pixels.
 pub fn remove_small(mask: &mut Array2<bool>, min_pixels: usize) {
     let regions = label(mask);
@@ -168,6 +187,16 @@ pub fn enclosed_holes(mask: &Array2<bool>, max_pixels: usize) -> Array2<bool> {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// The box spans the extreme rows and columns of any set pixel; an empty mask has none.
+    #[test]
+    fn the_bounding_box_holds_every_set_pixel() {
+        let mut mask = Array2::from_elem((6, 9), false);
+        assert_eq!(bounding_box(&mask), None);
+        mask[(1, 7)] = true;
+        mask[(4, 2)] = true;
+        assert_eq!(bounding_box(&mask), Some((1..5, 2..8)));
+    }
 
     /// A ring (with a 3×3 hole) and a separate 2-pixel bar, on an 8×10 grid.
     fn ring_and_bar() -> Array2<bool> {

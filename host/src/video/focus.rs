@@ -27,7 +27,7 @@
 
 use crate::demod::{Decoded, Roi};
 use crate::photometric::MaskConfig;
-use crate::regions::remove_small;
+use crate::regions::{bounding_box, remove_small};
 use ndarray::Array2;
 use rayon::prelude::*;
 
@@ -80,14 +80,14 @@ pub fn lit_box(
         reaches_edge: false,
     };
     // Specks are removed inside the box of every lit pixel, which holds them all.
-    let Some((outer_rows, outer_cols)) = bounds(&lit) else {
+    let Some((outer_rows, outer_cols)) = bounding_box(&lit) else {
         return none;
     };
     let mut inner = lit
         .slice(ndarray::s![outer_rows.clone(), outer_cols.clone()])
         .to_owned();
     remove_small(&mut inner, config.min_component_pixels);
-    let Some((rows, cols)) = bounds(&inner) else {
+    let Some((rows, cols)) = bounding_box(&inner) else {
         return none;
     };
     let rows = rows.start + outer_rows.start..rows.end + outer_rows.start;
@@ -133,25 +133,6 @@ fn lit_pixels(decoded: &Decoded, config: &MaskConfig) -> Array2<bool> {
             }
         });
     lit
-}
-
-/// Rows and columns holding a set pixel of `mask` (`None`: none is set).
-pub(super) fn bounds(
-    mask: &Array2<bool>,
-) -> Option<(std::ops::Range<usize>, std::ops::Range<usize>)> {
-    let spans: Vec<(usize, usize, usize)> = mask
-        .outer_iter()
-        .enumerate()
-        .filter_map(|(r, row)| {
-            let first = row.iter().position(|&m| m)?;
-            let last = row.iter().rposition(|&m| m).unwrap_or(first);
-            Some((r, first, last))
-        })
-        .collect();
-    let (top, bottom) = (spans.first()?.0, spans.last()?.0);
-    let left = spans.iter().map(|s| s.1).min()?;
-    let right = spans.iter().map(|s| s.2).max()?;
-    Some((top..bottom + 1, left..right + 1))
 }
 
 /// `lit` grown by `margin` pixels on every side and clipped to a `frame` (width, height);

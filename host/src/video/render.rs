@@ -7,10 +7,10 @@
 //! left shoulder. Frames are drawn at an integer fraction of the camera's resolution (every
 //! f-th pixel), with even sizes as H.264's 4:2:0 sampling needs.
 
-use super::focus::bounds;
 use crate::export::files::colour::ramp;
 use crate::export::files::preview::NO_DATA;
 use crate::metrics::normals_from_depth;
+use crate::regions::bounding_box;
 use image::{Rgb, RgbImage};
 use ndarray::{Array2, s};
 use std::ops::Range;
@@ -59,7 +59,7 @@ fn sampled_object(
     size: PictureSize,
 ) -> Option<(Array2<f32>, Range<usize>, Range<usize>)> {
     let sampled = size.sample(depth);
-    let (rows, cols) = bounds(&sampled.mapv(f32::is_finite))?;
+    let (rows, cols) = bounding_box(&sampled.mapv(f32::is_finite))?;
     let object = sampled.slice(s![rows.clone(), cols.clone()]).to_owned();
     Some((object, rows, cols))
 }
