@@ -1,6 +1,7 @@
 //! Connected regions of pixel masks (4-connectivity): labelling, dropping small pieces, finding
-//! the holes a mask encloses, and a mask's bounding box. Shared by the object mask of photometric stereo and the per-piece
-//! integration of normals, so neither depends on the other.
+//! the holes a mask encloses, and a mask's bounding box. Shared by the object mask of
+//! photometric stereo, the per-piece integration of normals and the video's focus and
+//! pictures, so none depends on another.
 
 use ndarray::Array2;
 use std::borrow::Cow;

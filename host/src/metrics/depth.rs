@@ -311,21 +311,18 @@ mod tests {
             "uniform ±2 mm noise"
         );
         // Arrays in column-major layout (rows not contiguous: copied) score the same pixels.
-        let columns = |a: &Array2<f32>| {
+        fn column_major<T: Clone>(a: &Array2<T>) -> Array2<T> {
             a.clone()
                 .reversed_axes()
                 .as_standard_layout()
                 .t()
                 .to_owned()
-        };
-        let transposed = |a: &Array2<bool>| {
-            a.clone()
-                .reversed_axes()
-                .as_standard_layout()
-                .t()
-                .to_owned()
-        };
-        let (e, t, s) = (columns(&estimate), columns(&truth), transposed(&surface));
+        }
+        let (e, t, s) = (
+            column_major(&estimate),
+            column_major(&truth),
+            column_major(&surface),
+        );
         assert!(e.as_slice().is_none() && e.row(0).as_slice().is_none());
         let strided = score_depth(&e, &t, Some(&s)).unwrap();
         assert_eq!(strided.compared_pixels, pairs.len());

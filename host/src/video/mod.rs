@@ -745,9 +745,10 @@ struct DecodeStage<'a> {
 
 impl DecodeStage<'_> {
     /// Sends every window's chosen try to `sender`, with the truth for it when there is a
-    /// `truth` source and the try goes on to a reconstruction ([`Try::would_reconstruct`]), until the stream ends, an error (sent too) or the
-    /// reconstruction hangs up; returns where the stream was left. The truth is read here, off
-    /// the reconstruction's thread: reading a 1280×720 depth file took ≈ 3–4 ms of each window.
+    /// `truth` source and the try goes on to a reconstruction ([`Try::would_reconstruct`]),
+    /// until the stream ends, an error (sent too) or the reconstruction hangs up; returns
+    /// where the stream was left. The truth is read here, off the reconstruction's thread:
+    /// reading a 1280×720 depth file took ≈ 3–4 ms of each window.
     fn run(
         self,
         mut stream: FrameStream,
