@@ -18,7 +18,7 @@
 //! waits for, has only `video.json` and the videos left.
 
 use super::encode::{VideoContainer, VideoEncoder};
-use super::render::{PictureSize, blank_picture, depth_picture, depth_range, shaded_picture};
+use super::render::{PictureSize, blank_picture, depth_range, pictures};
 use super::{FrameRecord, FrameStatus, FrameTiming, VideoError, VideoFrame, VideoSummary};
 use crate::export::files::{FilesError, write_npy_synced};
 use ndarray::{Array2, Array3};
@@ -218,10 +218,8 @@ impl VideoOutput {
                     self.range = depth_range(depth);
                 }
                 let (lo, hi) = self.range.unwrap_or((0.0, 1.0));
-                self.videos.push(&[
-                    &depth_picture(depth, self.size, lo, hi),
-                    &shaded_picture(depth, self.pitch_mm, self.size),
-                ])?;
+                let drawn = pictures(depth, self.size, self.pitch_mm, lo, hi);
+                self.videos.push(&[&drawn.depth, &drawn.shaded])?;
                 self.written += 1;
             }
             None => {

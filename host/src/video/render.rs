@@ -52,50 +52,85 @@ impl PictureSize {
     }
 }
 
-/// The sampled depth of a picture and the box of its finite values (rows, columns): the
-/// object fills a tenth of a video frame, and only the box is drawn, on a no-data picture.
-fn sampled_object(
+/// The sampled depth of a picture inside the box of its finite values: the object fills a
+/// tenth of a video frame, and only the box is drawn, on a no-data picture.
+struct SampledObject {
+    depth: Array2<f32>,
+    rows: Range<usize>,
+    cols: Range<usize>,
+}
+
+impl SampledObject {
+    /// The object in `depth` as drawn at `size`; `None` when no pixel has data.
+    fn of(depth: &Array2<f32>, size: PictureSize) -> Option<Self> {
+        let sampled = size.sample(depth);
+        let (rows, cols) = bounding_box(&sampled.mapv(f32::is_finite))?;
+        let depth = sampled.slice(s![rows.clone(), cols.clone()]).to_owned();
+        Some(Self { depth, rows, cols })
+    }
+
+    /// Sets the picture's pixel at the object's `(r, c)`.
+    fn put(&self, picture: &mut RgbImage, (r, c): (usize, usize), colour: Rgb<u8>) {
+        picture.put_pixel(
+            (self.cols.start + c) as u32,
+            (self.rows.start + r) as u32,
+            colour,
+        );
+    }
+}
+
+/// The two pictures of one 3-D frame, drawn from one sampling of its depth.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Pictures {
+    /// Depth through the colour ramp ([`depth_picture`]).
+    pub depth: RgbImage,
+    /// The surface shaded from the camera's viewpoint ([`shaded_picture`]).
+    pub shaded: RgbImage,
+}
+
+/// Both pictures of `depth` (grid pitch `pitch_mm`), coloured between `lo` and `hi` mm.
+pub fn pictures(
     depth: &Array2<f32>,
     size: PictureSize,
-) -> Option<(Array2<f32>, Range<usize>, Range<usize>)> {
-    let sampled = size.sample(depth);
-    let (rows, cols) = bounding_box(&sampled.mapv(f32::is_finite))?;
-    let object = sampled.slice(s![rows.clone(), cols.clone()]).to_owned();
-    Some((object, rows, cols))
+    pitch_mm: f64,
+    lo: f32,
+    hi: f32,
+) -> Pictures {
+    let object = SampledObject::of(depth, size);
+    Pictures {
+        depth: depth_picture(object.as_ref(), size, lo, hi),
+        shaded: shaded_picture(object.as_ref(), pitch_mm, size),
+    }
 }
 
 /// Depth between `lo` and `hi` mm through the colour ramp; no data is dark grey.
-pub fn depth_picture(depth: &Array2<f32>, size: PictureSize, lo: f32, hi: f32) -> RgbImage {
+fn depth_picture(object: Option<&SampledObject>, size: PictureSize, lo: f32, hi: f32) -> RgbImage {
     let mut picture = blank_picture(size);
-    let Some((object, rows, cols)) = sampled_object(depth, size) else {
+    let Some(object) = object else {
         return picture;
     };
     let span = (hi - lo).max(f32::MIN_POSITIVE);
-    for ((r, c), &z) in object.indexed_iter() {
+    for (p, &z) in object.depth.indexed_iter() {
         if z.is_finite() {
-            picture.put_pixel(
-                (cols.start + c) as u32,
-                (rows.start + r) as u32,
-                ramp((z - lo) / span),
-            );
+            object.put(&mut picture, p, ramp((z - lo) / span));
         }
     }
     picture
 }
 
-/// The surface of `depth` (grid pitch `pitch_mm`) shaded from the camera's viewpoint. The
-/// normals are those of the object's box alone: a neighbour beyond it is no data either way,
-/// so they equal the whole picture's.
-pub fn shaded_picture(depth: &Array2<f32>, pitch_mm: f64, size: PictureSize) -> RgbImage {
+/// The surface (grid pitch `pitch_mm`) shaded from the camera's viewpoint. The normals are
+/// those of the object's box alone: a neighbour beyond it is no data either way, so they equal
+/// the whole picture's.
+fn shaded_picture(object: Option<&SampledObject>, pitch_mm: f64, size: PictureSize) -> RgbImage {
     let mut picture = blank_picture(size);
-    let Some((object, rows, cols)) = sampled_object(depth, size) else {
+    let Some(object) = object else {
         return picture;
     };
-    let normals = normals_from_depth(&object, pitch_mm * size.factor as f64);
+    let normals = normals_from_depth(&object.depth, pitch_mm * size.factor as f64);
     let light = [-0.4f32, 0.5, 1.0];
     let norm = light.iter().map(|v| v * v).sum::<f32>().sqrt();
     let light = light.map(|v| v / norm);
-    for (r, c) in ndarray::indices(object.dim()) {
+    for (r, c) in ndarray::indices(object.depth.dim()) {
         let n = [0, 1, 2].map(|j| normals[(r, c, j)]);
         if n.iter().any(|v| !v.is_finite()) {
             continue;
@@ -103,7 +138,7 @@ pub fn shaded_picture(depth: &Array2<f32>, pitch_mm: f64, size: PictureSize) -> 
         let lambert: f32 = n.iter().zip(&light).map(|(a, b)| a * b).sum();
         let shade = 0.15 + 0.85 * lambert.max(0.0);
         let colour = Rgb([215.0, 205.0, 190.0].map(|v: f32| (v * shade).round() as u8));
-        picture.put_pixel((cols.start + c) as u32, (rows.start + r) as u32, colour);
+        object.put(&mut picture, (r, c), colour);
     }
     picture
 }
@@ -166,10 +201,8 @@ mod tests {
             let (height, width) = depth.dim();
             for max_width in [0, 30] {
                 let size = PictureSize::fit(width, height, max_width);
-                assert_eq!(
-                    shaded_picture(&depth, 0.7, size),
-                    shaded_whole(&depth, 0.7, size)
-                );
+                let drawn = pictures(&depth, size, 0.7, 0.0, 25.0);
+                assert_eq!(drawn.shaded, shaded_whole(&depth, 0.7, size));
                 let sampled = size.sample(&depth);
                 let whole = RgbImage::from_fn(size.width as u32, size.height as u32, |c, r| {
                     let z = sampled[(r as usize, c as usize)];
@@ -179,7 +212,7 @@ mod tests {
                         NO_DATA
                     }
                 });
-                assert_eq!(depth_picture(&depth, size, 0.0, 25.0), whole);
+                assert_eq!(drawn.depth, whole);
             }
         }
     }
@@ -209,15 +242,17 @@ mod tests {
     fn the_dome_is_lit_from_the_upper_left_and_coloured_by_height() {
         let depth = dome();
         let size = PictureSize::fit(81, 61, 0);
-        let shaded = shaded_picture(&depth, 1.0, size);
+        let (lo, hi) = depth_range(&depth).unwrap();
+        assert!(lo < 1.0 && hi > 25.0);
+        let Pictures {
+            depth: coloured,
+            shaded,
+        } = pictures(&depth, size, 1.0, 0.0, 25.0);
         // Upper-left flank faces the light, lower-right flank faces away.
         let lit = shaded.get_pixel(30, 20).0[0];
         let dark = shaded.get_pixel(50, 40).0[0];
         assert!(lit > dark + 40, "{lit} vs {dark}");
         assert_eq!(*shaded.get_pixel(0, 0), NO_DATA);
-        let (lo, hi) = depth_range(&depth).unwrap();
-        assert!(lo < 1.0 && hi > 25.0);
-        let coloured = depth_picture(&depth, size, 0.0, 25.0);
         assert_eq!(*coloured.get_pixel(40, 30), ramp(1.0));
         assert_eq!(*coloured.get_pixel(0, 0), NO_DATA);
         assert_eq!(blank_picture(size).dimensions(), (80, 60));
