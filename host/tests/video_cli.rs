@@ -12,6 +12,7 @@ use meb::reconstruct::{
     from_decoded, from_decoded_region, from_decoded_warm,
 };
 use meb::rig::Rig;
+use meb::video::truth::TruthFolder;
 use meb::video::{FrameStatus, TimingSource, VideoConfig, WindowSchedule, process};
 use ndarray::{Array2, Array3};
 use std::path::{Path, PathBuf};
@@ -897,11 +898,9 @@ fn motion_is_found_while_the_object_turns_and_not_once_it_stops() {
     let truth = tmp.path().join("joined-truth");
     std::fs::create_dir(&truth).unwrap();
     for (clip, first) in [(&turning, 0), (&still, 128)] {
-        for entry in std::fs::read_dir(clip.join("truth")).unwrap() {
-            let path = entry.unwrap().path();
-            let name = path.file_name().unwrap().to_str().unwrap();
-            let frame: usize = name[6..name.len() - 4].parse().unwrap();
-            std::fs::copy(&path, truth.join(format!("depth_{:05}.npy", first + frame))).unwrap();
+        let files = TruthFolder::open(&clip.join("truth"), (90, 160)).unwrap();
+        for (frame, path) in files.files() {
+            std::fs::copy(path, truth.join(format!("depth_{:05}.npy", first + frame))).unwrap();
         }
     }
     let out = tmp.path().join("skipped");

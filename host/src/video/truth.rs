@@ -82,9 +82,12 @@ impl TruthFolder {
         Err(missing())
     }
 
-    /// Camera frames that have a truth file (empty for a still scene).
-    pub fn frames(&self) -> Vec<usize> {
-        self.files.iter().filter_map(|(f, _)| *f).collect()
+    /// The camera frames that have a truth file and their files, in frame order (none for a
+    /// still scene).
+    pub fn files(&self) -> impl Iterator<Item = (usize, &Path)> {
+        self.files
+            .iter()
+            .filter_map(|(f, path)| Some((f.as_ref().copied()?, path.as_path())))
     }
 }
 
@@ -166,7 +169,10 @@ mod tests {
             write_npy(&truth.join(format!("depth_{frame:05}.npy")), &depth).unwrap();
         }
         let mut folder = TruthFolder::open(dir.path(), (2, 3)).unwrap();
-        assert_eq!(folder.frames(), vec![0, 20, 60]);
+        let files: Vec<(usize, &Path)> = folder.files().collect();
+        let file_20 = truth.join("depth_00020.npy");
+        assert_eq!(files.iter().map(|f| f.0).collect::<Vec<_>>(), [0, 20, 60]);
+        assert_eq!(files[1].1, file_20);
         let t = folder.depth_for(4..36).unwrap().unwrap();
         assert_eq!((t.frame, t.depth_mm[(1, 2)]), (20.0, 20.0));
         // Window 44..76 has its middle at 60.
@@ -191,6 +197,11 @@ mod tests {
         depth[(3, 3)] = f32::NAN;
         write_npy(&file, &depth).unwrap();
         let mut folder = TruthFolder::open(&file, (4, 5)).unwrap();
+        assert_eq!(
+            folder.files().count(),
+            0,
+            "a still scene's file has no frame"
+        );
         let binned = BinnedTruth::new(&mut folder, 2)
             .depth_for(0..8)
             .unwrap()
