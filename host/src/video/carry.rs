@@ -1,12 +1,15 @@
 //! Carrying the received waveform's timing from window to window.
 //!
-//! The decoder fits each LED's received waveform — shift, exposure and camera/chip rate
-//! ratio — from a window's spatial mean (SPEC §4). Exposure and rate ratio belong to the
-//! camera and the luminaire's clock, not to the window: they stay put for a whole clip, while
-//! a 32-frame fit of them can go astray when the object's mean brightness drifts (with the
-//! decoder's earlier per-window fit, one window in five of a turning ellipsoid fitted a 1.6 %
-//! rate error and 4 % exposure, and its 3-D frame came out 38 mm wrong). So the video decodes
-//! every window with the timing of the best free fit so far and fits only the shifts.
+//! The decoder fits each LED's received waveform — shift, exposure, camera/chip rate ratio and
+//! rolling-shutter line delay — from a window's spatial mean (SPEC §4). Exposure, line delay
+//! and rate ratio belong to the camera's sensor and the luminaire's clock, not to the window:
+//! they stay put for a whole clip, while a 32-frame fit of them can go astray when the object's
+//! mean brightness drifts (with the decoder's earlier per-window fit, one window in five of a
+//! turning ellipsoid fitted a 1.6 % rate error and 4 % exposure, and its 3-D frame came out
+//! 38 mm wrong). So the video decodes every window with the timing of the best free fit so far
+//! and fits only the shifts. Carrying the line delay also spares each window the fit's
+//! rolling-shutter test (band-wise and row-wise refinements, about two thirds of the timing
+//! fit's work); a global-shutter fit carries a line delay of 0.
 //!
 //! "Best" is the lowest median per-pixel residual σ of the decode (how well the LED model
 //! explains the pixels). The first [`FREE_WINDOWS`] windows are decoded both ways; later a
@@ -45,22 +48,46 @@ pub enum TimingSource {
 struct Timing {
     rate_ratio: f64,
     exposure: f64,
+    /// Seconds per row (0 for a global shutter); `None` when a rolling shutter's line delay
+    /// cannot be given in seconds (no frame rate), so that every window fits it.
+    line_time_s: Option<f64>,
     median_noise: f64,
 }
 
 impl Timing {
     fn of(decoded: &Decoded) -> Option<Self> {
         let r = &decoded.report;
-        let ok = [r.rate_ratio, r.exposure, r.median_noise]
-            .iter()
-            .all(|v| v.is_finite())
+        let ok = [
+            r.rate_ratio,
+            r.exposure,
+            r.median_noise,
+            r.line_delay_frames,
+        ]
+        .iter()
+        .all(|v| v.is_finite())
             && r.exposure > 0.0
             && r.exposure <= 1.0;
+        let line_time_s = if r.line_delay_frames == 0.0 {
+            Some(0.0)
+        } else {
+            (r.fps > 0.0).then(|| r.line_delay_frames / r.fps)
+        };
         ok.then_some(Self {
             rate_ratio: r.rate_ratio,
             exposure: r.exposure,
+            line_time_s,
             median_noise: r.median_noise,
         })
+    }
+
+    /// `config` with this timing wherever it leaves the timing to the fit.
+    fn given_in(&self, config: &DecodeConfig) -> DecodeConfig {
+        DecodeConfig {
+            rate_ratio: config.rate_ratio.or(Some(self.rate_ratio)),
+            exposure: config.exposure.or(Some(self.exposure)),
+            line_time_s: config.line_time_s.or(self.line_time_s),
+            ..config.clone()
+        }
     }
 }
 
@@ -106,12 +133,7 @@ impl TimingCarry {
             }
             Some(best) => best,
         };
-        let with_carried = DecodeConfig {
-            rate_ratio: config.rate_ratio.or(Some(carried.rate_ratio)),
-            exposure: config.exposure.or(Some(carried.exposure)),
-            ..config.clone()
-        };
-        let first = crate::demod::decode_frames(frames, format, &with_carried);
+        let first = crate::demod::decode_frames(frames, format, &carried.given_in(config));
         let trusted = self.windows > FREE_WINDOWS
             && first
                 .as_ref()
@@ -156,12 +178,7 @@ impl TimingCarry {
             };
             return (decoded, source);
         };
-        let with_carried = DecodeConfig {
-            rate_ratio: Some(carried.rate_ratio),
-            exposure: Some(carried.exposure),
-            ..config.clone()
-        };
-        let first = crate::demod::decode_frames(frames, format, &with_carried);
+        let first = crate::demod::decode_frames(frames, format, &carried.given_in(config));
         let trusted = first
             .as_ref()
             .is_ok_and(|d| d.report.median_noise <= SUSPICIOUS_RATIO * reference_noise);

@@ -214,6 +214,9 @@ pub struct DecodeQuality {
     pub rate_ratio: f64,
     /// Exposure, fraction of the frame period.
     pub exposure: f64,
+    /// Rolling-shutter line delay, frame periods per row (0 for a global shutter).
+    #[serde(default)]
+    pub line_delay_frames: f64,
     /// RMS residual of the waveform fit to the mean signal, fraction of full scale.
     pub fit_residual: f64,
     /// Median per-frame pixel noise σ, fraction of full scale.
@@ -231,6 +234,7 @@ impl DecodeQuality {
         Self {
             rate_ratio: report.rate_ratio,
             exposure: report.exposure,
+            line_delay_frames: report.line_delay_frames,
             fit_residual: report.fit_residual,
             median_noise: report.median_noise,
             led_snr_db: report.per_led.iter().map(|l| l.snr_db).collect(),
