@@ -46,50 +46,74 @@ pub(crate) fn grid_neighbours(index: usize, (rows, cols): (usize, usize)) -> [Op
 /// number a few hundred.
 pub fn label(mask: &Array2<bool>) -> Regions {
     let (rows, cols) = mask.dim();
-    let inside = row_major(mask);
-    let runs = row_runs(&inside, (rows, cols));
-    // Union–find over the runs, the root of a set always its first run in raster order.
-    let mut parent: Vec<u32> = (0..runs.runs.len() as u32).collect();
-    for r in 1..rows {
-        let (above, here) = (runs.of_row(r - 1), runs.of_row(r));
-        let (mut i, mut j) = (above.start, here.start);
-        while i < above.end && j < here.end {
-            // Run a one row up, in the row-major indices of b's row.
-            let (a, b) = (&runs.runs[i], &runs.runs[j]);
-            let (a_start, a_end) = (a.start + cols, a.end + cols);
-            // 4-connected: the column ranges overlap.
-            if a_start < b.end && b.start < a_end {
-                let (x, y) = (root(&mut parent, i as u32), root(&mut parent, j as u32));
-                let (low, high) = (x.min(y), x.max(y));
-                parent[high as usize] = low;
-            }
-            if a_end < b.end {
-                i += 1;
-            } else {
-                j += 1;
-            }
-        }
-    }
-    // Regions numbered in order of their first run (so of their first pixel) in raster order.
+    let runs = RunRegions::of(mask);
     let mut label = vec![OUTSIDE; rows * cols];
-    let mut region_of_run = vec![OUTSIDE; runs.runs.len()];
-    let mut sizes: Vec<usize> = Vec::new();
-    for (k, run) in runs.runs.iter().enumerate() {
-        let first = root(&mut parent, k as u32) as usize;
-        let id = if first == k {
-            sizes.push(0);
-            (sizes.len() - 1) as u32
-        } else {
-            region_of_run[first]
-        };
-        region_of_run[k] = id;
-        sizes[id as usize] += run.len();
+    for (run, &id) in runs.runs.runs.iter().zip(&runs.region_of_run) {
         label[run.clone()].fill(id);
     }
     Regions {
         label: Array2::from_shape_vec((rows, cols), label)
             .expect("one label per pixel of the mask"),
-        sizes,
+        sizes: runs.sizes,
+    }
+}
+
+/// The regions of a mask as runs ([`label`] before its labels are written per pixel).
+struct RunRegions {
+    runs: RowRuns,
+    /// Region of each run, numbered in raster order of the regions' first pixels.
+    region_of_run: Vec<u32>,
+    /// Pixel count of each region.
+    sizes: Vec<usize>,
+}
+
+impl RunRegions {
+    fn of(mask: &Array2<bool>) -> Self {
+        let (rows, cols) = mask.dim();
+        let inside = row_major(mask);
+        let runs = row_runs(&inside, (rows, cols));
+        // Union–find over the runs, the root of a set always its first run in raster order.
+        let mut parent: Vec<u32> = (0..runs.runs.len() as u32).collect();
+        for r in 1..rows {
+            let (above, here) = (runs.of_row(r - 1), runs.of_row(r));
+            let (mut i, mut j) = (above.start, here.start);
+            while i < above.end && j < here.end {
+                // Run a one row up, in the row-major indices of b's row.
+                let (a, b) = (&runs.runs[i], &runs.runs[j]);
+                let (a_start, a_end) = (a.start + cols, a.end + cols);
+                // 4-connected: the column ranges overlap.
+                if a_start < b.end && b.start < a_end {
+                    let (x, y) = (root(&mut parent, i as u32), root(&mut parent, j as u32));
+                    let (low, high) = (x.min(y), x.max(y));
+                    parent[high as usize] = low;
+                }
+                if a_end < b.end {
+                    i += 1;
+                } else {
+                    j += 1;
+                }
+            }
+        }
+        // Regions numbered in order of their first run (so of their first pixel) in raster
+        // order.
+        let mut region_of_run = vec![OUTSIDE; runs.runs.len()];
+        let mut sizes: Vec<usize> = Vec::new();
+        for (k, run) in runs.runs.iter().enumerate() {
+            let first = root(&mut parent, k as u32) as usize;
+            let id = if first == k {
+                sizes.push(0);
+                (sizes.len() - 1) as u32
+            } else {
+                region_of_run[first]
+            };
+            region_of_run[k] = id;
+            sizes[id as usize] += run.len();
+        }
+        Self {
+            runs,
+            region_of_run,
+            sizes,
+        }
     }
 }
 
@@ -158,12 +182,24 @@ pub fn bounding_box(
     Some((top..bottom + 1, left..right + 1))
 }
 
-/// Clears the regions of `mask` with fewer than `min_pixels` pixels.
+/// Clears the regions of `mask` with fewer than `min_pixels` pixels, run by run (no label is
+/// written per pixel).
 pub fn remove_small(mask: &mut Array2<bool>, min_pixels: usize) {
-    let regions = label(mask);
-    for (m, &l) in mask.iter_mut().zip(regions.label.iter()) {
-        if l != OUTSIDE && regions.sizes[l as usize] < min_pixels {
-            *m = false;
+    let regions = RunRegions::of(mask);
+    let cols = mask.ncols();
+    let small = regions
+        .runs
+        .runs
+        .iter()
+        .zip(&regions.region_of_run)
+        .filter(|&(_, &id)| regions.sizes[id as usize] < min_pixels)
+        .map(|(run, _)| run.clone());
+    match mask.as_slice_mut() {
+        Some(flat) => small.for_each(|run| flat[run].fill(false)),
+        None => {
+            for i in small.flatten() {
+                mask[(i / cols, i % cols)] = false;
+            }
         }
     }
 }
@@ -239,8 +275,19 @@ mod tests {
         }
     }
 
+    /// `mask` stored column by column.
+    fn column_major(mask: &Array2<bool>) -> Array2<bool> {
+        use ndarray::ShapeBuilder;
+        let stored = Array2::from_shape_vec(mask.dim().f(), mask.t().iter().copied().collect())
+            .expect("one value per pixel");
+        assert!(mask.nrows() < 2 || mask.ncols() < 2 || stored.as_slice().is_none());
+        assert_eq!(&stored, mask);
+        stored
+    }
+
     /// Random masks of every density (fixed seed), spirals and combs whose regions join far
-    /// below their first rows, and degenerate shapes: the runs label exactly as the flood fill.
+    /// below their first rows, and degenerate shapes: the runs label exactly as the flood fill,
+    /// and clear exactly its small regions.
     #[test]
     fn run_labels_equal_the_flood_fill() {
         use rand::{RngExt, SeedableRng};
@@ -274,9 +321,23 @@ mod tests {
         masks.push(Array2::from_elem((3, 4), true));
         masks.push(Array2::from_elem((3, 4), false));
         // A column-major mask (not stored row by row).
-        masks.push(ring_and_bar().reversed_axes().to_owned().reversed_axes());
+        masks.push(column_major(&ring_and_bar()));
         for mask in &masks {
             assert_eq!(label(mask), flood_fill_labels(mask), "{mask:?}");
+            // Small regions cleared by their runs are those the labels call small, whatever
+            // the mask's layout.
+            let regions = flood_fill_labels(mask);
+            for min_pixels in [2, 5, 40] {
+                let expected = regions
+                    .label
+                    .mapv(|l| l != OUTSIDE && regions.sizes[l as usize] >= min_pixels);
+                let mut cleared = mask.clone();
+                remove_small(&mut cleared, min_pixels);
+                assert_eq!(cleared, expected, "{mask:?} without regions < {min_pixels}");
+                let mut stored_by_columns = column_major(mask);
+                remove_small(&mut stored_by_columns, min_pixels);
+                assert_eq!(stored_by_columns, expected, "column-major {mask:?}");
+            }
         }
     }
 
