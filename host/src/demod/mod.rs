@@ -426,8 +426,18 @@ pub struct LedCountCheck {
     pub leds: usize,
     /// Modulated LEDs seen in the window (when checked).
     pub detected: Option<usize>,
-    /// The check's timing fit (of more LEDs), a starting point for the decode's.
-    pub fit: Option<TimingFit>,
+    /// The check's timing fit (of as many LEDs or more) and its quality, a starting point for
+    /// the decode's.
+    pub fit: Option<CheckedFit>,
+}
+
+/// A timing fit and what the window's sample says about it.
+#[derive(Debug, Clone)]
+pub struct CheckedFit {
+    /// The fit.
+    pub timing: TimingFit,
+    /// Its quality over the fitted LEDs.
+    pub quality: FitQuality,
 }
 
 /// One window decoded.
@@ -596,36 +606,47 @@ impl WindowDecoder {
         Ok(LedCountCheck {
             leds,
             detected: Some(detected),
-            fit: Some(fit),
+            fit: Some(CheckedFit {
+                timing: fit,
+                quality,
+            }),
         })
     }
 
     /// Decodes one window of `leds` LEDs (frames cropped to the region); `seed` is an earlier
-    /// fit of this window (of at least as many LEDs) to refine instead of starting afresh.
+    /// fit of this window (of at least as many LEDs) to refine instead of starting afresh, or,
+    /// of as many LEDs, to use as it is (with its quality: the same fit of the same sample).
     pub fn decode(
         &self,
         frames: &[Samples],
         window: &WindowSample,
         leds: usize,
-        seed: Option<&TimingFit>,
+        seed: Option<&CheckedFit>,
     ) -> WindowDecode {
         let count = frames.len();
         let height = self.roi.height;
         let waves: Vec<ReceivedWaveform> = (0..leds).map(ReceivedWaveform::new).collect();
         let space = SignalSpace::from_spectrum(&window.spectrum, &window.gram, leds);
-        let fit = match seed {
-            Some(previous) if previous.model.shifts.len() == leds => previous.clone(),
-            Some(previous) if previous.model.shifts.len() > leds => refit_timing(
-                &window.sample,
-                &space,
-                leds,
-                height,
-                &self.fit_limits,
-                previous,
-            ),
-            _ => fit_timing(&window.sample, &space, leds, height, &self.fit_limits),
+        let (fit, quality) = match seed {
+            Some(same) if same.timing.model.shifts.len() == leds => {
+                (same.timing.clone(), same.quality.clone())
+            }
+            _ => {
+                let fit = match seed {
+                    Some(more) if more.timing.model.shifts.len() > leds => refit_timing(
+                        &window.sample,
+                        &space,
+                        leds,
+                        height,
+                        &self.fit_limits,
+                        &more.timing,
+                    ),
+                    _ => fit_timing(&window.sample, &space, leds, height, &self.fit_limits),
+                };
+                let quality = quality::measure(&window.sample, &window.gram, &space, &fit, &waves);
+                (fit, quality)
+            }
         };
-        let quality = quality::measure(&window.sample, &window.gram, &space, &fit, &waves);
         let verdict = quality::judge(&quality.leds, &fit);
         let bands = if fit.rolling {
             let ramp = fit.model.ramp_chips(height).abs();

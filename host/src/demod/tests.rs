@@ -293,3 +293,43 @@ fn a_decode_does_not_depend_on_the_number_of_threads() {
         );
     }
 }
+
+/// The LED-count check's fit is the decode's start. Of as many LEDs as are decoded (a window
+/// too short for one LED more), it is used as it is with its quality, which equal a fresh fit
+/// and measure of the same sample; of one LED more, it is refitted and measured again.
+#[test]
+fn a_checked_fit_serves_the_decode_as_a_fresh_fit_would() {
+    for (frames, checked_leds) in [(32, 4), (64, 5)] {
+        let scene = Scene {
+            frames,
+            ..Scene::default()
+        };
+        let (mut source, _, _) = render(&scene);
+        let format = source.format().clone();
+        let mut window = Vec::new();
+        while let Some(frame) = source.next_frame().expect("a frame") {
+            window.push(frame.samples);
+        }
+        let config = DecodeConfig {
+            leds: LedCount::Fixed(scene.leds),
+            ..DecodeConfig::default()
+        };
+        let decoder = WindowDecoder::new(&format, &config).expect("a decoder");
+        let sample = decoder.sample(&window);
+        let check = decoder
+            .count_leds(&sample, config.leds, true)
+            .expect("four LEDs");
+        assert_eq!(check.leds, 4);
+        let checked = check.fit.as_ref().expect("the check's fit");
+        assert_eq!(checked.timing.model.shifts.len(), checked_leds);
+        assert_eq!(checked.quality.leds.len(), checked_leds);
+        let seeded = decoder.decode(&window, &sample, 4, Some(checked));
+        assert_eq!(seeded.quality.leds.len(), 4, "{frames} frames");
+        if checked_leds == 4 {
+            let fresh = decoder.decode(&window, &sample, 4, None);
+            assert_eq!(seeded.fit, fresh.fit);
+            assert_eq!(seeded.quality, fresh.quality);
+            assert_eq!(seeded.amplitudes.leds, fresh.amplitudes.leds);
+        }
+    }
+}
