@@ -455,6 +455,26 @@
 //! (means, on the slow machine). Not kept: skipping the LED-count probe in region windows
 //! saved only 0.6 % — the probe's 5-LED fit (300 M over the run) had seeded the 4-LED fit, and
 //! the fit without it cost 241 M.
+//!
+//! Session 44 (callgrind, the whole 2000-frame clip with `--ground-truth`): 27.10 G → 24.35 G
+//! instructions (−10 %), 542 → 487 M per window; every depth file byte-identical, so the
+//! per-window RMSE is unchanged (median 0.6837, mean 0.7448, worst 1.1953 mm). The timing
+//! carry also carries the rolling-shutter line delay, a property of the sensor like the
+//! exposure (0 for a global shutter), so a carried window's timing fit skips the band-wise and
+//! row-wise rolling-shutter test: the LED-count check's fit 505 → 252 M on the first 480
+//! frames (12 windows, three of them fitted freely), 8.28 → 8.04 G in all. The check's fit of
+//! as many LEDs as are decoded now serves the decode with its quality, which was measured a
+//! second time on the same sample (decoding 4.01 → 3.60 G over the clip). Small regions are
+//! cleared by their runs instead of through a label per pixel (`regions::remove_small` 204 →
+//! 55 M on 480 frames), the two pictures come from one sampling of the depth, and the direct
+//! writes copy each block once instead of zeroing it first (7.816 → 7.770 G on 480 frames).
+//! Where the instructions go now (inclusive; rayon's workers blur the split): integration
+//! 29 %, photometric stereo 11 %, depth-offset search 9 %, the decoding stage 19 % (matched
+//! filter 6.1 %, timing fit and its quality 4.7 %, pixel sample 3.4 %), writer 3.7 %, the first
+//! window's coarse start 2.5 %, lit test 1.9 %, motion 1.7 %, scores 1.3 %. Wall clock without
+//! the truth, eight rounds alternated with main (plus only the pictures change), the machine's
+//! speed drifting by 1.4× across them: 12.1 → 12.8 3-D frames/s (means), user CPU 6.6 → 6.1 s;
+//! with `--hop 8`, two rounds: 12.4 → 13.6 3-D frames/s, user CPU 32.3 → 29.1 s.
 use criterion::{BatchSize, Criterion, criterion_group, criterion_main};
 use meb::capture::binning::Binning;
 use meb::capture::memory::MemorySource;
