@@ -8,8 +8,10 @@
 //! turning ellipsoid fitted a 1.6 % rate error and 4 % exposure, and its 3-D frame came out
 //! 38 mm wrong). So the video decodes every window with the timing of the best free fit so far
 //! and fits only the shifts. Carrying the line delay also spares each window the fit's
-//! rolling-shutter test (band-wise and row-wise refinements, about two thirds of the timing
-//! fit's work); a global-shutter fit carries a line delay of 0.
+//! rolling-shutter test (band-wise and row-wise refinements, more than half of the timing
+//! fit's work); a global-shutter fit carries a line delay of 0. A setting the user gives
+//! (`DecodeConfig`) is never replaced by a carried one, in a region's decode as in a whole
+//! frame's.
 //!
 //! "Best" is the lowest median per-pixel residual σ of the decode (how well the LED model
 //! explains the pixels). The first [`FREE_WINDOWS`] windows are decoded both ways; later a

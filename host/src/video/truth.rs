@@ -87,7 +87,7 @@ impl TruthFolder {
     pub fn files(&self) -> impl Iterator<Item = (usize, &Path)> {
         self.files
             .iter()
-            .filter_map(|(f, path)| Some((f.as_ref().copied()?, path.as_path())))
+            .filter_map(|(frame, path)| frame.map(|f| (f, path.as_path())))
     }
 }
 
