@@ -13,6 +13,8 @@ pub mod device;
 pub mod export;
 pub mod flicker;
 pub mod integrate;
+#[cfg(test)]
+mod layouts;
 pub mod led_waveform;
 pub mod memory;
 pub mod mesh;

@@ -224,6 +224,7 @@ pub fn enclosed_holes(mask: &Array2<bool>, max_pixels: usize) -> Array2<bool> {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::layouts::column_major;
 
     /// The box spans the extreme rows and columns of any set pixel; an empty mask has none.
     #[test]
@@ -273,16 +274,6 @@ mod tests {
             label: Array2::from_shape_vec((rows, cols), label).unwrap(),
             sizes,
         }
-    }
-
-    /// `mask` stored column by column.
-    fn column_major(mask: &Array2<bool>) -> Array2<bool> {
-        use ndarray::ShapeBuilder;
-        let stored = Array2::from_shape_vec(mask.dim().f(), mask.t().iter().copied().collect())
-            .expect("one value per pixel");
-        assert!(mask.nrows() < 2 || mask.ncols() < 2 || stored.as_slice().is_none());
-        assert_eq!(&stored, mask);
-        stored
     }
 
     /// Random masks of every density (fixed seed), spirals and combs whose regions join far

@@ -159,13 +159,7 @@ mod tests {
         let a =
             Array2::from_shape_vec((2, 3), vec![0.1, f32::NAN, 0.5, 0.2, f32::NAN, 0.0]).unwrap();
         let b = Array2::from_shape_vec((2, 3), vec![0.3, f32::NAN, 0.4, 0.1, 0.7, -1.0]).unwrap();
-        let column_major = b
-            .clone()
-            .reversed_axes()
-            .as_standard_layout()
-            .t()
-            .to_owned();
-        assert!(column_major.row(0).as_slice().is_none());
+        let column_major = crate::layouts::column_major(&b);
         let mut out = [0.0f32; 3];
         for second in [b, column_major] {
             let images = LedImages {

@@ -93,6 +93,24 @@ fn run_err(args: &[&str]) -> String {
     String::from_utf8_lossy(&out.stderr).into_owned()
 }
 
+/// `meb video CAPTURE --rig RIG --out OUT OPTIONS…`.
+fn video_args(capture: &Path, rig: &str, out: &Path, options: &[&str]) -> Vec<String> {
+    let fixed = ["video", &s(capture), "--rig", rig, "--out", &s(out)];
+    fixed.iter().chain(options).map(|a| a.to_string()).collect()
+}
+
+/// Runs `meb video` ([`video_args`]), which must succeed; its standard output.
+fn video_ok(capture: &Path, rig: &str, out: &Path, options: &[&str]) -> String {
+    let args = video_args(capture, rig, out, options);
+    run_ok(&args.iter().map(String::as_str).collect::<Vec<_>>())
+}
+
+/// Runs `meb video` ([`video_args`]), which must fail; its standard error.
+fn video_err(capture: &Path, rig: &str, out: &Path, options: &[&str]) -> String {
+    let args = video_args(capture, rig, out, options);
+    run_err(&args.iter().map(String::as_str).collect::<Vec<_>>())
+}
+
 #[test]
 fn the_turning_ellipsoid_is_scored_frame_by_frame_within_the_thesis_accuracy() {
     let tmp = tempfile::tempdir().unwrap();
@@ -101,22 +119,10 @@ fn the_turning_ellipsoid_is_scored_frame_by_frame_within_the_thesis_accuracy() {
     let rig = dynamic_rig(tmp.path(), 320, 180);
     let clip = ellipsoid_with(tmp.path(), &rig, "ellipsoid", 200, 7.5, "0,1,0", &[]);
     let out = tmp.path().join("video");
-    let stdout = run_ok(&[
-        "video",
-        &s(&clip.join("capture.y4m")),
-        "--rig",
-        &rig,
-        "--out",
-        &s(&out),
-        "--window",
-        "40",
-        "--drop",
-        "4",
-        "--ground-truth",
-        &s(&clip),
-        "--save",
-        "normals,albedo",
-    ]);
+    let truth = s(&clip);
+    let options = ["--window", "40", "--drop", "4", "--ground-truth", &truth];
+    let options = [&options[..], &["--save", "normals,albedo"]].concat();
+    let stdout = video_ok(&clip.join("capture.y4m"), &rig, &out, &options);
     assert!(
         stdout.contains("5 3-D frames from 200 camera frames"),
         "{stdout}"
@@ -205,11 +211,9 @@ fn the_turning_ellipsoid_is_scored_frame_by_frame_within_the_thesis_accuracy() {
     // `meb video` of the clip into folder `name` with `options`, scored against the truth.
     let scored = |name: &str, options: &[&str]| {
         let out = tmp.path().join(name);
-        let (input, out_arg, truth) = (s(&clip.join("capture.y4m")), s(&out), s(&clip));
-        let mut args = vec!["video", &input, "--rig", &rig, "--out", &out_arg];
-        args.extend(["--ground-truth", &truth]);
-        args.extend(options);
-        run_ok(&args);
+        let truth = s(&clip);
+        let options = [&["--ground-truth", &truth][..], options].concat();
+        video_ok(&clip.join("capture.y4m"), &rig, &out, &options);
         let json = video_json(&out);
         (out, json)
     };
@@ -262,18 +266,13 @@ fn the_turning_ellipsoid_is_scored_frame_by_frame_within_the_thesis_accuracy() {
     let mean = binned_rmse.iter().sum::<f64>() / binned_rmse.len() as f64;
     assert!(mean < 2.0, "binned RMSE {binned_rmse:?} mm");
     // Binning sums code values: a linearising decode is refused, not approximated.
-    let err = run_err(&[
-        "video",
-        &s(&clip.join("capture.y4m")),
-        "--rig",
+    let options = ["--bin", "2", "--linearize", "srgb"];
+    let err = video_err(
+        &clip.join("capture.y4m"),
         &rig,
-        "--out",
-        &s(&tmp.path().join("binned-srgb")),
-        "--bin",
-        "2",
-        "--linearize",
-        "srgb",
-    ]);
+        &tmp.path().join("binned-srgb"),
+        &options,
+    );
     assert!(err.contains("linear codes"), "{err}");
     assert!(!tmp.path().join("binned-srgb").exists());
     let videos = json["outputs"].clone();
@@ -302,21 +301,10 @@ fn the_turning_ellipsoid_is_scored_frame_by_frame_within_the_thesis_accuracy() {
     // gives the same depth (timing fitted per window and every window reconstructed cold in
     // both runs, so they are comparable).
     let sliding = tmp.path().join("sliding");
-    let clip_path = s(&clip.join("capture.y4m"));
+    let clip_path = clip.join("capture.y4m");
     for (dir, hop) in [(&sliding, "8"), (&tmp.path().join("thesis-free"), "40")] {
-        run_ok(&[
-            "video",
-            &clip_path,
-            "--rig",
-            &rig,
-            "--out",
-            &s(dir),
-            "--hop",
-            hop,
-            "--fit-every-window",
-            "--cold-start",
-            "--apng",
-        ]);
+        let options = ["--hop", hop, "--fit-every-window", "--cold-start", "--apng"];
+        video_ok(&clip_path, &rig, dir, &options);
     }
     let json = video_json(&sliding);
     assert_eq!(frames(&json).len(), (200 - 40) / 8 + 1);
@@ -347,16 +335,13 @@ fn a_rolling_shutters_line_delay_is_carried_from_window_to_window() {
     let options = ["--phases", "3,7,11,5", "--line-time-us", "10"];
     let clip = ellipsoid_with(tmp.path(), &rig, "rolling", 280, 7.5, "0,1,0", &options);
     let out = tmp.path().join("video");
-    run_ok(&[
-        "video",
-        &s(&clip.join("capture.y4m")),
-        "--rig",
+    let truth = s(&clip);
+    video_ok(
+        &clip.join("capture.y4m"),
         &rig,
-        "--out",
-        &s(&out),
-        "--ground-truth",
-        &s(&clip),
-    ]);
+        &out,
+        &["--ground-truth", &truth],
+    );
     let json = video_json(&out);
     let records = frames(&json);
     assert_eq!(records.len(), 7);
@@ -837,14 +822,7 @@ fn standard_input_gives_the_same_video_as_the_file() {
     let clip = ellipsoid(tmp.path(), &rig, "clip", 80, 7.5, "0,1,0");
     let capture = clip.join("capture.y4m");
     let from_file = tmp.path().join("file");
-    run_ok(&[
-        "video",
-        &s(&capture),
-        "--rig",
-        &rig,
-        "--out",
-        &s(&from_file),
-    ]);
+    video_ok(&capture, &rig, &from_file, &[]);
     let from_stdin = tmp.path().join("stdin");
     let out = Command::new(env!("CARGO_BIN_EXE_meb"))
         .args(["video", "-", "--rig", &rig, "--out", &s(&from_stdin)])
@@ -897,24 +875,11 @@ fn motion_is_found_while_the_object_turns_and_not_once_it_stops() {
     let joined = tmp.path().join("moves-then-stops.y4m");
     std::fs::write(&joined, [&a[..], &b[header..]].concat()).unwrap();
     let out = tmp.path().join("marked");
-    let args = |out: &Path, policy: &str| {
-        [
-            "video".to_string(),
-            s(&joined),
-            "--rig".into(),
-            rig.clone(),
-            "--out".into(),
-            s(out),
-            "--window".into(),
-            "32".into(),
-            "--drop".into(),
-            "0".into(),
-            "--motion".into(),
-            policy.into(),
-        ]
+    let with_motion = |out: &Path, policy: &str, more: &[&str]| {
+        let options = ["--window", "32", "--drop", "0", "--motion", policy];
+        video_ok(&joined, &rig, out, &[&options[..], more].concat())
     };
-    let marked: Vec<String> = args(&out, "mark").to_vec();
-    run_ok(&marked.iter().map(String::as_str).collect::<Vec<_>>());
+    with_motion(&out, "mark", &[]);
     let json = video_json(&out);
     let moving: Vec<bool> = frames(&json)
         .iter()
@@ -951,9 +916,7 @@ fn motion_is_found_while_the_object_turns_and_not_once_it_stops() {
         }
     }
     let out = tmp.path().join("skipped");
-    let skipped: Vec<String> = args(&out, "skip").to_vec();
-    let scored = [&skipped[..], &["--ground-truth".into(), s(&truth)]].concat();
-    run_ok(&scored.iter().map(String::as_str).collect::<Vec<_>>());
+    with_motion(&out, "skip", &["--ground-truth", &s(&truth)]);
     let json = video_json(&out);
     let status: Vec<&str> = frames(&json)
         .iter()
@@ -979,8 +942,7 @@ fn motion_is_found_while_the_object_turns_and_not_once_it_stops() {
     // Placing: no window may be moved across the join (a sudden change of pose, whose decode
     // is implausible) and called still; the still windows stay where they were scheduled.
     let out = tmp.path().join("placed");
-    let placed: Vec<String> = args(&out, "place").to_vec();
-    run_ok(&placed.iter().map(String::as_str).collect::<Vec<_>>());
+    with_motion(&out, "place", &[]);
     let json = video_json(&out);
     let records = frames(&json);
     let moving: Vec<bool> = records
@@ -1003,12 +965,10 @@ fn a_wrong_fit_is_refused_moving_or_still_unless_forced() {
     // the LEDs' modulation unexplained (tens of noise levels) than the turning object's
     // motion holds (window 1: about 10).
     for (clip, windows) in [(&turning, 2), (&still, 1)] {
-        let capture = s(&clip.join("capture.y4m"));
+        let capture = clip.join("capture.y4m");
         let refused = tmp.path().join("refused");
         let wrong = ["--line-time-us", "5"];
-        let mut args = vec!["video", &capture, "--rig", &rig, "--out"];
-        let refused_out = s(&refused);
-        let stderr = run_err(&[&args[..], &[&refused_out], &wrong[..]].concat());
+        let stderr = video_err(&capture, &rig, &refused, &wrong);
         assert!(
             stderr.contains("implausible and the window's motion does not explain it"),
             "{stderr}"
@@ -1017,9 +977,12 @@ fn a_wrong_fit_is_refused_moving_or_still_unless_forced() {
         assert!(!refused.exists(), "no output for no 3-D frame");
         // --force keeps the windows, each recorded as forced.
         let forced = tmp.path().join("forced");
-        let forced_out = s(&forced);
-        args.push(&forced_out);
-        run_ok(&[&args[..], &wrong[..], &["--force"]].concat());
+        video_ok(
+            &capture,
+            &rig,
+            &forced,
+            &[&wrong[..], &["--force"]].concat(),
+        );
         let json = video_json(&forced);
         let records = frames(&json);
         assert_eq!(records.len(), windows);
@@ -1052,10 +1015,9 @@ fn windows_whose_depth_rests_on_two_led_guesses_are_refused_unless_forced() {
     let clip = tmp.path().join("cube");
     let scene = ["--scene", "cube", "--corner", "--rpm", "7.5"];
     simulate_y4m(&clip, "thesis-dynamic", "320x180", 80, &scene);
-    let capture = s(&clip.join("capture.y4m"));
     let rig = s(&clip.join("rig.toml"));
     let refused = tmp.path().join("refused");
-    let stderr = run_err(&["video", &capture, "--rig", &rig, "--out", &s(&refused)]);
+    let stderr = video_err(&clip.join("capture.y4m"), &rig, &refused, &[]);
     assert!(
         stderr.contains("the reconstruction is implausible")
             && stderr.contains("lit by three or more LEDs"),
@@ -1063,15 +1025,7 @@ fn windows_whose_depth_rests_on_two_led_guesses_are_refused_unless_forced() {
     );
     assert!(!refused.exists(), "no output for no 3-D frame");
     let forced = tmp.path().join("forced");
-    run_ok(&[
-        "video",
-        &capture,
-        "--rig",
-        &rig,
-        "--out",
-        &s(&forced),
-        "--force",
-    ]);
+    video_ok(&clip.join("capture.y4m"), &rig, &forced, &["--force"]);
     let json = video_json(&forced);
     let records = frames(&json);
     assert_eq!(records.len(), 2);
@@ -1103,14 +1057,7 @@ fn a_clip_shorter_than_a_window_and_a_cut_stream_are_reported() {
     // 30 frames: shorter than one 40-frame window.
     let short = tmp.path().join("short.y4m");
     std::fs::write(&short, &bytes[..header + 30 * frame]).unwrap();
-    let stderr = run_err(&[
-        "video",
-        &s(&short),
-        "--rig",
-        &rig,
-        "--out",
-        &s(&tmp.path().join("short")),
-    ]);
+    let stderr = video_err(&short, &rig, &tmp.path().join("short"), &[]);
     assert!(
         stderr.contains("ended after 30 frames, before its first window (frames 0..40)"),
         "{stderr}"
@@ -1125,7 +1072,7 @@ fn a_clip_shorter_than_a_window_and_a_cut_stream_are_reported() {
     let cut = tmp.path().join("cut.y4m");
     std::fs::write(&cut, &bytes[..header + 130 * frame + 100]).unwrap();
     let out = tmp.path().join("cut");
-    let stderr = run_err(&["video", &s(&cut), "--rig", &rig, "--out", &s(&out)]);
+    let stderr = video_err(&cut, &rig, &out, &[]);
     assert!(stderr.contains("truncated inside frame 130"), "{stderr}");
     assert!(stderr.contains("3 3-D frames before it"), "{stderr}");
     let json = video_json(&out);
@@ -1134,16 +1081,7 @@ fn a_clip_shorter_than_a_window_and_a_cut_stream_are_reported() {
     assert!(out.join("depth_00002.npy").exists());
 
     // A window too short for four LEDs is refused before any work.
-    let stderr = run_err(&[
-        "video",
-        &s(&capture),
-        "--rig",
-        &rig,
-        "--out",
-        &s(&tmp.path().join("bad")),
-        "--window",
-        "36",
-    ]);
+    let stderr = video_err(&capture, &rig, &tmp.path().join("bad"), &["--window", "36"]);
     assert!(stderr.contains("28 frames are left to decode"), "{stderr}");
 }
 

@@ -3,6 +3,17 @@
 use super::synthetic::{Scene, gain_and_noise, render};
 use super::*;
 
+/// The frames `scene` renders, in memory, and their format.
+fn frames_of(scene: &Scene) -> (FrameFormat, Vec<Samples>) {
+    let (mut source, _, _) = render(scene);
+    let format = source.format().clone();
+    let mut frames = Vec::new();
+    while let Some(frame) = source.next_frame().expect("a frame") {
+        frames.push(frame.samples);
+    }
+    (format, frames)
+}
+
 fn run(scene: &Scene, estimator: Estimator) -> (Decoded, Vec<Vec<f32>>) {
     run_seeded(scene, estimator, SeedMethod::default())
 }
@@ -184,12 +195,7 @@ fn frames_in_memory_decode_as_their_source_does() {
     use crate::capture::Frame;
     use crate::capture::memory::MemorySource;
     let scene = Scene::default();
-    let (mut source, _, _) = render(&scene);
-    let format = source.format().clone();
-    let mut frames = Vec::new();
-    while let Some(frame) = source.next_frame().expect("a frame") {
-        frames.push(frame.samples);
-    }
+    let (format, frames) = frames_of(&scene);
     let region = Roi {
         x: 5,
         y: 3,
@@ -233,11 +239,7 @@ fn frames_in_memory_decode_as_their_source_does() {
         frames: 300,
         ..Scene::default()
     };
-    let (mut source, _, _) = render(&long);
-    let mut long_frames = Vec::new();
-    while let Some(frame) = source.next_frame().expect("a frame") {
-        long_frames.push(frame.samples);
-    }
+    let (_, long_frames) = frames_of(&long);
     let decoded = decode_frames(&long_frames, &format, &config).expect("decodes");
     assert_eq!(decoded.report.windows, 2, "{:?}", decoded.report);
     let error = decode_frames(&frames[..5], &format, &config).expect_err("too few frames");
@@ -304,12 +306,7 @@ fn a_checked_fit_serves_the_decode_as_a_fresh_fit_would() {
             frames,
             ..Scene::default()
         };
-        let (mut source, _, _) = render(&scene);
-        let format = source.format().clone();
-        let mut window = Vec::new();
-        while let Some(frame) = source.next_frame().expect("a frame") {
-            window.push(frame.samples);
-        }
+        let (format, window) = frames_of(&scene);
         let config = DecodeConfig {
             leds: LedCount::Fixed(scene.leds),
             ..DecodeConfig::default()

@@ -239,6 +239,7 @@ fn check_sizes(
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::layouts::column_major;
 
     #[test]
     fn offset_is_removed_and_coverage_counted() {
@@ -311,13 +312,6 @@ mod tests {
             "uniform ±2 mm noise"
         );
         // Arrays in column-major layout (rows not contiguous: copied) score the same pixels.
-        fn column_major<T: Clone>(a: &Array2<T>) -> Array2<T> {
-            a.clone()
-                .reversed_axes()
-                .as_standard_layout()
-                .t()
-                .to_owned()
-        }
         let (e, t, s) = (
             column_major(&estimate),
             column_major(&truth),
