@@ -7,8 +7,8 @@
 //! the Laplace equation over the filled pixels then smooth the seams. Everything that depends only
 //! on which pixels are known — the pyramid's weights and every filled pixel's neighbours — is
 //! worked out once in an [`Inpainting`] and shared by the channels filled over the same pixels
-//! (s_x and s_y, filled together as pairs in one pass: [`Channels`]). The fill works in the
-//! grid's own row-major storage: the pull reads the known values there, the push reaches the
+//! (s_x and s_y, filled together as pairs in one pass, or as triples with the albedo where it is
+//! known at the same pixels: [`Channels`]). The fill works in the grid's own row-major storage: the pull reads the known values there, the push reaches the
 //! grid only at the pixels to fill (its weights there are 0), and the sweeps update it in place.
 
 use crate::regions::{grid_neighbours, row_major};
@@ -54,6 +54,20 @@ impl Channels for (f64, f64) {
 
     fn zip(self, other: Self, f: impl Fn(f64, f64) -> f64) -> Self {
         (f(self.0, other.0), f(self.1, other.1))
+    }
+}
+
+impl Channels for (f64, f64, f64) {
+    fn splat(v: f64) -> Self {
+        (v, v, v)
+    }
+
+    fn map(self, f: impl Fn(f64) -> f64) -> Self {
+        (f(self.0), f(self.1), f(self.2))
+    }
+
+    fn zip(self, other: Self, f: impl Fn(f64, f64) -> f64) -> Self {
+        (f(self.0, other.0), f(self.1, other.1), f(self.2, other.2))
     }
 }
 
@@ -361,6 +375,18 @@ mod tests {
         let bits = |v: &Array2<f64>| v.mapv(f64::to_bits);
         assert_eq!(bits(&pairs.mapv(|p| p.0)), bits(&a1));
         assert_eq!(bits(&pairs.mapv(|p| p.1)), bits(&b1));
+        // And three channels as triples (the third: a doubled, which every step keeps exact).
+        let mut triples = Array2::from_shape_fn(shape, |p| {
+            if known[p] || !wanted[p] {
+                (a[p], b[p], 2.0 * a[p])
+            } else {
+                (-0.0, f64::NAN, f64::INFINITY)
+            }
+        });
+        shared.fill(&mut triples);
+        assert_eq!(bits(&triples.mapv(|p| p.0)), bits(&a1));
+        assert_eq!(bits(&triples.mapv(|p| p.1)), bits(&b1));
+        assert_eq!(bits(&triples.mapv(|p| p.2 / 2.0)), bits(&a1));
         // Known pixels and pixels outside `wanted` keep their values.
         for ((p, &k), &w) in known.indexed_iter().zip(wanted.iter()) {
             if k || !w {
