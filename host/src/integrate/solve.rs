@@ -17,7 +17,7 @@ use super::{
 };
 use crate::rig::Projection;
 use crate::types::DepthMap;
-use ndarray::{Array2, Array3};
+use ndarray::{Array2, Array3, Zip};
 use rayon::prelude::*;
 use std::time::Instant;
 
@@ -73,6 +73,50 @@ fn update_two_led_slopes(
     }
 }
 
+/// The slopes of two-LED pixels and holes, and the albedo of two-LED pixels, filled in from
+/// the measured pixels around them ([`super::inpaint`]).
+fn filled_in(
+    problem: &Problem,
+    region: &Array2<bool>,
+    topology: &Topology,
+) -> (Array2<(f64, f64)>, Array2<f64>) {
+    let known = problem.class.mapv(|k| k == Confidence::Measured);
+    let albedo_known = Zip::from(&known)
+        .and(&problem.albedo)
+        .map_collect(|&k, &a| k && a.is_finite() && a > 0.0);
+    let fill_slopes = known.iter().any(|&k| k) && known != region;
+    let fill_albedo = problem
+        .planes
+        .iter()
+        .any(|p| topology.node(p.pixel).is_some())
+        && albedo_known.iter().any(|&k| k);
+    if fill_albedo && albedo_known == known {
+        // The albedo is known where the slopes are (and a two-LED pixel is in the region, so
+        // not all of it is known): all three channels in one pass, each bit for bit as on
+        // its own.
+        let mut joint = Zip::from(&problem.slopes)
+            .and(&problem.albedo)
+            .map_collect(|&(sx, sy), &a| (sx, sy, a));
+        Inpainting::new(&known, region).fill(&mut joint);
+        return (joint.mapv(|(sx, sy, _)| (sx, sy)), joint.mapv(|j| j.2));
+    }
+    let (mut slopes, mut albedo) = (problem.slopes.clone(), problem.albedo.clone());
+    rayon::join(
+        || {
+            if fill_slopes {
+                // s_x and s_y in one pass over their shared pyramid and stencil.
+                Inpainting::new(&known, region).fill(&mut slopes);
+            }
+        },
+        || {
+            if fill_albedo {
+                inpaint(&mut albedo, &albedo_known, region);
+            }
+        },
+    );
+    (slopes, albedo)
+}
+
 /// Solves a window problem and places depth, confidence and normals in a `shape` grid.
 pub(super) fn solve_window(
     problem: &Problem,
@@ -103,50 +147,7 @@ pub(super) fn solve_window(
     let grid = &problem.grid;
     let step = grid.step();
     let (r0, c0) = problem.origin;
-    // Fill in the slopes of two-LED pixels and holes from the measured ones.
-    let mut filled_slopes = problem.slopes.clone();
-    let known = problem.class.mapv(|k| k == Confidence::Measured);
-    // Two-LED pixels' albedo, interpolated from the measured pixels around them (with the
-    // slopes: the three fills are independent).
-    let mut albedo = problem.albedo.clone();
-    let albedo_known = Array2::from_shape_fn(albedo.dim(), |p| {
-        known[p] && albedo[p].is_finite() && albedo[p] > 0.0
-    });
-    let fill_slopes = known.iter().any(|&k| k) && known != region;
-    let fill_albedo = problem
-        .planes
-        .iter()
-        .any(|p| topology.node(p.pixel).is_some())
-        && albedo_known.iter().any(|&k| k);
-    if fill_albedo && albedo_known == known {
-        // The albedo is known where the slopes are: all three in one pass, each channel bit
-        // for bit as on its own.
-        let mut joint = ndarray::Zip::from(&filled_slopes)
-            .and(&albedo)
-            .map_collect(|&(sx, sy), &a| (sx, sy, a));
-        Inpainting::new(&known, &region).fill(&mut joint);
-        ndarray::Zip::from(&mut filled_slopes)
-            .and(&mut albedo)
-            .and(&joint)
-            .for_each(|s, a, &(sx, sy, filled)| {
-                *s = (sx, sy);
-                *a = filled;
-            });
-    } else {
-        rayon::join(
-            || {
-                if fill_slopes {
-                    // s_x and s_y in one pass over their shared pyramid and stencil.
-                    Inpainting::new(&known, &region).fill(&mut filled_slopes);
-                }
-            },
-            || {
-                if fill_albedo {
-                    inpaint(&mut albedo, &albedo_known, &region);
-                }
-            },
-        );
-    }
+    let (filled_slopes, albedo) = filled_in(problem, &region, &topology);
     profile.add("inpainting", t);
     let t = Instant::now();
     let mut slopes: Vec<(f64, f64)> = topology.cells.iter().map(|&p| filled_slopes[p]).collect();
@@ -527,4 +528,89 @@ fn place_nodes(out: &mut Integration, nodes: &NodeResults) {
                 }
             },
         );
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use nalgebra::Vector3;
+
+    /// A 12×15 region (its first column outside) whose measured pixels surround a block of
+    /// two-LED pixels and a hole.
+    fn problem() -> Problem {
+        let shape = (12, 15);
+        let class = Array2::from_shape_fn(shape, |(r, c)| match (r, c) {
+            (_, 0) => Confidence::None,
+            (3..6, 4..9) => Confidence::TwoLeds,
+            (8..10, 10..13) => Confidence::Filled,
+            _ => Confidence::Measured,
+        });
+        let measured = |p: (usize, usize)| class[p] == Confidence::Measured;
+        let slopes = Array2::from_shape_fn(shape, |(r, c)| {
+            if measured((r, c)) {
+                (0.1 * r as f64 - 0.02 * c as f64, (0.3 * c as f64).sin())
+            } else {
+                (f64::NAN, f64::NAN)
+            }
+        });
+        let albedo = Array2::from_shape_fn(shape, |(r, c)| {
+            if measured((r, c)) {
+                0.5 + 0.01 * (r * c) as f64
+            } else {
+                f64::NAN
+            }
+        });
+        let planes = class
+            .indexed_iter()
+            .filter(|(_, k)| **k == Confidence::TwoLeds)
+            .map(|(pixel, _)| NormalPlane {
+                pixel,
+                across: Vector3::x(),
+                towards: Vector3::z(),
+                least_albedo: Vector3::zeros(),
+            })
+            .collect();
+        Problem {
+            class,
+            slopes,
+            planes,
+            albedo,
+            origin: (0, 0),
+            grid: DepthGrid::Orthographic { pitch_mm: 1.0 },
+        }
+    }
+
+    /// Slopes and albedo filled in together (albedo known wherever slopes are) or apart (a
+    /// measured pixel without an albedo) equal the separate fills bit for bit, and fill
+    /// every region pixel.
+    #[test]
+    fn slopes_and_albedo_fill_in_together_or_apart_as_on_their_own() {
+        for albedo_missing_at in [None, Some((1, 1)), Some((7, 3))] {
+            let mut problem = problem();
+            if let Some(p) = albedo_missing_at {
+                problem.albedo[p] = f64::NAN;
+            }
+            let region = problem.class.mapv(|k| k != Confidence::None);
+            let topology = Topology::new(&region);
+            let (slopes, albedo) = filled_in(&problem, &region, &topology);
+            let known = problem.class.mapv(|k| k == Confidence::Measured);
+            let mut alone = problem.slopes.clone();
+            Inpainting::new(&known, &region).fill(&mut alone);
+            let albedo_known = Zip::from(&known)
+                .and(&problem.albedo)
+                .map_collect(|&k, &a| k && a.is_finite());
+            let mut albedo_alone = problem.albedo.clone();
+            inpaint(&mut albedo_alone, &albedo_known, &region);
+            let bits = |a: &Array2<f64>| a.mapv(f64::to_bits);
+            assert_eq!(bits(&slopes.mapv(|s| s.0)), bits(&alone.mapv(|s| s.0)));
+            assert_eq!(bits(&slopes.mapv(|s| s.1)), bits(&alone.mapv(|s| s.1)));
+            assert_eq!(bits(&albedo), bits(&albedo_alone));
+            for (p, &inside) in region.indexed_iter() {
+                if inside {
+                    assert!(slopes[p].0.is_finite() && slopes[p].1.is_finite(), "{p:?}");
+                    assert!(albedo[p].is_finite(), "{p:?} {albedo_missing_at:?}");
+                }
+            }
+        }
+    }
 }
