@@ -483,8 +483,9 @@
 //! either way while the machine was steady (reconstruction median 54–57 ms a window,
 //! integration 29–31 ms); the gain is below this machine's noise. Updating each colour of the
 //! fill's red–black sweeps in parallel (tried, not kept) did not shorten the reconstruction
-//! (median 62 against 60 ms a window, four rounds): the reconstruction uses 1.45 of the two
-//! cores, and the decode and writer threads take the rest.
+//! (62 against 60 ms a window, the mean of four rounds' medians): the whole run keeps only
+//! 1.45 of the two cores busy (user CPU 4.7 s in 3.3 s), and the reconstruction's second
+//! worker competes with the decoding and writing threads.
 use criterion::{BatchSize, Criterion, criterion_group, criterion_main};
 use meb::capture::binning::Binning;
 use meb::capture::memory::MemorySource;
