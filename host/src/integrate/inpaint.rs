@@ -8,8 +8,9 @@
 //! on which pixels are known — the pyramid's weights and every filled pixel's neighbours — is
 //! worked out once in an [`Inpainting`] and shared by the channels filled over the same pixels
 //! (s_x and s_y, filled together as pairs in one pass, or as triples with the albedo where it is
-//! known at the same pixels: [`Channels`]). The fill works in the grid's own row-major storage: the pull reads the known values there, the push reaches the
-//! grid only at the pixels to fill (its weights there are 0), and the sweeps update it in place.
+//! known at the same pixels: [`Channels`]). The fill works in the grid's own row-major storage:
+//! the pull reads the known values there, the push reaches the grid only at the pixels to fill
+//! (its weights there are 0), and the sweeps update it in place.
 
 use crate::regions::{grid_neighbours, row_major};
 use ndarray::Array2;
