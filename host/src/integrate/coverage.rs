@@ -37,16 +37,31 @@ const MAX_TILT_RAD: f64 = 80.0 * std::f64::consts::PI / 180.0;
 
 impl NormalPlane {
     /// The normal on the circle nearest `n` in angle, within [`MAX_TILT_RAD`] of the direction
-    /// of `towards` in the plane; `None` when the constraint is degenerate.
+    /// of `towards` in the plane; `None` when the constraint is degenerate or `n` is not finite.
+    ///
+    /// With e₁ the direction of `towards` in the circle's plane and e₂ = m̂ × e₁, `n` lies at the
+    /// angle θ = atan2(n·e₂, n·e₁) of the circle; the answer is at θ clamped to ±α. Within the
+    /// limit (cos θ ≥ cos α) that is the in-plane part of `n` normalised, beyond it the limit on
+    /// the side of n·e₂, so no angle is computed (atan2 and sin/cos were 1.5 % of `meb video`'s
+    /// CPU).
     pub fn project(&self, n: &Vector3<f64>) -> Option<Vector3<f64>> {
         let m = self.across.try_normalize(0.0)?;
         let e1 = (self.towards - m * m.dot(&self.towards)).try_normalize(1e-12)?;
         let e2 = m.cross(&e1);
-        let theta = n
-            .dot(&e2)
-            .atan2(n.dot(&e1))
-            .clamp(-MAX_TILT_RAD, MAX_TILT_RAD);
-        Some(e1 * theta.cos() + e2 * theta.sin())
+        let (along, aside) = (n.dot(&e1), n.dot(&e2));
+        let radius = (along * along + aside * aside).sqrt();
+        if !radius.is_finite() {
+            return None;
+        }
+        if radius == 0.0 {
+            // θ = atan2(0, 0) = 0: the middle of the half-circle.
+            return Some(e1);
+        }
+        let (cos_limit, sin_limit) = (MAX_TILT_RAD.cos(), MAX_TILT_RAD.sin());
+        if along >= radius * cos_limit {
+            return Some((e1 * along + e2 * aside) / radius);
+        }
+        Some(e1 * cos_limit + e2 * sin_limit.copysign(aside))
     }
 
     /// The normal of the circle whose albedo is `albedo` on the side of `n` (module docs):
@@ -139,6 +154,59 @@ mod tests {
             ..plane
         };
         assert!(degenerate.project(&Vector3::z()).is_none());
+    }
+
+    /// The projection equals the angle clamped on the circle, θ = atan2(n·e₂, n·e₁) within
+    /// ±[`MAX_TILT_RAD`], over random planes and normals (fixed seed), both sides of the limit.
+    #[test]
+    fn projection_is_the_clamped_angle_on_the_circle() {
+        use rand::{RngExt, SeedableRng};
+        let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(11);
+        let mut unit = || {
+            Vector3::new(
+                rng.random_range(-1.0..1.0),
+                rng.random_range(-1.0..1.0),
+                rng.random_range(-1.0..1.0),
+            )
+        };
+        let (mut clamped, mut inside) = (0, 0);
+        for _ in 0..2000 {
+            let plane = NormalPlane {
+                pixel: (0, 0),
+                across: unit(),
+                towards: unit(),
+                least_albedo: Vector3::zeros(),
+            };
+            let n = unit();
+            let m = plane.across.normalize();
+            let e1 = (plane.towards - m * m.dot(&plane.towards)).normalize();
+            let e2 = m.cross(&e1);
+            let theta = n.dot(&e2).atan2(n.dot(&e1));
+            let expected = theta.clamp(-MAX_TILT_RAD, MAX_TILT_RAD);
+            if expected == theta {
+                inside += 1;
+            } else {
+                clamped += 1;
+            }
+            let want = e1 * expected.cos() + e2 * expected.sin();
+            let got = plane.project(&n).unwrap();
+            assert!(
+                (got - want).norm() < 1e-12,
+                "{got} vs {want} at θ = {theta}"
+            );
+        }
+        assert!(
+            clamped > 100 && inside > 100,
+            "{clamped} clamped, {inside} inside"
+        );
+        let plane = NormalPlane {
+            pixel: (0, 0),
+            across: Vector3::x(),
+            towards: Vector3::z(),
+            least_albedo: Vector3::zeros(),
+        };
+        assert_eq!(plane.project(&Vector3::x()), Some(Vector3::z()));
+        assert!(plane.project(&Vector3::new(0.0, f64::NAN, 1.0)).is_none());
     }
 
     /// Two lights and a known normal: the circle with the true albedo holds the normal and its
