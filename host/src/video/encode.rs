@@ -3,8 +3,8 @@
 //!
 //! A [`VideoEncoder`] writes several videos of the same picture size side by side, one picture
 //! of each per step. MP4: one FFmpeg process takes them all, stacked one above the other as
-//! one `rgb24` raw frame, and splits and crops them back into one `libx264`/`yuv420p` MP4 each
-//! (`-filter_complex split,crop`). Each picture is piped as it is made, so nothing accumulates
+//! one raw `yuv420p` frame (converted here, [`super::yuv`]), and splits and crops them back
+//! into one `libx264` MP4 each (`-filter_complex split,crop`; no conversion in FFmpeg). Each picture is piped as it is made, so nothing accumulates
 //! in memory, and the process starts once: FFmpeg's start-up (dynamic linking of its 200-odd
 //! libraries) costs about 60 ms of CPU, which a second process would pay again while the
 //! first window is being read and decoded. APNG needs its frame count before the first frame,
@@ -52,6 +52,8 @@ pub enum VideoEncoder {
         stderr: Option<JoinHandle<String>>,
         /// Picture size.
         size: (u32, u32),
+        /// The stacked 4:2:0 frame being piped (storage reused).
+        frame: Vec<u8>,
     },
     /// Pictures stored for APNGs.
     Apng {
@@ -97,6 +99,11 @@ impl VideoEncoder {
             25.0
         };
         if container == VideoContainer::Auto {
+            if !width.is_multiple_of(2) || !height.is_multiple_of(2) {
+                return Err(VideoError::Encode(format!(
+                    "{width}×{height} pictures cannot be stored as 4:2:0 H.264 (odd size)"
+                )));
+            }
             let paths: Vec<PathBuf> = stems.iter().map(|s| s.with_extension("mp4")).collect();
             let stacked = height
                 .checked_mul(paths.len() as u32)
@@ -104,7 +111,7 @@ impl VideoEncoder {
             let mut command = Command::new("ffmpeg");
             command
                 .args(["-hide_banner", "-loglevel", "error", "-nostdin", "-y"])
-                .args(["-f", "rawvideo", "-pix_fmt", "rgb24"])
+                .args(["-f", "rawvideo", "-pix_fmt", "yuv420p"])
                 .args(["-s", &format!("{width}x{stacked}")])
                 .args(["-framerate", &format!("{fps}"), "-i", "-"])
                 .args([
@@ -139,6 +146,7 @@ impl VideoEncoder {
                         stdin,
                         stderr,
                         size: (width, height),
+                        frame: Vec::new(),
                     });
                 }
                 Err(e) if e.kind() == std::io::ErrorKind::NotFound => {
@@ -217,7 +225,11 @@ impl VideoEncoder {
         }
         match self {
             Self::Mp4 {
-                stdin, size, paths, ..
+                stdin,
+                size,
+                paths,
+                frame,
+                ..
             } => {
                 for picture in pictures {
                     check_size(picture, *size)?;
@@ -225,16 +237,13 @@ impl VideoEncoder {
                 let Some(stdin) = stdin.as_mut() else {
                     return Err(VideoError::Encode("ffmpeg's input is closed".into()));
                 };
-                // Pictures of one width stacked one above the other are their rows in turn.
-                for picture in pictures {
-                    stdin.write_all(picture.as_raw()).map_err(|e| {
-                        VideoError::Encode(format!(
-                            "ffmpeg stopped taking frames for {} ({e})",
-                            listed(paths)
-                        ))
-                    })?;
-                }
-                Ok(())
+                super::yuv::stacked_420(pictures, frame);
+                stdin.write_all(frame).map_err(|e| {
+                    VideoError::Encode(format!(
+                        "ffmpeg stopped taking frames for {} ({e})",
+                        listed(paths)
+                    ))
+                })
             }
             Self::Apng {
                 stores,
@@ -398,6 +407,59 @@ fn assemble_apng(
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// Two MP4s from one FFmpeg: each decodes to its own pictures, in order, within H.264's
+    /// loss at CRF 18. FFmpeg is part of the set-up (`scripts/setup.sh`): without it the
+    /// encoder falls back to APNG and this test fails.
+    #[test]
+    fn stacked_mp4s_decode_to_their_own_pictures() {
+        let dir = tempfile::tempdir().unwrap();
+        let stems = [dir.path().join("depth"), dir.path().join("shaded")];
+        let (width, height) = (32u32, 16u32);
+        let mut video = VideoEncoder::create(&stems, width, height, 25.0, VideoContainer::Auto)
+            .expect("encoder");
+        assert_eq!(video.container(), "mp4", "{:?}", video.fallback());
+        let colours = |k: u8| {
+            (
+                image::Rgb([200, 40 * k, 30]),
+                image::Rgb([20, 90, 60 * k + 10]),
+            )
+        };
+        for k in 0..3u8 {
+            let (a, b) = colours(k);
+            let (a, b) = (
+                RgbImage::from_pixel(width, height, a),
+                RgbImage::from_pixel(width, height, b),
+            );
+            video.push(&[&a, &b]).unwrap();
+        }
+        let paths = video.finish().unwrap();
+        for (which, path) in paths.into_iter().enumerate() {
+            let path = path.unwrap();
+            let decoded = std::process::Command::new("ffmpeg")
+                .args(["-v", "error", "-i"])
+                .arg(&path)
+                .args(["-f", "rawvideo", "-pix_fmt", "rgb24", "-"])
+                .output()
+                .expect("ffmpeg decodes");
+            assert!(decoded.status.success(), "{path:?}");
+            let picture_bytes = (3 * width * height) as usize;
+            assert_eq!(decoded.stdout.len(), 3 * picture_bytes, "{path:?}");
+            for (k, picture) in decoded.stdout.chunks_exact(picture_bytes).enumerate() {
+                let (a, b) = colours(k as u8);
+                let want = if which == 0 { a.0 } else { b.0 };
+                for pixel in picture.chunks_exact(3) {
+                    for (got, want) in pixel.iter().zip(want) {
+                        assert!(
+                            got.abs_diff(want) <= 4,
+                            "{path:?} picture {k}: {pixel:?} vs {want:?}"
+                        );
+                    }
+                }
+            }
+        }
+        assert!(VideoEncoder::create(&stems, 5, 4, 25.0, VideoContainer::Auto).is_err());
+    }
 
     #[test]
     fn an_apng_holds_every_picture_in_order() {

@@ -49,6 +49,7 @@ pub mod stream;
 pub mod truth;
 pub mod window;
 pub mod writer;
+mod yuv;
 
 pub use carry::{TimingCarry, TimingSource};
 pub use focus::{FOCUS_MARGIN_PX, Focus, FocusRegion, LitBox, lit_box};
