@@ -486,6 +486,25 @@
 //! (62 against 60 ms a window, the mean of four rounds' medians): the whole run keeps only
 //! 1.45 of the two cores busy (user CPU 4.7 s in 3.3 s), and the reconstruction's second
 //! worker competes with the decoding and writing threads.
+//!
+//! Session 46 (`perf record` of the whole 2000-frame run, samples per thread, FFmpeg
+//! included): 6.6 s of CPU in 3.8 s under `perf`; without it (`time`, children included)
+//! user + system 5.5–5.7 s in 3.5–3.6 s, 1.6 of the two cores (session 45's 1.45 counted user
+//! time only). Per window: reconstruction pool 78 ms, decoding 25 ms (the matched filter
+//! 9), FFmpeg 12 ms, the reader 10 ms (the kernel's copy out of the page cache), the writer
+//! 6 ms. 25 3-D frames/s needs all of it below 80 ms, so every stage's CPU counts, not only
+//! the reconstruction's. Changes: the two-LED projection clamps its angle without atan2, sin
+//! and cos; the previews reach FFmpeg as one yuv420p frame converted here (FFmpeg's samples
+//! 431–506 → 299–312 over the run, the writer's 214–257 → 279–364: about 2.4 ms of CPU a
+//! window less, and half the bytes through the pipe); the warm offset search stops at the
+//! tolerance divided by the carried-offset gain (11 % fewer misfit evaluations). Callgrind, the
+//! first 480 frames with `--ground-truth`: 7.560 G (before) → 7.485 G (projection) → 7.492 G
+//! (all three, now including the 123 M of the yuv420p conversion that FFmpeg did before); the
+//! per-window RMSE moved by at most 0.08 µm and the whole clip's stayed at median 0.6837,
+//! mean 0.7448, worst 1.1954 mm. Wall clock, three rounds alternated: 15.1–15.3 → 15.4–15.8
+//! 3-D frames/s, user + system CPU (FFmpeg included) 5.55–5.68 → 5.44–5.54 s: within this
+//! machine's noise. `--hop 8`: 17.7 3-D frames/s (246 windows, RMSE median 0.732, worst
+//! 1.614 mm); `--bin 2`: 25.7–26.7 3-D frames/s.
 use criterion::{BatchSize, Criterion, criterion_group, criterion_main};
 use meb::capture::binning::Binning;
 use meb::capture::memory::MemorySource;
