@@ -162,7 +162,7 @@ mod tests {
     fn projection_is_the_clamped_angle_on_the_circle() {
         use rand::{RngExt, SeedableRng};
         let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(11);
-        let mut unit = || {
+        let mut random_vector = || {
             Vector3::new(
                 rng.random_range(-1.0..1.0),
                 rng.random_range(-1.0..1.0),
@@ -173,11 +173,11 @@ mod tests {
         for _ in 0..2000 {
             let plane = NormalPlane {
                 pixel: (0, 0),
-                across: unit(),
-                towards: unit(),
+                across: random_vector(),
+                towards: random_vector(),
                 least_albedo: Vector3::zeros(),
             };
-            let n = unit();
+            let n = random_vector();
             let m = plane.across.normalize();
             let e1 = (plane.towards - m * m.dot(&plane.towards)).normalize();
             let e2 = m.cross(&e1);

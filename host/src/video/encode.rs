@@ -4,13 +4,13 @@
 //! A [`VideoEncoder`] writes several videos of the same picture size side by side, one picture
 //! of each per step. MP4: one FFmpeg process takes them all, stacked one above the other as
 //! one raw `yuv420p` frame (converted here, [`super::yuv`]), and splits and crops them back
-//! into one `libx264` MP4 each (`-filter_complex split,crop`; no conversion in FFmpeg). Each picture is piped as it is made, so nothing accumulates
-//! in memory, and the process starts once: FFmpeg's start-up (dynamic linking of its 200-odd
-//! libraries) costs about 60 ms of CPU, which a second process would pay again while the
-//! first window is being read and decoded. APNG needs its frame count before the first frame,
-//! which a stream does not know: each picture is stored as a PNG under a hidden folder as it
-//! comes, and [`VideoEncoder::finish`] assembles them one at a time into the animation and
-//! deletes them.
+//! into one `libx264` MP4 each (`-filter_complex split,crop`; no conversion in FFmpeg). Each
+//! picture is piped as it is made, so nothing accumulates in memory, and the process starts
+//! once: FFmpeg's start-up (dynamic linking of its 200-odd libraries) costs about 60 ms of CPU,
+//! which a second process would pay again while the first window is being read and decoded.
+//! APNG needs its frame count before the first frame, which a stream does not know: each
+//! picture is stored as a PNG under a hidden folder as it comes, and [`VideoEncoder::finish`]
+//! assembles them one at a time into the animation and deletes them.
 
 use super::VideoError;
 use image::RgbImage;
@@ -449,9 +449,9 @@ mod tests {
                 let (a, b) = colours(k as u8);
                 let want = if which == 0 { a.0 } else { b.0 };
                 for pixel in picture.chunks_exact(3) {
-                    for (got, want) in pixel.iter().zip(want) {
+                    for (got, expected) in pixel.iter().zip(want) {
                         assert!(
-                            got.abs_diff(want) <= 4,
+                            got.abs_diff(expected) <= 4,
                             "{path:?} picture {k}: {pixel:?} vs {want:?}"
                         );
                     }
