@@ -497,13 +497,16 @@
 //! and cos; the previews reach FFmpeg as one yuv420p frame converted here (FFmpeg's samples
 //! 431–506 → 299–312 over the run, the writer's 214–257 → 279–364: about 2.4 ms of CPU a
 //! window less, and half the bytes through the pipe); the warm offset search stops at the
-//! tolerance divided by the carried-offset gain (11 % fewer misfit evaluations). Callgrind, the
-//! first 480 frames with `--ground-truth`: 7.560 G (before) → 7.485 G (projection) → 7.492 G
-//! (all three, now including the 123 M of the yuv420p conversion that FFmpeg did before); the
-//! per-window RMSE moved by at most 0.08 µm and the whole clip's stayed at median 0.6837,
-//! mean 0.7448, worst 1.1954 mm. Wall clock, three rounds alternated: 15.1–15.3 → 15.4–15.8
-//! 3-D frames/s, user + system CPU (FFmpeg included) 5.55–5.68 → 5.44–5.54 s: within this
-//! machine's noise. `--hop 8`: 17.7 3-D frames/s (246 windows, RMSE median 0.732, worst
+//! tolerance divided by the carried-offset gain (11 % fewer misfit evaluations) and on 2 500
+//! pixels instead of 5 000 (`WARM_MISFIT_PIXELS`; 5.4 → 2.8 ms a window). Callgrind, the first
+//! 480 frames with `--ground-truth`: 7.560 G (before) → 7.485 G (projection) → 7.492 G (with
+//! the tolerance and the 123 M of the yuv420p conversion that FFmpeg did before) → 7.180 G
+//! (2 500 pixels): −5.0 %, FFmpeg's share not counted. The first three left every window's
+//! RMSE within 0.1 µm; the fewer pixels move single windows by −0.04 to +0.07 mm, without a
+//! trend (whole clip median 0.684 → 0.673, mean 0.745 → 0.751, worst 1.195 → 1.194 mm). Wall
+//! clock, three rounds alternated before the 2 500 pixels: 15.1–15.3 → 15.4–15.8 3-D frames/s,
+//! user + system CPU (FFmpeg included) 5.55–5.68 → 5.44–5.54 s; with them, while disk waits
+//! slowed both: 9.5–14.6 → 13.8–14.1 3-D frames/s. Both within this machine's noise. `--hop 8`: 17.7 3-D frames/s (246 windows, RMSE median 0.732, worst
 //! 1.614 mm); `--bin 2`: 25.7–26.7 3-D frames/s.
 use criterion::{BatchSize, Criterion, criterion_group, criterion_main};
 use meb::capture::binning::Binning;

@@ -36,11 +36,13 @@ const MISFIT_PIXELS: usize = 20_000;
 /// Pixels whose misfit places a part from a warm start, where the bracket is narrow and only
 /// [`WARM_OFFSET_GAIN`] of a preferred offset's move is taken. 2 500 instead of 5 000 halved
 /// the warm offset search (median 5.4 → 2.8 ms a window; its misfit evaluations cost as much
-/// CPU as the window's photometric stereo) at the same per-window depth RMSE against truth
-/// every 20 frames (thesis-dynamic rig, 1280×720, windows of 40): the turning ellipsoid (2000
-/// frames, 50 windows) median 0.684 → 0.673 mm, mean 0.745 → 0.751, worst 1.195 → 1.194; a
-/// seeded blobby shape it was not tuned on (`--scene blobby --seed 5 --rpm 10`, 600 frames)
-/// median 0.412 → 0.412, mean 0.404 → 0.407, worst 0.556 → 0.543 mm.
+/// CPU as the window's photometric stereo). The depth RMSE against truth every 20 frames
+/// (thesis-dynamic rig, 1280×720, windows of 40) moved window by window as the t-test's
+/// verdicts did, with no trend: on the turning ellipsoid (2000 frames, 50 windows) by −0.039 to
+/// +0.074 mm (28 windows better, 22 worse; median 0.684 → 0.673, mean 0.745 → 0.751, worst
+/// 1.195 → 1.194 mm); on a seeded blobby shape it was not tuned on (`--scene blobby --seed 5
+/// --rpm 10`, 600 frames, 15 windows) by −0.022 to +0.024 mm (median 0.412 → 0.412, mean
+/// 0.404 → 0.407, worst 0.556 → 0.543 mm).
 const WARM_MISFIT_PIXELS: usize = 2_500;
 
 /// Half-width in mm of the bracket around the offset carried from the previous pass in which a
