@@ -506,8 +506,9 @@
 //! trend (whole clip median 0.684 → 0.673, mean 0.745 → 0.751, worst 1.195 → 1.194 mm). Wall
 //! clock, three rounds alternated before the 2 500 pixels: 15.1–15.3 → 15.4–15.8 3-D frames/s,
 //! user + system CPU (FFmpeg included) 5.55–5.68 → 5.44–5.54 s; with them, while disk waits
-//! slowed both: 9.5–14.6 → 13.8–14.1 3-D frames/s. Both within this machine's noise. `--hop 8`: 17.7 3-D frames/s (246 windows, RMSE median 0.732, worst
-//! 1.614 mm); `--bin 2`: 25.7–26.7 3-D frames/s.
+//! slowed both: 9.5–14.6 → 13.8–14.1 3-D frames/s. Both within this machine's noise.
+//! `--hop 8`: 17.7 3-D frames/s (246 windows, RMSE median 0.732, worst 1.614 mm); `--bin 2`:
+//! 25.7–26.7 3-D frames/s.
 use criterion::{BatchSize, Criterion, criterion_group, criterion_main};
 use meb::capture::binning::Binning;
 use meb::capture::memory::MemorySource;
