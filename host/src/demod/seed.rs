@@ -12,7 +12,9 @@
 //! the LEDs' best scores at full exposure sum highest; the exposure e is scanned at that rate
 //! with each LED's Δ_i refined per exposure. The local maxima of that scan (and a few spread
 //! exposures, because at ρ ≈ 1 the exposure barely changes the templates) start the
-//! least-squares refinement ([`super::fit`]).
+//! least-squares refinement ([`super::fit`]), and so do the LEDs' shifts where the sample holds
+//! the most energy along their templates, for samples whose signal space is nearly rank one
+//! (one flat face: [`strongest_shift_starts`]).
 
 use super::config::{FitLimits, SeedMethod};
 use super::spectrum::SignalSpace;
@@ -169,10 +171,7 @@ impl<'a> Scorer<'a> {
             return Vec::new();
         }
         let mut template = vec![0.0; self.frames];
-        let apart = |shift: f64| {
-            let d = (shift - best.1).rem_euclid(half);
-            d.min(half - d) > 1.5 * step
-        };
+        let apart = |shift: f64| circular_distance(shift, best.1, half) > 1.5 * step;
         let mut rivals: Vec<(f64, f64)> = (0..steps)
             .filter(|&k| {
                 let (before, after) = (grid[(k + steps - 1) % steps], grid[(k + 1) % steps]);
@@ -323,7 +322,86 @@ pub fn starts(
             }
         }
     }
+    // And the LEDs at their strongest shifts (a sample of nearly rank one).
+    let strongest = strongest_shift_starts(space, waves, frames, &starts);
+    starts.extend(strongest);
     starts
+}
+
+/// Starts with the LEDs at the shifts where the sample's energy along their templates peaks:
+/// for each timing of `starts`, all of them; for the first (best) start, each one alone too.
+/// Only starts not in `starts` already.
+///
+/// The subspace score cannot place an LED whose waveform the signal space does not hold as a
+/// direction of its own. The sample's pixels see the LEDs in nearly fixed proportions when
+/// they lie on one flat face (a face-on cube), so its signal is nearly rank one, the weighted
+/// sum Σ A_i·u_i of the waveforms, and a weak LED's template scores low at every shift. The
+/// 75 mm cube face-on at (30, 0, 20) mm (thesis-out-of-plane, 128 frames): two significant
+/// eigenvalues (1569 and 1.2, noise 0.025), LEDs 1 and 4 (on-levels 0.03 against 0.18 and
+/// 0.19) peaking at 0.07 and 0.10, and LED 4's peak 10 chips from its shift, so every
+/// refinement stopped there and the decode was refused (82 % of its modulation unexplained).
+/// The energy the sample holds along a template, tᵀGt / tᵀt over the leading directions,
+/// does not need that direction: the carriers stay orthogonal under any shift (SPEC §2), so
+/// the other LEDs add nothing to it, and it peaks at the LED's own shift however weak. The
+/// refinement keeps the lowest residual, so these starts only win where they fit better.
+fn strongest_shift_starts(
+    space: &SignalSpace,
+    waves: &[ReceivedWaveform],
+    frames: usize,
+    starts: &[Start],
+) -> Vec<Start> {
+    let energy_basis = space.energy_basis();
+    let energy = Scorer::new(energy_basis.as_view(), waves, frames);
+    let half = |led: usize| energy.half_period(led);
+    let strongest = |timing: Timing| -> Vec<f64> {
+        (0..waves.len())
+            .map(|led| {
+                let (_, shift) = energy.best_shift(led, timing, SHIFT_STEP, true);
+                shift.rem_euclid(half(led))
+            })
+            .collect()
+    };
+    let same = |a: &Start, b: &Start| {
+        a.timing == b.timing
+            && a.shifts
+                .iter()
+                .zip(&b.shifts)
+                .enumerate()
+                .all(|(led, (&x, &y))| circular_distance(x, y, half(led)) <= 1.5 * SHIFT_STEP)
+    };
+    let mut new: Vec<Start> = Vec::new();
+    let mut timings: Vec<Timing> = Vec::new();
+    for (k, start) in starts.iter().enumerate() {
+        if timings.contains(&start.timing) {
+            continue;
+        }
+        timings.push(start.timing);
+        let shifts = strongest(start.timing);
+        if k == 0 {
+            for (led, &shift) in shifts.iter().enumerate() {
+                let mut moved = start.clone();
+                moved.shifts[led] = shift;
+                new.push(moved);
+            }
+        }
+        new.push(Start {
+            timing: start.timing,
+            shifts,
+        });
+    }
+    let mut kept: Vec<Start> = Vec::new();
+    for candidate in new {
+        if !starts.iter().chain(&kept).any(|s| same(s, &candidate)) {
+            kept.push(candidate);
+        }
+    }
+    kept
+}
+
+/// Distance between two shifts on a circle of circumference `period`.
+fn circular_distance(a: f64, b: f64, period: f64) -> f64 {
+    let d = (a - b).rem_euclid(period);
+    d.min(period - d)
 }
 
 /// The rate ratio whose templates at full exposure the signal space holds best.

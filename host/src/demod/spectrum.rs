@@ -120,6 +120,17 @@ impl SignalSpace {
     pub fn basis(&self) -> nalgebra::DMatrixView<'_, f64> {
         self.vectors.columns(0, self.rank)
     }
+
+    /// The leading directions, each scaled by the square root of its eigenvalue: B = V·Λ^½,
+    /// so that |Bᵀt|² = tᵀ·V·Λ·Vᵀ·t is the energy the sample holds along t (the Gram
+    /// quadratic form tᵀGt restricted to the leading directions).
+    pub fn energy_basis(&self) -> DMatrix<f64> {
+        let mut b = self.vectors.clone();
+        for (mut column, &value) in b.column_iter_mut().zip(&self.values) {
+            column *= value.max(0.0).sqrt();
+        }
+        b
+    }
 }
 
 /// The `count` leading eigenpairs of a symmetric positive semi-definite matrix, descending;

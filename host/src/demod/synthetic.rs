@@ -9,6 +9,14 @@ use rand::{RngExt, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 use rand_distr::{Distribution, Normal};
 
+/// A flat face filling the disc: LED i lights it at `levels[i]` in the middle, and each LED's
+/// level changes by the fraction `tilt` per unit of distance towards the LED's side (0: the
+/// LEDs in the same proportions on every pixel, a sample of rank one).
+pub struct Face {
+    pub levels: Vec<f32>,
+    pub tilt: f64,
+}
+
 /// Parameters of a synthetic capture.
 pub struct Scene {
     pub width: usize,
@@ -21,6 +29,8 @@ pub struct Scene {
     pub background: f64,
     pub seed: u64,
     pub bit_depth: u8,
+    /// A flat face instead of the sphere.
+    pub face: Option<Face>,
 }
 
 impl Default for Scene {
@@ -36,6 +46,7 @@ impl Default for Scene {
             background: 0.05,
             seed: 7,
             bit_depth: 16,
+            face: None,
         }
     }
 }
@@ -77,8 +88,12 @@ pub fn render(scene: &Scene) -> (MemorySource, Vec<Vec<f32>>, Vec<f64>) {
                     if r2 > 0.85 {
                         return 0.0;
                     }
-                    let z = (1.0 - r2).sqrt();
                     let (lx, ly) = (angle.cos() * 0.6, angle.sin() * 0.6);
+                    if let Some(face) = &scene.face {
+                        let level = f64::from(face.levels.get(i).copied().unwrap_or(0.0));
+                        return (level * (1.0 + face.tilt * (x * lx + y * ly))) as f32;
+                    }
+                    let z = (1.0 - r2).sqrt();
                     (0.22 * (x * lx + y * ly + z * 0.8)).max(0.0) as f32
                 })
                 .collect()
