@@ -10,8 +10,9 @@ use rand_chacha::ChaCha8Rng;
 use rand_distr::{Distribution, Normal};
 
 /// A flat face filling the disc: LED i lights it at `levels[i]` in the middle, and each LED's
-/// level changes by the fraction `tilt` per unit of distance towards the LED's side (0: the
-/// LEDs in the same proportions on every pixel, a sample of rank one).
+/// level grows towards the LED's side by the fraction 0.6·`tilt` per unit of the disc's
+/// half-width (±0.55·`tilt` at its rim; 0: the LEDs in the same proportions on every pixel, a
+/// sample of rank one).
 pub struct Face {
     pub levels: Vec<f32>,
     pub tilt: f64,

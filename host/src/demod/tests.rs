@@ -335,7 +335,7 @@ fn a_checked_fit_serves_the_decode_as_a_fresh_fit_would() {
 /// the sample's signal is nearly rank one and two weak LEDs (on-levels 0.03 and 0.035 against
 /// 0.18 and 0.19, as the 75 mm cube face-on at (30, 0, 20) mm sees them) are no directions of
 /// their own. Every seed's LEDs must come out at their gains, neither refused nor at a wrong
-/// shift, on a face whose levels change across it by 0 %, ±3 % and ±6 % (8-bit codes and
+/// shift, on a face whose levels change across it by 0, ±2.8 % and ±5.5 % (8-bit codes and
 /// σ = 0.005, as `meb simulate` renders). Before the starts at the strongest shifts
 /// (`seed::strongest_shift_starts`), 9 of these 24 decodes were refused.
 #[test]
