@@ -167,7 +167,7 @@ pub struct TimingFit {
     /// The fitted line delay sits at the largest one searched.
     pub line_delay_at_limit: bool,
     /// 1σ standard error of the exposure (frame periods) from the fit's covariance; 0 when
-    /// given, [`UNDETERMINED_STD`] when the data do not constrain it.
+    /// given, [`UNDETERMINED_STD`] when the data do not constrain it or it ended on a bound.
     pub exposure_std: f64,
     /// 1σ standard error of the line delay (frame periods per row); 0 when given or not fitted.
     pub line_delay_std: f64,
@@ -438,7 +438,11 @@ impl Fitter<'_> {
             pixel_noise,
             rate_at_limit,
             line_delay_at_limit,
-            exposure_std: standard_error(&solution, information.as_ref(), EXPOSURE, pixel_noise),
+            exposure_std: if exposure_on_bound(&solution) {
+                UNDETERMINED_STD
+            } else {
+                standard_error(&solution, information.as_ref(), EXPOSURE, pixel_noise)
+            },
             line_delay_std: standard_error(
                 &solution,
                 information.as_ref(),
@@ -820,6 +824,18 @@ fn standard_error(
         Some(variance) => (variance * pixel_noise).sqrt().min(UNDETERMINED_STD),
         None => UNDETERMINED_STD,
     }
+}
+
+/// Whether the fitted exposure ended on one of its bounds ([`MIN_EXPOSURE`] or one frame).
+/// Its Gauss–Newton standard error says nothing there: the cost's minimum lies outside the
+/// box, or at one frame on a kink of the model (a shorter window mixes two chips, a longer
+/// one three), where the curvature is that of the kink, not of how far inside the box the
+/// data let the exposure move. The −20 ppm hil-like capture with integer shifts (true
+/// exposure 0.8, which every exposure in [0.8, 1] fits as well at ρ ≈ 1) ended at 1.0 and
+/// reported ±0.002 from that curvature; on a bound the exposure is reported undetermined.
+fn exposure_on_bound(solution: &Solution) -> bool {
+    let exposure = solution.params[EXPOSURE];
+    solution.free.contains(&EXPOSURE) && (exposure >= 1.0 || exposure <= MIN_EXPOSURE)
 }
 
 /// The sample's mean region row.
