@@ -2,7 +2,7 @@
 //! `led_true`, less noise than the thesis estimator, rate mismatch, and `meb decode` on the
 //! files `meb simulate` writes.
 
-use meb::demod::{DecodeConfig, Decoded, Estimator, LedCount, Linearize, decode};
+use meb::demod::{DecodeConfig, Decoded, DemodError, Estimator, LedCount, Linearize, decode};
 use meb::rig::Rig;
 use meb::simulate::ToneCurve;
 use meb::simulate::capture::{SimConfig, SimulatedCapture};
@@ -528,4 +528,45 @@ fn hil_settings_decode_without_a_line_delay() {
         }
     }
     assert!(failures.is_empty(), "{failures:#?}");
+}
+
+/// The 75 mm cube corner-on at the default gain (thesis-out-of-plane rig, 256×144): the top
+/// face, the only one LEDs 1 and 2 reach, clips whenever three LEDs are on, so the pixels that
+/// do not clip show LEDs 3 and 4 alone. For these carrier phasings the decode used to be
+/// refused as "the video shows 3 modulated LEDs (decode 3)", which sent the user to a wrong
+/// decode; it must name the clipping instead. The same scene exposed without clipping must
+/// decode all four LEDs, so the refusal is the clipping's and not the geometry's.
+#[test]
+fn leds_seen_only_in_clipped_pixels_are_refused_for_the_clipping() {
+    let mut rig = thesis_rig();
+    rig.camera.width = 256;
+    rig.camera.height = 144;
+    let scene = Scene::single(SceneObject::cube(75.0, true));
+    for seed in [2, 4] {
+        let sim = SimConfig {
+            frames: 128,
+            seed,
+            ..SimConfig::default()
+        };
+        let mut clipped = SimulatedCapture::new(rig.clone(), scene.clone(), sim.clone()).unwrap();
+        let err = decode(&mut clipped, &four_leds(), &mut |_, _| {}).unwrap_err();
+        eprintln!("seed {seed}: {err}");
+        assert!(
+            matches!(
+                err,
+                DemodError::LedsHiddenByClipping {
+                    requested: 4,
+                    detected: 2..=3,
+                    ..
+                }
+            ),
+            "seed {seed}: {err}"
+        );
+        let exposed = expose_without_clipping(&rig, &scene, sim).unwrap();
+        let mut unclipped = SimulatedCapture::new(rig.clone(), scene.clone(), exposed).unwrap();
+        let (decoded, gains) = decode_default(&mut unclipped, &four_leds());
+        eprintln!("seed {seed} without clipping: gains {gains:.4?}");
+        assert_eq!(decoded.report.detected_leds, Some(4), "seed {seed}");
+        assert_gains_within_one_percent(&gains, &format!("seed {seed} without clipping"));
+    }
 }

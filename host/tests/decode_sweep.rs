@@ -233,7 +233,11 @@ fn run(case: &Case) -> Outcome {
     };
     let decoded = match decode(&mut source, &config, &mut |_, _| {}) {
         Ok(d) => d,
-        Err(e @ (DemodError::LedCountMismatch { .. } | DemodError::NoModulation)) => {
+        Err(
+            e @ (DemodError::LedCountMismatch { .. }
+            | DemodError::LedsHiddenByClipping { .. }
+            | DemodError::NoModulation),
+        ) => {
             return Outcome::Refused(e.to_string());
         }
         Err(e) => panic!("capture {}: unexpected error {e}", case.index),

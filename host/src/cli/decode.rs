@@ -187,6 +187,9 @@ fn flag_hint(error: &DemodError) -> Option<String> {
         DemodError::LedCountMismatch { detected, .. } => {
             format!("(use --leds {detected} or --leds auto; --no-led-check skips the check)")
         }
+        DemodError::LedsHiddenByClipping { .. } => "(--no-led-check decodes the pixels that \
+             do not clip anyway; the clipped ones are flagged in saturated.npy)"
+            .into(),
         DemodError::Implausible { .. } => "(flags: --rate-ratio, --exposure, --line-time-us, \
              --linearize, --frames, --max-rate-mismatch; --force keeps the result with the \
              verdict recorded)"

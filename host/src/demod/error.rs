@@ -39,6 +39,22 @@ pub enum DemodError {
         /// LEDs seen in the video.
         detected: usize,
     },
+    /// Fewer modulated LEDs than requested in the pixels that do not clip, and enough clipped
+    /// pixels to hold the others: the count cannot be told, and decoding fewer would be wrong.
+    #[error(
+        "{requested} LEDs requested but the pixels that do not clip show {detected} modulated \
+         LED(s), and {clipped_percent:.1} % of the pixels examined clip at full scale: the \
+         others may light only those. Lower the camera's exposure or gain (or the LEDs' \
+         brightness) until nothing clips, then capture again"
+    )]
+    LedsHiddenByClipping {
+        /// Requested LEDs.
+        requested: usize,
+        /// LEDs seen in the pixels that do not clip.
+        detected: usize,
+        /// Share of the examined pixels that clip, percent.
+        clipped_percent: f64,
+    },
     /// No LED modulation at all in the capture.
     #[error(
         "no MEB-FDMA modulation found in the video (is the luminaire on, in view, and its \

@@ -108,6 +108,12 @@ const AUTO_MAX_LEDS: usize = 6;
 const MAX_WINDOW_FRAMES: usize = 256;
 /// Largest number of pixels the reported median noise is computed from.
 const MEDIAN_SAMPLE: usize = 1 << 16;
+/// Fewer LEDs than requested are put down to clipping, not to their absence, when the clipped
+/// candidate pixels number at least this share of the sample's pixels: enough to hold a
+/// face of their own. The 75 mm cube corner-on (thesis-out-of-plane rig, default gain): the
+/// top face, the only one LEDs 1 and 2 reach, clips whenever three LEDs are on, and the
+/// unclipped pixels show LEDs 3 and 4 alone; a specular highlight is a few pixels.
+const HIDING_CLIPPED_SHARE: f64 = 0.1;
 /// An LED counts as present when its mean on-level exceeds this fraction of the strongest's.
 const SIGNIFICANT_FRACTION: f64 = 0.03;
 /// Largest phase change, chips, of the rolling-shutter ramp inside one row band.
@@ -595,6 +601,17 @@ impl WindowDecoder {
                     } else {
                         detected.min(n - 1)
                     };
+                    let sample = &window.sample;
+                    if detected < n
+                        && sample.clipped() as f64 >= HIDING_CLIPPED_SHARE * sample.len() as f64
+                    {
+                        return Err(DemodError::LedsHiddenByClipping {
+                            requested: n,
+                            detected,
+                            clipped_percent: 100.0 * sample.clipped() as f64
+                                / sample.examined().max(1) as f64,
+                        });
+                    }
                     return Err(DemodError::LedCountMismatch {
                         requested: n,
                         detected,

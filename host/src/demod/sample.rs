@@ -44,6 +44,10 @@ pub struct PixelSample {
     values: Vec<f64>,
     /// Region row of each pixel, ascending.
     rows: Vec<usize>,
+    /// Candidate pixels left out because they clip at full scale in some frame.
+    clipped: usize,
+    /// Candidate pixels examined, clipped or not.
+    examined: usize,
 }
 
 /// The candidate rows of a region of a frame (module docs).
@@ -100,10 +104,13 @@ impl PixelSample {
     ) -> Self {
         let count = frames.len();
         let rows: Vec<usize> = grid.rows(height).collect();
-        let mut candidates: Vec<Candidate> = rows
+        let per_row: Vec<(Vec<Candidate>, usize)> = rows
             .par_iter()
-            .flat_map_iter(|&row| row_candidates(frames, width, row, map, limits))
+            .map(|&row| row_candidates(frames, width, row, map, limits))
             .collect();
+        let clipped = per_row.iter().map(|(_, clipped)| clipped).sum();
+        let examined = clipped + per_row.iter().map(|(row, _)| row.len()).sum::<usize>();
+        let mut candidates: Vec<Candidate> = per_row.into_iter().flat_map(|(row, _)| row).collect();
         let keep = (SAMPLE_VALUES / count.max(1)).clamp(MIN_PIXELS, MAX_PIXELS);
         if candidates.len() > keep {
             candidates.select_nth_unstable_by(keep - 1, |a, b| b.variance.total_cmp(&a.variance));
@@ -130,6 +137,8 @@ impl PixelSample {
             frames: count,
             values,
             rows: candidates.iter().map(|c| c.row).collect(),
+            clipped,
+            examined,
         }
     }
 
@@ -140,6 +149,8 @@ impl PixelSample {
             frames,
             values,
             rows,
+            clipped: 0,
+            examined: 0,
         }
     }
 
@@ -151,6 +162,17 @@ impl PixelSample {
     /// Whether no pixel was kept.
     pub fn is_empty(&self) -> bool {
         self.rows.is_empty()
+    }
+
+    /// Candidate pixels left out because they clip at full scale in some frame: whatever
+    /// lights only those is not in the sample.
+    pub fn clipped(&self) -> usize {
+        self.clipped
+    }
+
+    /// Candidate pixels examined, clipped or not.
+    pub fn examined(&self) -> usize {
+        self.examined
     }
 
     /// Frames per pixel (F).
@@ -208,14 +230,14 @@ impl PixelSample {
 }
 
 /// Temporal statistics of the non-saturated pixels of one region row (variance in the
-/// code map's accumulation units: only the ranking matters).
+/// code map's accumulation units: only the ranking matters), and how many pixels clip.
 fn row_candidates(
     frames: &[Samples],
     width: usize,
     row: usize,
     map: &CodeMap,
     limits: CodeLimits,
-) -> Vec<Candidate> {
+) -> (Vec<Candidate>, usize) {
     let range = row * width..(row + 1) * width;
     let mut sums = RowSums::new(width);
     for frame in frames {
@@ -235,7 +257,7 @@ fn row_candidates(
         }
     }
     let n = frames.len().max(1) as f64;
-    (0..width)
+    let candidates: Vec<Candidate> = (0..width)
         .filter(|&col| !limits.classify(sums.max_code[col]).0)
         .map(|col| {
             let (sum, squares) = sums.moments(col);
@@ -246,7 +268,9 @@ fn row_candidates(
                 variance: (squares / n - mean * mean).max(0.0),
             }
         })
-        .collect()
+        .collect();
+    let clipped = width - candidates.len();
+    (candidates, clipped)
 }
 
 /// Per-pixel running sums of one row: exact integer sums of the codes for a linear map (the
