@@ -12,9 +12,9 @@
 //! the LEDs' best scores at full exposure sum highest; the exposure e is scanned at that rate
 //! with each LED's Δ_i refined per exposure. The local maxima of that scan (and a few spread
 //! exposures, because at ρ ≈ 1 the exposure barely changes the templates) start the
-//! least-squares refinement ([`super::fit`]), and so do the LEDs' shifts where the sample holds
-//! the most energy along their templates, for samples whose signal space is nearly rank one
-//! (one flat face: [`strongest_shift_starts`]).
+//! least-squares refinement ([`super::fit`]), and, when the best start leaves an LED outside
+//! the signal space, so do the LEDs' shifts where the sample holds the most energy along their
+//! templates (a nearly rank-one sample of one flat face: [`strongest_shift_starts`]).
 
 use super::config::{FitLimits, SeedMethod};
 use super::spectrum::SignalSpace;
@@ -65,6 +65,14 @@ const MAX_LANES: usize = (3 * super::MAX_LEDS + 2).div_ceil(LANES) * LANES;
 const RIVAL_SHARE: f64 = 0.5;
 /// Rival shifts tried per LED.
 const RIVALS: usize = 2;
+/// An LED whose template at the best start's timing and shift keeps less than this share of
+/// its energy in the signal space is not held by it as a direction of its own, and the
+/// LEDs' strongest shifts are tried too ([`strongest_shift_starts`]). On a well-lit sphere
+/// every LED keeps nearly all of it; on the face-on cube's nearly rank-one sample the weak
+/// LEDs kept 0.07 and 0.10. Only then: elsewhere the extra starts would only move the fit
+/// along the flat valley of exposure and fractional shifts that ρ ≈ 1 leaves (see
+/// [`super::fit`]), and change decodes that were right for no gain.
+const WEAK_SCORE: f64 = 0.5;
 
 /// Scores templates against the signal space.
 struct Scorer<'a> {
@@ -322,9 +330,19 @@ pub fn starts(
             }
         }
     }
-    // And the LEDs at their strongest shifts (a sample of nearly rank one).
-    let strongest = strongest_shift_starts(space, waves, frames, &starts);
-    starts.extend(strongest);
+    // And, when the best start leaves an LED outside the signal space, the LEDs at their
+    // strongest shifts (a sample of nearly rank one).
+    let mut column = vec![0.0; frames];
+    let weak = starts.first().is_some_and(|best| {
+        (0..waves.len()).any(|led| {
+            let shift = best.shifts.get(led).copied().unwrap_or(0.0);
+            scorer.score(led, best.timing, shift, &mut column) < WEAK_SCORE
+        })
+    });
+    if weak {
+        let strongest = strongest_shift_starts(space, waves, frames, &starts);
+        starts.extend(strongest);
+    }
     starts
 }
 
