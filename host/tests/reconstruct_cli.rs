@@ -276,7 +276,9 @@ fn a_surface_lit_mostly_by_two_leds_is_refused() {
 /// The simulator's two-object scene (a Ø48 mm sphere, a 40 mm cube 70 mm behind it) under the
 /// in-plane rig at 320×180: the cube's lighting misfit keeps falling to the edge of the depth
 /// search (at 640×360 it was left at −70 mm, 20 mm from its depth, and reported at 8.8 mm
-/// RMSE). `meb reconstruct` refuses it; the sphere alone, masked, is placed and written.
+/// RMSE), and the sphere's barely changes over ±20 mm, so the two cannot be placed relative to
+/// each other (decoded along the exposure valley the cube was once placed 26 mm off, inside
+/// the search). `meb reconstruct` refuses it; the sphere alone, masked, is placed and written.
 #[test]
 fn an_object_the_lighting_cannot_place_is_refused() {
     let tmp = tempfile::tempdir().unwrap();
@@ -290,10 +292,14 @@ fn an_object_the_lighting_cannot_place_is_refused() {
     );
     let (capture, rig) = (p("cap/capture.y4m"), p("cap/rig.toml"));
     let out = tmp.path().join("refused");
-    refused(
+    let text = refused(
         &["reconstruct", &capture, "--rig", &rig, "--out", arg(&out)],
         &out,
         "could not be placed in depth",
+    );
+    assert!(
+        text.contains("part 0") && text.contains("20 mm nearer or farther"),
+        "the sphere's placement is not judged: {text}"
     );
     // The sphere (left of the middle) alone.
     let mask = image::GrayImage::from_fn(320, 180, |x, _| {

@@ -12,11 +12,12 @@
 //! The depth of each separately integrated part is placed by the near-field misfit
 //! ([`super::offset`]); a part whose misfit kept falling to the edge of the searched range was
 //! not placed at all (an in-plane capture of a sphere before a cube 70 mm behind it: the cube
-//! left at the −70 mm edge, 20 mm from its depth), and the result is refused too. A placement
-//! inside the range is not judged (the misfit's curvature did not separate the right placements
-//! from the wrong ones on the simulated scenes tried).
+//! left at the −70 mm edge, 20 mm from its depth), and the result is refused too. So is one of
+//! several parts whose misfit at its minimum is not clearly lower than 20 mm nearer and farther
+//! (the same capture decoded along its exposure valley: the cube placed 26 mm off, inside the
+//! range): the parts' depths relative to each other rest on nothing else.
 
-use super::offset::Unplaced;
+use super::offset::{Unplaced, WhyUnplaced};
 use crate::demod::quality::Verdict;
 use crate::integrate::Integration;
 use crate::types::ConfidenceCounts;
@@ -57,10 +58,18 @@ pub(super) fn judge(integration: &Integration, unplaced: &[Unplaced]) -> Support
         );
     }
     for u in unplaced {
+        let why = match u.why {
+            WhyUnplaced::AtEdge { reach_mm } => format!(
+                "its lighting misfit kept falling to the edge of the ±{reach_mm:.0} mm search"
+            ),
+            WhyUnplaced::Flat { within_mm } => format!(
+                "its lighting misfit is not clearly worse {within_mm:.0} mm nearer or farther, \
+                 so its depth relative to the other parts is not measured"
+            ),
+        };
         problems.push(format!(
-            "part {} ({} pixels) could not be placed in depth: its lighting misfit kept falling \
-             to the edge of the ±{:.0} mm search",
-            u.part, u.pixels, u.reach_mm
+            "part {} ({} pixels) could not be placed in depth: {why}",
+            u.part, u.pixels
         ));
     }
     if !unplaced.is_empty() {
@@ -122,16 +131,30 @@ mod tests {
     #[test]
     fn a_part_its_offset_search_could_not_place_is_refused() {
         let r = sphere();
-        let unplaced = Unplaced {
-            part: 1,
-            pixels: 1260,
-            reach_mm: 70.0,
-        };
-        let support = judge(&r.integration, &[unplaced]);
+        let unplaced = [
+            Unplaced {
+                part: 1,
+                pixels: 1260,
+                why: WhyUnplaced::AtEdge { reach_mm: 70.0 },
+            },
+            Unplaced {
+                part: 2,
+                pixels: 856,
+                why: WhyUnplaced::Flat { within_mm: 20.0 },
+            },
+        ];
+        let support = judge(&r.integration, &unplaced);
         assert!(!support.verdict.is_plausible());
         assert_eq!(support.measured_share, r.support.measured_share);
+        let problems = &support.verdict.problems;
         assert!(
-            support.verdict.problems[0].contains("part 1 (1260 pixels) could not be placed"),
+            problems[0].contains("part 1 (1260 pixels) could not be placed")
+                && problems[0].contains("edge of the ±70 mm search"),
+            "{support:?}"
+        );
+        assert!(
+            problems[1].contains("part 2 (856 pixels) could not be placed")
+                && problems[1].contains("20 mm nearer or farther"),
             "{support:?}"
         );
         assert!(support.verdict.advice[0].contains("--mask"));
