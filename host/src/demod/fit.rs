@@ -826,6 +826,10 @@ fn standard_error(
     }
 }
 
+/// How close to a bound, frame periods, an exposure counts as on it: the fit stops a hair
+/// short of a bound as well as on it (the −20 ppm case below: just under 1.0, shown as 1.000).
+const ON_BOUND: f64 = 1e-3;
+
 /// Whether the fitted exposure ended on one of its bounds ([`MIN_EXPOSURE`] or one frame).
 /// Its Gauss–Newton standard error says nothing there: the cost's minimum lies outside the
 /// box, or at one frame on a kink of the model (a shorter window mixes two chips, a longer
@@ -835,7 +839,8 @@ fn standard_error(
 /// reported ±0.002 from that curvature; on a bound the exposure is reported undetermined.
 fn exposure_on_bound(solution: &Solution) -> bool {
     let exposure = solution.params[EXPOSURE];
-    solution.free.contains(&EXPOSURE) && (exposure >= 1.0 || exposure <= MIN_EXPOSURE)
+    solution.free.contains(&EXPOSURE)
+        && (exposure >= 1.0 - ON_BOUND || exposure <= MIN_EXPOSURE + ON_BOUND)
 }
 
 /// The sample's mean region row.
