@@ -16,6 +16,7 @@ use crate::types::{Confidence, DepthMap, NormalField};
 use base64::Engine;
 use image::RgbImage;
 use ndarray::Array2;
+use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
 use std::path::{Path, PathBuf};
 
@@ -222,16 +223,30 @@ pub fn write_report(dir: &Path, inputs: &ReportInputs) -> Result<WrittenReport, 
             "the depth map has no reconstructed pixel".into(),
         ));
     }
-    write_npy(&dir.join("normals.npy"), &inputs.normals.normals)?;
-    write_npy(&dir.join("albedo.npy"), &inputs.normals.albedo)?;
-    write_npy(&dir.join("depth.npy"), &inputs.depth.depth_mm)?;
-    if let Some(confidence) = inputs.confidence {
-        write_npy(&dir.join("confidence.npy"), &confidence.mapv(|k| k as u8))?;
-    }
     let mask = inputs.depth.depth_mm.mapv(f32::is_finite);
-    let previews = previews(inputs, &mask);
-    for preview in &previews {
-        write(&dir.join(&preview.file), &png_bytes(&preview.image)?)?;
+    // The arrays are written while the previews are drawn and encoded, each preview on its
+    // own (the four renders dominate: serially about 45 ms of a 1280×720 `meb reconstruct`).
+    let (arrays, drawn) = rayon::join(
+        || -> Result<(), ExportError> {
+            write_npy(&dir.join("normals.npy"), &inputs.normals.normals)?;
+            write_npy(&dir.join("albedo.npy"), &inputs.normals.albedo)?;
+            write_npy(&dir.join("depth.npy"), &inputs.depth.depth_mm)?;
+            if let Some(confidence) = inputs.confidence {
+                write_npy(&dir.join("confidence.npy"), &confidence.mapv(|k| k as u8))?;
+            }
+            Ok(())
+        },
+        || {
+            previews(inputs, &mask)
+                .into_par_iter()
+                .map(|preview| png_bytes(&preview.image).map(|png| (preview, png)))
+                .collect::<Result<Vec<_>, _>>()
+        },
+    );
+    arrays?;
+    let (previews, pngs): (Vec<Preview>, Vec<Vec<u8>>) = drawn?.into_iter().unzip();
+    for (preview, png) in previews.iter().zip(&pngs) {
+        write(&dir.join(&preview.file), png)?;
     }
     let mesh = SurfaceMesh::from_depth(inputs.depth);
     mesh.write(&dir.join("surface.ply"))?;
@@ -292,56 +307,68 @@ pub fn write_report(dir: &Path, inputs: &ReportInputs) -> Result<WrittenReport, 
 
 /// The preview images of a reconstruction.
 fn previews(inputs: &ReportInputs, mask: &ndarray::Array2<bool>) -> Vec<Preview> {
-    let grid = |caption: &str, file: &str, image: RgbImage| Preview {
-        caption: caption.into(),
-        file: file.into(),
-        image,
-        on_grid: true,
-    };
-    let mut previews = vec![
-        grid(
-            "normal map",
-            "normals.png",
-            normal_map(&inputs.normals.normals),
-        ),
-        grid("albedo", "albedo.png", grey_map(&inputs.normals.albedo)),
-        grid("depth", "depth.png", depth_map(&inputs.depth.depth_mm)),
-        grid("mask", "mask.png", mask_image(mask)),
+    /// Draws one preview.
+    type Draw<'a> = Box<dyn Fn() -> Preview + Send + Sync + 'a>;
+    fn grid<'a>(
+        caption: String,
+        file: &'static str,
+        image: impl Fn() -> RgbImage + Send + Sync + 'a,
+    ) -> Draw<'a> {
+        Box::new(move || Preview {
+            caption: caption.clone(),
+            file: file.into(),
+            image: image(),
+            on_grid: true,
+        })
+    }
+    let mut draws: Vec<Draw> = vec![
+        grid("normal map".into(), "normals.png", || {
+            normal_map(&inputs.normals.normals)
+        }),
+        grid("albedo".into(), "albedo.png", || {
+            grey_map(&inputs.normals.albedo)
+        }),
+        grid("depth".into(), "depth.png", || {
+            depth_map(&inputs.depth.depth_mm)
+        }),
+        grid("mask".into(), "mask.png", || mask_image(mask)),
     ];
     if let Some(confidence) = inputs.confidence {
-        previews.push(grid(
-            "confidence (green ≥ 3 LEDs, amber 2 LEDs, red filled)",
+        draws.push(grid(
+            "confidence (green ≥ 3 LEDs, amber 2 LEDs, red filled)".into(),
             "confidence.png",
-            confidence_image(confidence),
+            || confidence_image(confidence),
         ));
     }
     if let Some(e) = inputs.depth_errors {
         let limit = (3.0 * e.rmse_mm as f32).max(1e-3);
-        previews.push(grid(
-            &format!("depth error (±{limit:.2} mm)"),
+        draws.push(grid(
+            format!("depth error (±{limit:.2} mm)"),
             "depth_error.png",
-            error_map(&e.error_map, limit),
+            move || error_map(&e.error_map, limit),
         ));
     }
     if let Some(a) = inputs.angular_errors {
-        let capped = a
-            .error_map
-            .mapv(|d| if d.is_nan() { d } else { d.min(10.0) });
-        previews.push(grid(
-            "normal error (0–10°)",
+        draws.push(grid(
+            "normal error (0–10°)".into(),
             "normal_error.png",
-            grey_map(&capped),
+            || {
+                let capped = a
+                    .error_map
+                    .mapv(|d| if d.is_nan() { d } else { d.min(10.0) });
+                grey_map(&capped)
+            },
         ));
     }
     for view in VIEWS {
-        previews.push(Preview {
+        draws.push(Box::new(move || Preview {
             caption: format!("render: {}", view.name),
             file: format!("render_{}.png", view.name),
             image: render_surface(inputs.depth, view, 480),
             on_grid: false,
-        });
+        }));
     }
-    previews
+    draws.into_par_iter().map(|draw| draw()).collect()
 }
 
 /// Per-stage totals: "integration (pass 2)" counts towards "integration".
