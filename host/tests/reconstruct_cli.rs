@@ -119,6 +119,9 @@ fn decode_folder_reconstructs_sphere_within_bound() {
     assert!(mean_deg < 3.0, "normal error {mean_deg}°");
     let depth: Array2<f32> = ndarray_npy::read_npy(t.path("rec/depth.npy")).unwrap();
     assert_eq!(depth.dim(), (96, 160));
+    // Out-of-plane LEDs place the sphere in depth too.
+    let absolute = report.summary.absolute_depth.clone().unwrap_or_default();
+    assert!(absolute.starts_with("measured"), "{absolute}");
 
     // The thesis' distant-light model is measurably worse on this near rig.
     run_ok(&[
@@ -323,6 +326,10 @@ fn an_object_the_lighting_cannot_place_is_refused() {
     assert!(report.summary.implausible.is_empty());
     let rmse = depth_rmse(&report);
     assert!(rmse < 1.0, "sphere alone: RMSE {rmse} mm");
+    // Its shape is right, but LEDs in the camera's plane do not measure its distance: the
+    // report says so rather than passing the misfit's shallow minimum off as a measurement.
+    let absolute = report.summary.absolute_depth.unwrap_or_default();
+    assert!(absolute.starts_with("not measured"), "{absolute}");
 }
 
 #[test]

@@ -169,6 +169,7 @@ pub fn reconstruction_summary(
         object_pixels: Some(mask.iter().filter(|&&m| m).count()),
         kept_fraction: Some(reconstruction.integration.kept_fraction),
         measured_share: Some(reconstruction.support.measured_share),
+        absolute_depth: Some(reconstruction.support.absolute_depth.describe()),
         implausible: reconstruction.support.verdict.problems.clone(),
         ..Summary::default()
     }

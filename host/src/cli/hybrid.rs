@@ -203,6 +203,11 @@ impl ObjectReport<'_> {
             hybrid.objects.len(),
             object.tof_depth_mm
         ));
+        // The fused depth's distance comes from the range camera.
+        summary.absolute_depth = Some(format!(
+            "placed by the range camera (ToF depth {:.1} mm)",
+            object.tof_depth_mm
+        ));
         summary.input.clone_from(&self.summary.input);
         summary.rig.clone_from(&self.summary.rig);
         summary.ground_truth.clone_from(&self.summary.ground_truth);

@@ -11,7 +11,9 @@ use meb::demod::Decoded;
 use meb::demod::output::read_decode_dir;
 use meb::export::report::Summary;
 use meb::metrics::{AngularErrors, DepthErrors};
-use meb::reconstruct::{LightModel, ReconstructConfig, Reconstruction, from_decoded};
+use meb::reconstruct::{
+    AbsoluteDepth, LightModel, ReconstructConfig, Reconstruction, from_decoded,
+};
 use meb::rig::Rig;
 use std::path::PathBuf;
 
@@ -266,6 +268,13 @@ fn print_summary(
         println!(
             "normal error mean {:.2}°, median {:.2}° over {} pixels",
             a.mean_deg, a.median_deg, a.compared_pixels
+        );
+    }
+    let absolute = reconstruction.support.absolute_depth;
+    if matches!(absolute, AbsoluteDepth::Unmeasured { .. }) {
+        eprintln!(
+            "warning: the depth's distance from the camera is {}",
+            absolute.describe()
         );
     }
 }

@@ -61,6 +61,10 @@ pub struct Summary {
     /// Share (0..1) of the reconstructed pixels measured by three or more LEDs.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub measured_share: Option<f64>,
+    /// What is known of the depth's distance from the camera (measured by the lighting, or not:
+    /// then only the shape is).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub absolute_depth: Option<String>,
     /// What the reconstruction's support check found implausible, written on request
     /// (`--force`); empty for a plausible result.
     #[serde(default, skip_serializing_if = "Vec::is_empty")]
@@ -491,6 +495,9 @@ fn figure_rows(report: &Report) -> Vec<(String, String)> {
             "reconstructed surface lit by ≥ 3 LEDs".into(),
             format!("{:.1} %", 100.0 * m),
         ));
+    }
+    if let Some(a) = &s.absolute_depth {
+        rows.push(("distance from the camera".into(), a.clone()));
     }
     for problem in &s.implausible {
         rows.push(("implausible, kept by --force".into(), problem.clone()));

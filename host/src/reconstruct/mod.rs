@@ -75,7 +75,7 @@ use offset::{OffsetPrior, Unplaced, place_parts};
 pub use region::{Extent, RegionReconstruction, from_decoded_region};
 pub use roi::ROI_MARGIN_PX;
 use roi::Roi;
-pub use support::{MIN_MEASURED_SHARE, Support};
+pub use support::{AbsoluteDepth, MIN_MEASURED_SHARE, Support};
 
 /// Bilateral reweightings, or two-LED alternations, of the near-field passes before the last
 /// (they only feed the next pass's light vectors).
@@ -582,6 +582,8 @@ fn passes(
     let mut verdict = Ok(0);
     // Parts a pass's offset search could not place (a part keeps its number from pass to pass).
     let mut unplaced = std::collections::BTreeMap::new();
+    // Whether a pass scanned for every part's offset and judged the minimum.
+    let mut scanned = false;
     // The last pass's depth change from the warm start, when its light vectors came from it.
     let mut moved_from_warm: Option<DepthChange> = None;
     for pass in 0..passes {
@@ -628,7 +630,10 @@ fn passes(
                 (_, None) => OffsetPrior::None,
             };
             match place_parts(images, rig, noise, &ps, &mut integration, config, prior) {
-                Ok(parts) => unplaced.extend(parts.into_iter().map(|u| (u.part, u))),
+                Ok(placed) => {
+                    unplaced.extend(placed.unplaced.into_iter().map(|u| (u.part, u)));
+                    scanned |= placed.scanned;
+                }
                 Err(reason) => verdict = Err(reason),
             }
             time("depth offset search", pass, start);
@@ -661,7 +666,7 @@ fn passes(
     let (photometric, integration) = previous
         .ok_or_else(|| ReconstructError::Rig("no reconstruction pass was run".to_string()))?;
     let unplaced: Vec<Unplaced> = unplaced.into_values().collect();
-    let support = support::judge(&integration, &unplaced);
+    let support = support::judge(&integration, &unplaced, scanned);
     let start = verdict.and_then(|passes| {
         let Some(warm) = warm else {
             return Ok(Start::Cold);

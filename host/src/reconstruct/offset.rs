@@ -4,8 +4,9 @@
 //! in a cold first pass, near the offset carried from the previous pass in later ones, and
 //! around the offset carried from the previous window from a warm start (kept unless a t-test
 //! clearly prefers another, [`OFFSET_PREFERENCE_T`], then damped by [`WARM_OFFSET_GAIN`]).
-//! With several parts a scanned minimum must be clearly lower than the misfit
-//! ±[`PLACEMENT_CHECK_MM`] from it, or the part is reported as not placed ([`WhyUnplaced`]).
+//! A scanned minimum must be clearly lower than the misfit ±[`PLACEMENT_CHECK_MM`] from it, or
+//! the part is reported as not placed ([`WhyUnplaced`]; with a single part only its distance
+//! from the camera is then unmeasured, [`super::AbsoluteDepth`]).
 
 use super::ReconstructConfig;
 use crate::integrate::Integration;
@@ -143,8 +144,9 @@ pub(super) fn place_parts(
     integration: &mut Integration,
     config: &ReconstructConfig,
     prior: OffsetPrior,
-) -> Result<Vec<Unplaced>, String> {
+) -> Result<Placements, String> {
     let mut unplaced = Vec::new();
+    let mut scanned = integration.parts > 0;
     let projection = rig.camera.projection();
     let cap = match prior {
         OffsetPrior::Warm(_) => WARM_MISFIT_PIXELS,
@@ -177,12 +179,13 @@ pub(super) fn place_parts(
                 }
             }
         };
-        let judge = integration.parts > 1;
-        let Some((offset, placement)) = best_offset(
-            images, rig, noise, depth, &pixels, ps, config, bracket, judge,
-        ) else {
+        let Some((offset, placement, judged)) =
+            best_offset(images, rig, noise, depth, &pixels, ps, config, bracket)
+        else {
+            scanned = false;
             continue;
         };
+        scanned &= judged;
         let why = match placement {
             Placement::Placed => None,
             Placement::AtEdge => Some(WhyUnplaced::AtEdge {
@@ -209,7 +212,16 @@ pub(super) fn place_parts(
                 moved_part(depth, &integration.part, part, offset, &projection);
         }
     }
-    Ok(unplaced)
+    Ok(Placements { unplaced, scanned })
+}
+
+/// What [`place_parts`] found.
+#[derive(Debug, Clone, PartialEq)]
+pub(super) struct Placements {
+    /// The parts it could not place.
+    pub unplaced: Vec<Unplaced>,
+    /// Whether every part's offset was scanned for and its minimum judged (module docs).
+    pub scanned: bool,
 }
 
 /// A part the offset search could not place ([`WhyUnplaced`]).
@@ -232,8 +244,8 @@ pub enum WhyUnplaced {
         /// How far the scan reached, mm.
         reach_mm: f64,
     },
-    /// One of several parts, whose misfit at its minimum is not clearly lower than at the
-    /// offsets this far on either side (the part stays at the minimum).
+    /// A part whose misfit at its minimum is not clearly lower than at the offsets this far on
+    /// either side (the part stays at the minimum).
     Flat {
         /// The distance tested, mm.
         within_mm: f64,
@@ -248,15 +260,15 @@ enum Placement {
     /// The minimum lies at the (wider) bracket's edge, or at the scanned range's.
     AtEdge,
     /// A scanned minimum that the misfit does not clearly prefer to the offsets
-    /// ±[`PLACEMENT_CHECK_MM`] from it (judged only when there are several parts).
+    /// ±[`PLACEMENT_CHECK_MM`] from it.
     Undetermined,
 }
 
 /// Distance in mm from a scanned part's minimum at which the misfit must be clearly higher
-/// (the t-test of [`clearly_better`]) on both sides when the capture has several parts:
-/// their depths relative to each other rest on nothing else. With one part the offset sets
-/// only the absolute depth, which is not judged (the in-plane rig leaves it flat too: a Ø48
-/// mm sphere at 320×180, t 0.6 / 0.6, depth RMSE 0.46 mm about its offset). Simulated captures
+/// (the t-test of [`clearly_better`]) on both sides. With several parts their depths relative
+/// to each other rest on nothing else; with one part the offset sets only the distance from the
+/// camera, reported as unmeasured when flat (the in-plane rig: a Ø48 mm sphere at 320×180,
+/// t 0.6 / 0.6, depth RMSE 0.46 mm about its offset). Simulated captures
 /// (t at −20 / +20 mm from the minimum): thesis-out-of-plane sphere 10.6 / 9.7 at 1280×720
 /// and 7.9 / 8.9 at 320×180, cube 11.1 / 5.6, thesis-dynamic ellipsoid 10.1 / 10.3, a seeded
 /// blobby shape 9.1 / 7.5; the two-object in-plane capture at 320×180 (Ø48 mm sphere, 40 mm
@@ -353,7 +365,8 @@ enum Bracket {
 /// minimises their Lambertian misfit (module docs) — around a carried offset, that offset
 /// unless the misfit clearly prefers the minimum ([`clearly_better`]) — and whether it lies at
 /// the (wider) bracket's edge, or for a scan at the edge of the scanned range (the misfit kept
-/// falling: no minimum inside it); `None` with fewer than 16 pixels. The light vectors and the
+/// falling: no minimum inside it), and whether a scan found it (a scan's minimum is judged,
+/// [`Placement::Undetermined`]); `None` with fewer than 16 pixels. The light vectors and the
 /// pixels' rays and values are gathered once ([`ModelMisfit`]) for every bracket searched, and
 /// the carried offset's misfit once for both; around a carried offset every evaluation keeps
 /// its per-pixel terms for the t-test ([`clearly_better`]), which evaluates nothing again.
@@ -367,8 +380,7 @@ fn best_offset(
     ps: &PhotometricResult,
     config: &ReconstructConfig,
     bracket: Bracket,
-    judge: bool,
-) -> Option<(f64, Placement)> {
+) -> Option<(f64, Placement, bool)> {
     if pixels.len() < 16 {
         return None;
     }
@@ -400,12 +412,12 @@ fn best_offset(
         let found = if value <= best_value { refined } else { best };
         let placement = if at_edge(found, 0.0, half + step, OFFSET_TOLERANCE_MM) {
             Placement::AtEdge
-        } else if judge && !determined(&model, found) {
+        } else if !determined(&model, found) {
             Placement::Undetermined
         } else {
             Placement::Placed
         };
-        (found, placement)
+        (found, placement, true)
     };
     match bracket {
         Bracket::Scan(half) => Some(scan(half)),
@@ -420,7 +432,7 @@ fn best_offset(
             if at_edge(refined, centre, half, OFFSET_TOLERANCE_MM) {
                 Some(scan(config.offset_search_mm))
             } else {
-                Some((refined, Placement::Placed))
+                Some((refined, Placement::Placed, false))
             }
         }
         // A warm start keeps the carried offset unless the misfit clearly prefers the best.
@@ -473,10 +485,11 @@ fn best_offset(
                     },
                 )
             };
-            match search(half) {
-                (_, Placement::AtEdge) => Some(search(wider)),
-                found => Some(found),
-            }
+            let (offset, placement) = match search(half) {
+                (_, Placement::AtEdge) => search(wider),
+                found => found,
+            };
+            Some((offset, placement, false))
         }
     }
 }
@@ -717,13 +730,13 @@ mod tests {
                 &ps,
                 &sphere.config,
                 bracket,
-                true,
             );
-            let (offset, placement) = found.expect("enough pixels");
+            let (offset, placement, by_scan) = found.expect("enough pixels");
             assert_eq!(placement, Placement::Placed, "{bracket:?}");
-            offset
+            (offset, by_scan)
         };
-        let scanned = find(Bracket::Scan(60.0));
+        let (scanned, by_scan) = find(Bracket::Scan(60.0));
+        assert!(by_scan);
         // The cold reconstruction placed its depth at this minimum already.
         assert!(scanned.abs() < 0.5, "scanned offset {scanned} mm");
         assert_eq!(sphere.config.offset_search_mm, 60.0);
@@ -731,14 +744,14 @@ mod tests {
             centre,
             half: REFINE_OFFSET_BRACKET_MM,
         };
-        let found = find(near(scanned + 1.5));
+        let (found, by_scan) = find(near(scanned + 1.5));
         assert!(
-            (found - scanned).abs() < 0.05,
+            (found - scanned).abs() < 0.05 && !by_scan,
             "within the bracket: {found} vs {scanned} mm"
         );
         // 10 mm off: the bracket's minimum lies at its edge, and the scan takes over.
-        assert_eq!(find(near(scanned + 10.0)), scanned);
-        assert_eq!(find(near(scanned - 10.0)), scanned);
+        assert_eq!(find(near(scanned + 10.0)), (scanned, true));
+        assert_eq!(find(near(scanned - 10.0)), (scanned, true));
     }
 
     /// Brent's method finds smooth minima in a few evaluations, and kinked, flat-bottomed and

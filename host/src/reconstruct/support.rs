@@ -16,6 +16,12 @@
 //! several parts whose misfit at its minimum is not clearly lower than 20 mm nearer and farther
 //! (the same capture decoded along its exposure valley: the cube placed 26 mm off, inside the
 //! range): the parts' depths relative to each other rest on nothing else.
+//!
+//! A single part's offset is its distance from the camera, which the shape does not need: when
+//! its misfit is not clearly lower than 20 mm nearer and farther either (LEDs in the camera's
+//! plane: a Ø48 mm sphere at 320×180, t 0.6 / 0.6), the depth is kept but reported as
+//! unmeasured ([`AbsoluteDepth`]), so that no one takes `depth.npy`'s distances for
+//! measurements.
 
 use super::offset::{Unplaced, WhyUnplaced};
 use crate::demod::quality::Verdict;
@@ -30,19 +36,69 @@ use crate::types::ConfidenceCounts;
 /// windows 0.27–0.39.
 pub const MIN_MEASURED_SHARE: f64 = 0.5;
 
-/// What the check found: the verdict and the figure behind it.
+/// What the check found: the verdict and the figures behind it.
 #[derive(Debug, Clone, PartialEq, serde::Serialize, serde::Deserialize)]
 pub struct Support {
     /// Share of the reconstructed pixels measured by three or more LEDs.
     pub measured_share: f64,
+    /// Whether the depth's distance from the camera was measured.
+    pub absolute_depth: AbsoluteDepth,
     /// Plausible, or what looks wrong and what to try.
     pub verdict: Verdict,
 }
 
+/// Whether a reconstruction's distance from the camera rests on the lighting (module docs).
+#[derive(Debug, Clone, Copy, Default, PartialEq, serde::Serialize, serde::Deserialize)]
+#[serde(rename_all = "snake_case", tag = "kind")]
+pub enum AbsoluteDepth {
+    /// Every part's offset was scanned for, and its near-field misfit is clearly higher
+    /// 20 mm nearer and farther.
+    Measured,
+    /// One part whose misfit is not clearly higher `within_mm` nearer or farther: its shape is
+    /// measured, its distance from the camera is the misfit's shallow minimum.
+    Unmeasured {
+        /// The distance tested, mm.
+        within_mm: f64,
+    },
+    /// Not judged: distant lights (no offset is searched), or offsets carried from a warm
+    /// start (a video's earlier window), or a part too small to search.
+    #[default]
+    Unjudged,
+}
+
+impl AbsoluteDepth {
+    /// One line for reports: what is known of the depth's distance from the camera.
+    pub fn describe(&self) -> String {
+        match self {
+            Self::Measured => "measured by the near-field lighting".into(),
+            Self::Unmeasured { within_mm } => format!(
+                "not measured: the lighting misfit is not clearly worse {within_mm:.0} mm \
+                 nearer or farther, so the shape is measured but its distance from the camera \
+                 is not (place it with a range camera, --tof, or take depths as relative)"
+            ),
+            Self::Unjudged => "not judged (distant lights, or carried from a warm start)".into(),
+        }
+    }
+}
+
 /// Judges the support of `integration`'s depth, whose offset search left the parts
-/// `unplaced` (module docs).
-pub(super) fn judge(integration: &Integration, unplaced: &[Unplaced]) -> Support {
+/// `unplaced` and judged every part's placement by a scan when `scanned` (module docs).
+pub(super) fn judge(integration: &Integration, unplaced: &[Unplaced], scanned: bool) -> Support {
     let measured_share = ConfidenceCounts::of(&integration.confidence).measured_share();
+    // A single part that is only flat keeps its depth: its distance is what is unmeasured.
+    let single_flat = match unplaced {
+        [u] if integration.parts == 1 => match u.why {
+            WhyUnplaced::Flat { within_mm } => Some(within_mm),
+            WhyUnplaced::AtEdge { .. } => None,
+        },
+        _ => None,
+    };
+    let absolute_depth = match single_flat {
+        Some(within_mm) => AbsoluteDepth::Unmeasured { within_mm },
+        None if scanned && unplaced.is_empty() => AbsoluteDepth::Measured,
+        None => AbsoluteDepth::Unjudged,
+    };
+    let unplaced = if single_flat.is_some() { &[] } else { unplaced };
     let mut problems = Vec::new();
     let mut advice = Vec::new();
     if measured_share < MIN_MEASURED_SHARE {
@@ -81,6 +137,7 @@ pub(super) fn judge(integration: &Integration, unplaced: &[Unplaced]) -> Support
     }
     Support {
         measured_share,
+        absolute_depth,
         verdict: Verdict::from_findings(problems, advice),
     }
 }
@@ -102,7 +159,7 @@ mod tests {
         let r = sphere();
         assert!(r.support.verdict.is_plausible(), "{:?}", r.support);
         assert!(r.support.measured_share >= MIN_MEASURED_SHARE);
-        assert_eq!(r.support, judge(&r.integration, &[]));
+        assert_eq!(r.support, judge(&r.integration, &[], true));
     }
 
     #[test]
@@ -120,7 +177,7 @@ mod tests {
                 n += 1;
             }
         }
-        let support = judge(&r.integration, &[]);
+        let support = judge(&r.integration, &[], true);
         assert!(support.measured_share < MIN_MEASURED_SHARE, "{support:?}");
         assert!((support.measured_share - r.support.measured_share * 0.4).abs() < 0.01);
         assert!(!support.verdict.is_plausible());
@@ -143,7 +200,7 @@ mod tests {
                 why: WhyUnplaced::Flat { within_mm: 20.0 },
             },
         ];
-        let support = judge(&r.integration, &unplaced);
+        let support = judge(&r.integration, &unplaced, true);
         assert!(!support.verdict.is_plausible());
         assert_eq!(support.measured_share, r.support.measured_share);
         let problems = &support.verdict.problems;
@@ -158,5 +215,35 @@ mod tests {
             "{support:?}"
         );
         assert!(support.verdict.advice[0].contains("--mask"));
+        assert_eq!(support.absolute_depth, AbsoluteDepth::Unjudged);
+    }
+
+    #[test]
+    fn a_single_part_without_a_measured_distance_is_kept_and_reported() {
+        let r = sphere();
+        assert_eq!(r.integration.parts, 1);
+        assert_eq!(r.support.absolute_depth, AbsoluteDepth::Measured);
+        let flat = [Unplaced {
+            part: 0,
+            pixels: 9000,
+            why: WhyUnplaced::Flat { within_mm: 20.0 },
+        }];
+        let support = judge(&r.integration, &flat, true);
+        assert!(support.verdict.is_plausible(), "{support:?}");
+        assert_eq!(
+            support.absolute_depth,
+            AbsoluteDepth::Unmeasured { within_mm: 20.0 }
+        );
+        assert!(support.absolute_depth.describe().contains("not measured"));
+        // Without a scan (a warm start) nothing is claimed; at the range's edge it is refused.
+        assert_eq!(
+            judge(&r.integration, &[], false).absolute_depth,
+            AbsoluteDepth::Unjudged
+        );
+        let at_edge = [Unplaced {
+            why: WhyUnplaced::AtEdge { reach_mm: 60.0 },
+            ..flat[0]
+        }];
+        assert!(!judge(&r.integration, &at_edge, true).verdict.is_plausible());
     }
 }

@@ -67,7 +67,8 @@ use crate::demod::{
 };
 use crate::metrics::{MetricsError, score_depth};
 use crate::reconstruct::{
-    ReconstructConfig, Reconstruction, Start, WarmStart, from_decoded_extent, from_decoded_region,
+    AbsoluteDepth, ReconstructConfig, Reconstruction, Start, WarmStart, from_decoded_extent,
+    from_decoded_region,
 };
 use crate::rig::Rig;
 use crate::timing::StageTiming;
@@ -259,6 +260,10 @@ pub struct ReconstructionQuality {
     /// ([`crate::reconstruct::Support`]).
     #[serde(default)]
     pub measured_share: f64,
+    /// Whether the depth's distance from the camera was measured: judged only where a window's
+    /// offsets were scanned for from scratch (a warm or coarse start carries them, unjudged).
+    #[serde(default)]
+    pub absolute_depth: AbsoluteDepth,
     /// What the reconstruction's support check found wrong (empty when plausible).
     #[serde(default, skip_serializing_if = "Vec::is_empty")]
     pub implausible: Vec<String>,
@@ -279,6 +284,7 @@ impl ReconstructionQuality {
             iterations: reconstruction.integration.iterations,
             start: reconstruction.start.clone(),
             measured_share: reconstruction.support.measured_share,
+            absolute_depth: reconstruction.support.absolute_depth,
             implausible: reconstruction.support.verdict.problems.clone(),
         }
     }
