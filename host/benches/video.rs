@@ -12,7 +12,9 @@
 //! 44..76) started from the first window's result, as `meb video` does for every window after
 //! the first ([`meb::reconstruct::WarmStart`]). `frame_warm` is the one 3-D frame from
 //! frames in memory: decode (carried timing) and warm reconstruction of the second window in series;
-//! `frame_warm_bin2` bins its 32 frames first. The bench first prints both per-stage profiles and
+//! `frame_warm_bin2` bins its 32 frames first; `frame_warm_region` decodes and reconstructs in
+//! the region around the object, as `meb video` does once its timing has settled
+//! ([`meb::reconstruct::from_decoded_region`]). The bench first prints both per-stage profiles and
 //! how far the warm result lies from a cold reconstruction of the same window.
 //!
 //! Warm starts, first measurement (the stage profile this bench prints, one run at a load
@@ -509,13 +511,35 @@
 //! slowed both: 9.5–14.6 → 13.8–14.1 3-D frames/s. Both within this machine's noise.
 //! `--hop 8`: 17.7 3-D frames/s (246 windows, RMSE median 0.732, worst 1.614 mm); `--bin 2`:
 //! 25.7–26.7 3-D frames/s.
+//!
+//! Session 49, on a machine about 1.8× faster than sessions 46–48's (the same code measured
+//! 13.7–13.9 3-D frames/s in session 47): `meb video` on the 2000-frame clip without the truth,
+//! five runs in a row: 16.5 (the first, reading the clip from disk: 2.5 s of system time),
+//! 25.1, 25.9, 27.0 and 26.8 3-D frames/s (1.91–2.05 s wall, user 2.4–2.5 s, system
+//! 0.64–0.75 s, peak RSS 243–265 MB); with the truth every 20 frames 21.9 / 24.2. Per window
+//! (means): reconstruction 34.4–37.2 ms (photometric stereo 10.4, integration 20.1, offset
+//! search 2.1), decoding 13–15 ms, writing 11–14 ms. `perf` by thread (one run): the
+//! reconstruction pool's two workers 39 % and 20 % of the samples, decoding 16 %, the reader
+//! 13 % (the kernel's copy out of the page cache 9.7 %), the writer 5.7 %, FFmpeg 5.1 %: the
+//! run keeps 1.6 of the two cores busy. Criterion: `window_warm` 41.0 ms, `frame_warm` 50.5 ms
+//! (52.6 in the run before), of which 13 ms paste the region's arrays into the frame (the
+//! stage "full frame from the region, warm", which `meb video` leaves to its writer);
+//! `frame_warm_region`, the 3-D frame as `meb video` runs it (decoded and reconstructed in
+//! the 514×311 region around the object, inside a pool of both cores), **34.1 ms** (33.8–34.4)
+//! and 36.8 ms (36.6–37.0) in two runs; called from outside a pool, as at first, 40.9 ms
+//! (40.2–41.6). `decode_region` 3.9 ms; `frame_warm_bin2` 27.8 ms, `window_warm_bin2` 11.8 ms.
+//! With the truth every 20 frames: 24.9 3-D frames/s, per-window depth RMSE median 0.680,
+//! mean 0.750, best 0.419, worst 1.194 mm (the thesis: 4.8–11 mm on 21 of 200 positions);
+//! `--hop 8` 29.5 3-D frames/s (246 windows, median 0.725, worst 1.626 mm). The first run
+//! after a build read the clip from disk (15.0 and 16.5 3-D frames/s): the build's files had
+//! pushed the 1.8 GB clip out of the page cache.
 use criterion::{BatchSize, Criterion, criterion_group, criterion_main};
 use meb::capture::binning::Binning;
 use meb::capture::memory::MemorySource;
 use meb::capture::{Frame, FrameFormat, FrameSource, Samples};
 use meb::demod::DecodeConfig;
 use meb::demod::decode_frames;
-use meb::reconstruct::{WarmStart, from_decoded, from_decoded_warm};
+use meb::reconstruct::{WarmStart, from_decoded, from_decoded_region, from_decoded_warm};
 use meb::rig::Rig;
 use meb::video::{VideoConfig, process};
 use std::hint::black_box;
@@ -643,6 +667,26 @@ fn bench(c: &mut Criterion) {
             black_box(
                 from_decoded_warm(&decoded, &rig, None, &config.reconstruct, Some(&warm)).ok(),
             )
+        })
+    });
+    // The same 3-D frame as `meb video` runs it after its first window: decoded in the region
+    // around the object and reconstructed there, the result kept in the region (the writer
+    // pastes it into the frame's files on its own thread), inside a pool of every core (from
+    // outside a pool each of a window's parallel loops would be injected into the global pool
+    // with the caller asleep).
+    let Ok(pool) = rayon::ThreadPoolBuilder::new().build() else {
+        eprintln!("cannot start a thread pool");
+        return;
+    };
+    group.bench_function("frame_warm_region", |b| {
+        b.iter(|| {
+            pool.install(|| {
+                let decoded = decode_frames(&second_frames, &format, &around_object).ok()?;
+                let roi = around_object.roi?;
+                black_box(
+                    from_decoded_region(&decoded, roi, &rig, &config.reconstruct, Some(&warm)).ok(),
+                )
+            })
         })
     });
     binned(&mut group, &rig, &format, &frames, &config);
