@@ -285,3 +285,90 @@ fn mp4_goes_through_ffmpeg_when_installed() {
         .len();
     assert!(size > 100);
 }
+
+/// The brightest code and the number of samples at full scale in a mono 8-bit y4m file.
+fn y4m_extremes(path: &Path) -> (u8, usize) {
+    let data = std::fs::read(path).unwrap();
+    let header = data.iter().position(|&b| b == b'\n').unwrap() + 1;
+    let text = String::from_utf8_lossy(&data[..header]).into_owned();
+    assert!(text.contains("Cmono"), "{text}");
+    let field = |key: char| -> usize {
+        let word = text
+            .split_whitespace()
+            .find(|w| w.starts_with(key))
+            .unwrap();
+        word[1..].parse().unwrap()
+    };
+    let samples = field('W') * field('H');
+    let (mut brightest, mut clipped) = (0u8, 0usize);
+    let mut at = header;
+    while at < data.len() {
+        at += data[at..].iter().position(|&b| b == b'\n').unwrap() + 1;
+        let frame = &data[at..at + samples];
+        brightest = brightest.max(*frame.iter().max().unwrap());
+        clipped += frame.iter().filter(|&&v| v == u8::MAX).count();
+        at += samples;
+    }
+    (brightest, clipped)
+}
+
+#[test]
+fn auto_exposure_keeps_a_corner_on_cube_from_clipping() {
+    // The corner-on cube's top face is lit by all four LEDs at once (1.22 of full scale
+    // together at the default gain).
+    let tmp = tempfile::tempdir().unwrap();
+    let simulate = |name: &str, extra: &[&str]| {
+        let out = path(tmp.path(), name);
+        let args = [
+            "simulate",
+            "--rig",
+            "thesis-out-of-plane",
+            "--camera-size",
+            "160x90",
+            "--scene",
+            "cube",
+            "--corner",
+            "--seed",
+            "1",
+            "--frames",
+            "32",
+            "--format",
+            "y4m",
+            "--out",
+            &out,
+        ];
+        run_ok(&[&args[..], extra].concat());
+        let truth: serde_json::Value =
+            serde_json::from_slice(&std::fs::read(Path::new(&out).join("truth.json")).unwrap())
+                .unwrap();
+        let gain = truth["gain"].as_f64().unwrap();
+        (y4m_extremes(&Path::new(&out).join("capture.y4m")), gain)
+    };
+    let ((_, clipped), gain) = simulate("default", &[]);
+    assert!(clipped > 0, "the default gain no longer clips this scene");
+    let ((brightest, clipped_auto), gain_auto) = simulate("auto", &["--auto-exposure"]);
+    println!(
+        "default gain {gain:.4e}: {clipped} clipped samples; auto-exposed {gain_auto:.4e}: \
+         brightest code {brightest}, {clipped_auto} clipped"
+    );
+    assert_eq!(clipped_auto, 0);
+    // 90 % of full scale, plus the read noise that may overshoot its 3 σ allowance.
+    assert!(brightest <= 235, "brightest code {brightest}");
+    assert!(
+        gain_auto < gain && gain_auto > 0.5 * gain,
+        "{gain_auto} vs {gain}"
+    );
+    // Either sets the gain: both at once is refused.
+    let err = run_err(&[
+        "simulate",
+        "--gain",
+        "1e5",
+        "--auto-exposure",
+        "--out",
+        &path(tmp.path(), "both"),
+    ]);
+    assert!(
+        err.contains("--gain") && err.contains("--auto-exposure"),
+        "{err}"
+    );
+}

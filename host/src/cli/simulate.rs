@@ -5,6 +5,7 @@ use clap::{Args, Subcommand, ValueEnum};
 use indicatif::{ProgressBar, ProgressStyle};
 use meb::rig::Rig;
 use meb::simulate::dataset::{DatasetConfig, write_dataset};
+use meb::simulate::exposure::expose_without_clipping;
 use meb::simulate::output::{OutputOptions, VideoFormat, write_capture};
 use meb::simulate::tof::thesis_hybrid_scene;
 use meb::simulate::{
@@ -163,6 +164,12 @@ struct CaptureArgs {
     /// otherwise saturate).
     #[arg(long)]
     peak: Option<f64>,
+    /// Lower the gain, as an auto-exposed camera would, until the brightest pixel of the first
+    /// frame with every LED on stays below 90 % of full scale (faces lit by several LEDs at
+    /// once, e.g. `--scene cube --corner`, clip at the default gain and hide LEDs from the
+    /// decoder).
+    #[arg(long, conflicts_with = "gain")]
+    auto_exposure: bool,
     /// Per-LED time shifts in chips, comma-separated (default: random from --seed).
     #[arg(long, value_delimiter = ',', allow_hyphen_values = true)]
     phases: Option<Vec<f64>>,
@@ -295,6 +302,11 @@ fn run_capture(args: &CaptureArgs) -> Result<()> {
             args.frames
         );
     }
+    let config = if args.auto_exposure {
+        expose_without_clipping(&rig, &scene, config)?
+    } else {
+        config
+    };
     let started = Instant::now();
     let mut capture = SimulatedCapture::new(rig, scene.clone(), config)?;
     if let Some(path) = &args.timeline {

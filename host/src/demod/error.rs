@@ -45,7 +45,8 @@ pub enum DemodError {
         "{requested} LEDs requested but the pixels that do not clip show {detected} modulated \
          LED(s), and {clipped_percent:.1} % of the pixels examined clip at full scale: the \
          others may light only those. Lower the camera's exposure or gain (or the LEDs' \
-         brightness) until nothing clips, then capture again"
+         brightness) until nothing clips, then capture again (a simulated capture: `meb \
+         simulate --auto-exposure`)"
     )]
     LedsHiddenByClipping {
         /// Requested LEDs.
