@@ -274,6 +274,24 @@ fn a_surface_lit_mostly_by_two_leds_is_refused() {
         "{:?}",
         report.summary.implausible
     );
+    // Exposed without clipping, one face is measured and the other, lit by two LEDs, is
+    // tilted by the integrator's guess (half the surface measured, 5 mm depth RMSE): refused.
+    simulate_y4m(
+        &tmp.path().join("exposed"),
+        "thesis-dynamic",
+        "320x180",
+        32,
+        &[&scene[..], &["--auto-exposure"]].concat(),
+    );
+    let err = run_err(&[
+        "reconstruct",
+        &p("exposed/capture.y4m"),
+        "--rig",
+        &p("exposed/rig.toml"),
+        "--out",
+        &p("exposed_refused"),
+    ]);
+    assert!(err.contains("lit by three or more LEDs"), "{err}");
 }
 
 /// The simulator's two-object scene (a Ø48 mm sphere, a 40 mm cube 70 mm behind it) under the
