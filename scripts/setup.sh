@@ -1,7 +1,7 @@
 #!/usr/bin/env bash
 # Installs what building and testing meb needs on a fresh Debian machine. Idempotent.
 #   - FFmpeg: video capture (meb decode on video files) and its tests;
-#   - Node.js + npm: three.js for report.html's 3-D view, pinned in host/viewer/package-lock.json;
+#   - Node.js + npm: three.js for report.html's 3-D view, pinned in host/cli/viewer/package-lock.json;
 #   - Chromium: the test that opens report.html headless and checks the 3-D view draws;
 #   - OpenCV, clang, libclang: the opencv crate behind meb's `opencv` feature (chequerboard
 #     corners for `meb tof calibrate`), which the tests and CI build; `--without-opencv` skips
@@ -33,8 +33,8 @@ if [ ${#missing[@]} -gt 0 ]; then
     $sudo apt-get update -qq
     DEBIAN_FRONTEND=noninteractive $sudo apt-get install -y -qq "${missing[@]}" >/dev/null
 fi
-# three.js at the version the lock file pins (host/build.rs runs the same when it is missing).
-if [ ! -f host/viewer/node_modules/three/build/three.module.min.js ]; then
-    echo "setup: installing three.js (npm ci in host/viewer)" >&2
-    (cd host/viewer && npm ci --ignore-scripts --no-audit --no-fund >/dev/null)
+# three.js at the version the lock file pins (host/cli/build.rs runs the same when it is missing).
+if [ ! -f host/cli/viewer/node_modules/three/build/three.module.min.js ]; then
+    echo "setup: installing three.js (npm ci in host/cli/viewer)" >&2
+    (cd host/cli/viewer && npm ci --ignore-scripts --no-audit --no-fund >/dev/null)
 fi

@@ -1,7 +1,7 @@
 //! Helpers for the hardware-in-the-loop tests.
 //!
 //! Every protocol scenario here takes a serial port path and drives it with the real `meb`
-//! client ([`meb::device::DeviceClient`] over `serialport`), so the same checks run against the
+//! client ([`meb_device::DeviceClient`] over `serialport`), so the same checks run against the
 //! virtual luminaire on a pseudo-terminal (by default) and against a real board. The board tests
 //! (`tests/hardware.rs`) are `#[ignore = "needs MEB_HIL_PORT"]`: they show as ignored in every
 //! run, and `MEB_HIL_PORT=/dev/ttyACM0 cargo test -p hil-tests --test hardware -- --ignored`
@@ -13,7 +13,7 @@ use std::io::Write;
 use std::path::{Path, PathBuf};
 use std::time::Duration;
 
-use meb::device::client::{DeviceClient, DeviceError, Timeouts};
+use meb_device::client::{DeviceClient, DeviceError, Timeouts};
 use protocol::config::{ChipRate, ConfigError, LuminaireConfig};
 use protocol::framing::{MAX_FRAME_LEN, encode_request};
 use protocol::wire::{Request, SaveState};
@@ -211,7 +211,7 @@ pub trait RawSend {
 
 impl RawSend for DeviceClient {
     fn link_mut_send(&mut self, bytes: &[u8]) {
-        use meb::device::transport::Link;
+        use meb_device::transport::Link;
         self.link_mut().send(bytes).unwrap();
     }
 }

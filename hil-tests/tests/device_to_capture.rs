@@ -4,9 +4,9 @@
 use std::sync::Arc;
 
 use hil_tests::client;
-use meb::device::{EmulatorOptions, Timeline, TimelineWaveform, VirtualLuminaire};
-use meb::rig::Rig;
-use meb::simulate::{NoiseModel, Scene, SceneObject, Shape, SimConfig, SimulatedCapture};
+use meb_core::rig::Rig;
+use meb_device::{EmulatorOptions, Timeline, TimelineWaveform, VirtualLuminaire};
+use meb_sim::{NoiseModel, Scene, SceneObject, Shape, SimConfig, SimulatedCapture};
 use protocol::config::{ChipRate, LuminaireConfig};
 
 const PHASES: [u16; 4] = [0, 5, 11, 20];

@@ -8,15 +8,13 @@
 use std::sync::Arc;
 
 use hil_tests::client;
-use meb::demod::{DecodeConfig, Linearize, decode};
-use meb::device::{EmulatorOptions, TimelineWaveform, VirtualLuminaire};
-use meb::metrics::depth::compare_depth;
-use meb::reconstruct::{ReconstructConfig, from_decoded};
-use meb::rig::Rig;
-use meb::simulate::exposure::expose_without_clipping;
-use meb::simulate::{
-    NoiseModel, Scene, SceneObject, Shape, SimConfig, SimulatedCapture, ToneCurve,
-};
+use meb_core::metrics::depth::compare_depth;
+use meb_core::rig::Rig;
+use meb_device::{EmulatorOptions, TimelineWaveform, VirtualLuminaire};
+use meb_pipeline::demod::{DecodeConfig, Linearize, decode};
+use meb_pipeline::reconstruct::{ReconstructConfig, from_decoded};
+use meb_sim::exposure::expose_without_clipping;
+use meb_sim::{NoiseModel, Scene, SceneObject, Shape, SimConfig, SimulatedCapture, ToneCurve};
 use ndarray::Array2;
 use protocol::config::{ChipRate, LuminaireConfig};
 

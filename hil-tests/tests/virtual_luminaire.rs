@@ -6,8 +6,8 @@ use hil_tests::{
     check_disconnect_recovery, check_garbage_recovery, check_invalid_configs_rejected,
     check_no_output_fault, client, configure_and_save, sample_config,
 };
-use meb::device::client::DeviceError;
-use meb::device::{EmulatorOptions, VirtualLuminaire};
+use meb_device::client::DeviceError;
+use meb_device::{EmulatorOptions, VirtualLuminaire};
 use protocol::config::LuminaireConfig;
 use protocol::luminaire::RestoredConfig;
 use protocol::wire::{ConfigSource, OutputFault};
@@ -102,7 +102,7 @@ fn device_vanishing_mid_session_is_an_error_not_a_hang() {
 
 #[test]
 fn missing_port_is_a_clear_no_device_error() {
-    match meb::device::DeviceClient::open(
+    match meb_device::DeviceClient::open(
         std::path::Path::new("/dev/meb-no-such-luminaire"),
         hil_tests::test_timeouts(),
     ) {

@@ -1,7 +1,8 @@
 //! Rules about the device side of the workspace that no compiler checks: comments cite papers,
 //! equations and the reference manual, never tracker issues; the protocol contract and the
 //! register plan contain no unsafe code; the firmware depends on nothing it does not use; the
-//! host's Unix-only dependency is declared for Unix only.
+//! host's Unix-only dependency is declared for Unix only; the simulator depends on no part of
+//! the pipeline it is the oracle of.
 
 use std::path::{Path, PathBuf};
 
@@ -13,9 +14,9 @@ const DEVICE_SIDE: [&str; 9] = [
     "protocol/src",
     "protocol/tests",
     "chip-plan/src",
-    "host/src/device",
-    "host/src/cli/device.rs",
-    "host/tests/device_cli.rs",
+    "host/device/src",
+    "host/cli/src/cli/device.rs",
+    "host/cli/tests/cli/device_cli.rs",
     "hil-tests/src",
     "hil-tests/tests",
 ];
@@ -112,11 +113,35 @@ fn firmware_depends_on_nothing_it_does_not_use() {
 
 #[test]
 fn host_declares_nix_for_unix_only() {
-    let host = manifest("host/Cargo.toml");
-    let everywhere = host["dependencies"].as_table().unwrap();
-    assert!(!everywhere.contains_key("nix"), "nix is Unix-only");
-    let unix = host["target"]["cfg(unix)"]["dependencies"]
-        .as_table()
-        .unwrap();
-    assert!(unix.contains_key("nix"));
+    for path in [
+        "host/core/Cargo.toml",
+        "host/device/Cargo.toml",
+        "host/cli/Cargo.toml",
+    ] {
+        let host = manifest(path);
+        let everywhere = host["dependencies"].as_table().unwrap();
+        assert!(!everywhere.contains_key("nix"), "{path}: nix is Unix-only");
+        let unix = host["target"]["cfg(unix)"]["dependencies"]
+            .as_table()
+            .unwrap();
+        assert!(unix.contains_key("nix"), "{path}");
+    }
+}
+
+#[test]
+fn the_simulator_depends_on_no_part_of_the_pipeline() {
+    let sim = manifest("host/sim/Cargo.toml");
+    let tables = ["dependencies", "dev-dependencies", "build-dependencies"];
+    let names: Vec<&String> = tables
+        .iter()
+        .filter_map(|t| sim.get(*t).and_then(|d| d.as_table()))
+        .flat_map(|d| d.keys())
+        .collect();
+    assert!(names.iter().any(|n| n.as_str() == "meb-core"), "{names:?}");
+    for forbidden in ["meb-pipeline", "meb", "meb-device"] {
+        assert!(
+            !names.iter().any(|n| n.as_str() == forbidden),
+            "the simulator depends on {forbidden}"
+        );
+    }
 }

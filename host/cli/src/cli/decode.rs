@@ -1,0 +1,273 @@
+//! `meb decode`: demodulate a capture into one image per LED and write the output directory.
+
+use anyhow::{Context, Result, bail};
+use clap::Args;
+use indicatif::{ProgressBar, ProgressStyle};
+use meb_core::capture::raw::RawLayout;
+use meb_core::capture::{OpenOptions, open};
+use meb_pipeline::demod::output::write_decode_dir;
+use meb_pipeline::demod::{
+    DecodeConfig, DecodeReport, Decoded, DemodError, Estimator, LedCount, Linearize, OnImplausible,
+    Roi, VerdictStatus, decode,
+};
+use std::path::{Path, PathBuf};
+
+/// Arguments of `meb decode`.
+#[derive(Args)]
+pub struct DecodeArgs {
+    /// Input: a directory of PNG/TIFF frames, a multi-page TIFF, a .y4m file, a raw file
+    /// (with --raw) or a video file (through FFmpeg).
+    input: PathBuf,
+    /// Output folder (led1.npy…, ledI.png, noise.npy, decode.json), replaced whole and
+    /// atomically.
+    #[arg(long)]
+    out: PathBuf,
+    #[arg(long, help = super::common::FORCE_HELP)]
+    force: bool,
+    /// Decoder settings.
+    #[command(flatten)]
+    options: DecodeOptions,
+}
+
+/// The decoder settings shared by `meb decode` and `meb reconstruct`.
+#[derive(Args)]
+pub struct DecodeOptions {
+    /// Number of LEDs (1..=8) or `auto` [default: 4, or the rig's LED count in `reconstruct`].
+    #[arg(long)]
+    leds: Option<String>,
+    /// Number of frames to use (≥ 2^(N+1)); default all.
+    #[arg(long)]
+    frames: Option<usize>,
+    /// Frames to skip at the start.
+    #[arg(long, default_value_t = 0)]
+    start: usize,
+    /// Amplitude estimator: `waveform` (matched filter, default) or `thesis`.
+    #[arg(long, default_value = "waveform")]
+    estimator: String,
+    /// Code-value linearisation: `none`, `srgb` or `gamma:G`.
+    #[arg(long, default_value = "none")]
+    linearize: String,
+    /// Region of interest WxH+X+Y.
+    #[arg(long)]
+    roi: Option<String>,
+    /// Camera frame rate override (phone containers may store the playback rate).
+    #[arg(long)]
+    fps: Option<f64>,
+    /// Known chips per frame (chip rate / frame rate) instead of estimating it.
+    #[arg(long)]
+    rate_ratio: Option<f64>,
+    /// Largest |chips per frame − 1| searched when the rate ratio is estimated.
+    #[arg(long, default_value_t = 0.06)]
+    max_rate_mismatch: f64,
+    /// Known exposure as a fraction of the frame period instead of estimating it.
+    #[arg(long)]
+    exposure: Option<f64>,
+    /// Known rolling-shutter line time in microseconds (0 = global shutter); fitted from
+    /// the video when absent.
+    #[arg(long)]
+    line_time_us: Option<f64>,
+    /// Raw input layout WxHxBITS (e.g. 1280x720x8).
+    #[arg(long)]
+    raw: Option<String>,
+    /// Decode even when the video shows a different LED count than --leds.
+    #[arg(long)]
+    no_led_check: bool,
+}
+
+/// Parses "W x H + X + Y".
+fn parse_roi(text: &str) -> Result<Roi> {
+    let (size, offset) = text.split_once('+').unwrap_or((text, "0+0"));
+    let (w, h) = size.split_once('x').context("--roi needs WxH+X+Y")?;
+    let (x, y) = offset.split_once('+').context("--roi needs WxH+X+Y")?;
+    Ok(Roi {
+        width: w.parse().context("--roi width")?,
+        height: h.parse().context("--roi height")?,
+        x: x.parse().context("--roi x")?,
+        y: y.parse().context("--roi y")?,
+    })
+}
+
+/// Builds the decoder settings; `default_leds` applies when --leds is absent, `force` keeps
+/// a result the quality verdict finds implausible (recorded as overridden).
+pub fn config(args: &DecodeOptions, default_leds: usize, force: bool) -> Result<DecodeConfig> {
+    let leds = match args.leds.as_deref() {
+        None => LedCount::Fixed(default_leds),
+        Some("auto") => LedCount::Auto,
+        Some(n) => LedCount::Fixed(n.parse().context("--leds must be a number or `auto`")?),
+    };
+    let estimator = match args.estimator.as_str() {
+        "waveform" => Estimator::Waveform,
+        "thesis" => Estimator::Thesis,
+        other => bail!("unknown --estimator {other} (waveform or thesis)"),
+    };
+    let linearize = match args.linearize.as_str() {
+        "none" => Linearize::None,
+        "srgb" => Linearize::Srgb,
+        other => match other.strip_prefix("gamma:") {
+            Some(g) => Linearize::Gamma(g.parse().context("--linearize gamma:G")?),
+            None => bail!("unknown --linearize {other} (none, srgb or gamma:G)"),
+        },
+    };
+    Ok(DecodeConfig {
+        leds,
+        frames: args.frames,
+        start: args.start,
+        estimator,
+        linearize,
+        roi: args.roi.as_deref().map(parse_roi).transpose()?,
+        fps: args.fps,
+        rate_ratio: args.rate_ratio,
+        max_rate_mismatch: args.max_rate_mismatch,
+        exposure: args.exposure,
+        line_time_s: args.line_time_us.map(|us| us * 1e-6),
+        check_led_count: !args.no_led_check,
+        on_implausible: if force {
+            OnImplausible::Keep
+        } else {
+            OnImplausible::Refuse
+        },
+        ..DecodeConfig::default()
+    })
+}
+
+/// Parses "WxHxBITS".
+fn parse_raw(text: &str) -> Result<RawLayout> {
+    let parts: Vec<&str> = text.split('x').collect();
+    let [w, h, b] = parts.as_slice() else {
+        bail!("--raw needs WxHxBITS, e.g. 1280x720x8");
+    };
+    Ok(RawLayout {
+        width: w.parse().context("--raw width")?,
+        height: h.parse().context("--raw height")?,
+        bit_depth: b.parse().context("--raw bits")?,
+    })
+}
+
+/// How to open the input: frame rate override and raw layout.
+pub fn open_options(options: &DecodeOptions) -> Result<OpenOptions> {
+    Ok(OpenOptions {
+        fps: options.fps,
+        raw: options.raw.as_deref().map(parse_raw).transpose()?,
+    })
+}
+
+/// Opens and decodes `input` with `options`, showing a progress bar; `default_leds` applies
+/// when --leds is absent, `force` keeps a result the verdict finds implausible.
+pub fn decode_capture(
+    input: &Path,
+    options: &DecodeOptions,
+    default_leds: usize,
+    force: bool,
+) -> Result<Decoded> {
+    let config = config(options, default_leds, force)?;
+    let mut source = open(input, &open_options(options)?)
+        .with_context(|| format!("cannot open {}", input.display()))?;
+    let bar = ProgressBar::new(0);
+    bar.set_style(
+        ProgressStyle::with_template("decoding {bar:40} {pos}/{len} frames {elapsed}")
+            .unwrap_or_else(|_| ProgressStyle::default_bar()),
+    );
+    let decoded = decode(source.as_mut(), &config, &mut |done, total| {
+        bar.set_length(total as u64);
+        bar.set_position(done as u64);
+    });
+    bar.finish_and_clear();
+    let decoded = decoded.map_err(|e| match flag_hint(&e) {
+        // These errors carry no source: the message with the flags to try is all there is.
+        Some(hint) => anyhow::anyhow!("cannot decode {}: {e} {hint}", input.display()),
+        None => anyhow::Error::new(e).context(format!("cannot decode {}", input.display())),
+    })?;
+    warn_if_overridden(&decoded.report);
+    Ok(decoded)
+}
+
+/// The command-line flags that address a decode error (for errors without a source).
+fn flag_hint(error: &DemodError) -> Option<String> {
+    Some(match error {
+        DemodError::LedCountMismatch { detected, .. } => {
+            format!("(use --leds {detected} or --leds auto; --no-led-check skips the check)")
+        }
+        DemodError::LedsHiddenByClipping { .. } => "(--no-led-check decodes the pixels that \
+             do not clip anyway; the clipped ones are flagged in saturated.npy)"
+            .into(),
+        DemodError::Implausible { .. } => "(flags: --rate-ratio, --exposure, --line-time-us, \
+             --linearize, --frames, --max-rate-mismatch; --force keeps the result with the \
+             verdict recorded)"
+            .into(),
+        DemodError::NoModulation => "(check --leds, --fps and --max-rate-mismatch)".into(),
+        DemodError::StartBeyondEnd { .. } => "(lower --start)".into(),
+        _ => return None,
+    })
+}
+
+/// Prints the verdict's problems when an implausible result was kept on request.
+fn warn_if_overridden(report: &DecodeReport) {
+    if report.verdict.status == VerdictStatus::Overridden {
+        eprintln!(
+            "warning: kept an implausible decode (--force): {}",
+            report.verdict.problems.join("; ")
+        );
+    }
+}
+
+/// Refuses a decode folder whose verdict is not plausible unless `force` (then warns).
+pub fn check_folder_verdict(report: &DecodeReport, folder: &Path, force: bool) -> Result<()> {
+    let verdict = &report.verdict;
+    if verdict.status == VerdictStatus::Plausible {
+        return Ok(());
+    }
+    let what = match verdict.status {
+        VerdictStatus::Unchecked => {
+            "was decoded without a quality verdict (an older meb); decode it again".to_string()
+        }
+        _ => format!(
+            "holds a decode its quality verdict found implausible ({})",
+            verdict.problems.join("; ")
+        ),
+    };
+    if force {
+        eprintln!(
+            "warning: {} {what}; using it anyway (--force)",
+            folder.display()
+        );
+        return Ok(());
+    }
+    bail!(
+        "{} {what}; use --force to reconstruct from it anyway",
+        folder.display()
+    )
+}
+
+/// Runs `meb decode`.
+pub fn run(args: &DecodeArgs) -> Result<()> {
+    let folder = super::common::output_folder(&args.out, "decode", args.force)?;
+    let decoded = decode_capture(&args.input, &args.options, 4, args.force)?;
+    write_decode_dir(folder.path(), &decoded)?;
+    let out = super::common::commit(folder)?;
+    let report = &decoded.report;
+    println!(
+        "decoded {} LEDs from {} frames ({}x{}), rate ratio {:.5}, exposure {:.2}, \
+         line time {:.2} µs, median noise {:.4}, verdict {:?}",
+        report.leds,
+        report.frames_used,
+        report.width,
+        report.height,
+        report.rate_ratio,
+        report.exposure,
+        report.line_time_us,
+        report.median_noise,
+        report.verdict.status
+    );
+    for led in &report.per_led {
+        println!(
+            "  LED {}: phase {:.3} chips, mean level {:.4}, SNR {:.1} dB, gain ±{:.2} %",
+            led.led,
+            led.phase_chips,
+            led.mean_level,
+            led.snr_db,
+            100.0 * led.quality.gain_uncertainty
+        );
+    }
+    println!("wrote {}", out.display());
+    Ok(())
+}

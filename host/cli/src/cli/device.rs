@@ -1,0 +1,436 @@
+//! `meb device`: list, query and configure luminaires over USB serial, or emulate one.
+
+use std::io::Write;
+use std::path::PathBuf;
+use std::time::Duration;
+
+use anyhow::{Result, anyhow, bail};
+use clap::{Args, Subcommand};
+use meb_device::discovery::{self, DiscoveryError, PortEntry};
+use meb_device::{DeviceClient, Timeouts};
+use protocol::carriers::MAX_LEDS;
+use protocol::config::{ChipRate, FULL_BRIGHTNESS_PERMILLE, LuminaireConfig};
+use protocol::wire::SaveOutcome;
+use serde::Serialize;
+
+/// Arguments of `meb device`.
+#[derive(Args)]
+pub struct DeviceArgs {
+    /// Serial port of the luminaire (default: the only attached luminaire).
+    #[arg(long, global = true)]
+    port: Option<PathBuf>,
+    /// Reply timeout per attempt in milliseconds.
+    #[arg(long, global = true, default_value_t = 500)]
+    timeout_ms: u64,
+    /// Attempts per command (retries reuse the sequence number).
+    #[arg(long, global = true, default_value_t = 3)]
+    attempts: u32,
+    #[command(subcommand)]
+    action: DeviceAction,
+}
+
+/// What to do with the luminaire.
+#[derive(Subcommand)]
+enum DeviceAction {
+    /// List serial ports, marking meb luminaires.
+    List(JsonFlag),
+    /// Firmware, protocol version, board and limits.
+    Info(JsonFlag),
+    /// Running state, save state and link counters.
+    Status(JsonFlag),
+    /// The active configuration.
+    Get(JsonFlag),
+    /// Apply a configuration (takes effect at once; `save` persists it).
+    Set(SetArgs),
+    /// Persist the active configuration to the luminaire's flash.
+    Save,
+    /// Start playing the carriers.
+    Start,
+    /// Stop playing the carriers (LEDs off).
+    Stop,
+    /// Blink to find the luminaire: the board LED (PC13) on a Black Pill, every output on the
+    /// virtual luminaire (0 s ends a blink).
+    Identify {
+        /// Blink duration in seconds (≤ 60).
+        #[arg(long, default_value_t = 5)]
+        seconds: u8,
+    },
+    /// Check the link and measure the round-trip time.
+    Ping(PingArgs),
+    /// Run a virtual luminaire on a pseudo-terminal until Ctrl-C / SIGTERM.
+    #[cfg(unix)]
+    Emulate(EmulateArgs),
+}
+
+/// `--json` flag of a read command.
+#[derive(Args)]
+struct JsonFlag {
+    /// Print JSON instead of text.
+    #[arg(long)]
+    json: bool,
+}
+
+/// Arguments of `meb device set`.
+#[derive(Args)]
+struct SetArgs {
+    /// Number of LEDs N (1..=8).
+    #[arg(long)]
+    leds: u8,
+    /// Chip rate in Hz (= the camera frame rate), e.g. 960 or 959.5; 1 to 4000 Hz.
+    #[arg(long)]
+    rate: f64,
+    /// Per-LED brightness in per mille, N comma-separated values (default all 1000).
+    #[arg(long, value_delimiter = ',')]
+    brightness: Option<Vec<u16>>,
+    /// Per-LED carrier delay in chips, N comma-separated values (default all 0).
+    #[arg(long, value_delimiter = ',')]
+    phase: Option<Vec<u16>>,
+}
+
+/// Arguments of `meb device ping`.
+#[derive(Args)]
+struct PingArgs {
+    /// Number of pings (at least 1).
+    #[arg(long, default_value_t = 1, value_parser = clap::value_parser!(u32).range(1..))]
+    count: u32,
+    /// Print JSON instead of text.
+    #[arg(long)]
+    json: bool,
+}
+
+/// Arguments of `meb device emulate`.
+#[cfg(unix)]
+#[derive(Args)]
+struct EmulateArgs {
+    /// Record file standing in for flash (restart on the same file = power cycle).
+    #[arg(long)]
+    storage: Option<PathBuf>,
+    /// Crystal error of the virtual board in ppm (chips play at rate × (1 + ppm·1e-6)).
+    #[arg(long, default_value_t = 0.0, allow_hyphen_values = true)]
+    rate_error_ppm: f64,
+    /// JSON file receiving the LED timeline (for `meb simulate --timeline`).
+    #[arg(long)]
+    timeline: Option<PathBuf>,
+}
+
+/// Runs `meb device`.
+pub fn run(args: &DeviceArgs) -> Result<()> {
+    match &args.action {
+        DeviceAction::List(flag) => list(flag.json),
+        #[cfg(unix)]
+        DeviceAction::Emulate(emulate_args) => emulate::run(emulate_args),
+        action => {
+            let mut client = connect(args)?;
+            talk(&mut client, action)
+        }
+    }
+}
+
+fn connect(args: &DeviceArgs) -> Result<DeviceClient> {
+    let path = discovery::select_port(args.port.as_deref()).map_err(|err| match err {
+        DiscoveryError::NoLuminaire | DiscoveryError::SeveralLuminaires(_) => {
+            anyhow!("{err}; pass --port PATH (e.g. the path `meb device emulate` prints)")
+        }
+        other => other.into(),
+    })?;
+    let timeouts = Timeouts {
+        reply: Duration::from_millis(args.timeout_ms),
+        attempts: args.attempts.max(1),
+        ..Timeouts::default()
+    };
+    Ok(DeviceClient::open(&path, timeouts)?)
+}
+
+fn talk(client: &mut DeviceClient, action: &DeviceAction) -> Result<()> {
+    match action {
+        DeviceAction::Info(flag) => {
+            let info = client.info()?;
+            if flag.json {
+                return print_json(&info);
+            }
+            println!("board             {}", info.board);
+            println!("firmware          {}", info.firmware_version);
+            println!("protocol version  {}", info.protocol_version);
+            println!("max LEDs          {}", info.max_leds);
+            println!(
+                "chip rate range   {:.3} .. {:.3} Hz",
+                info.min_chip_rate.hz(),
+                info.max_chip_rate.hz()
+            );
+            println!("carrier table     {:08x}", info.carrier_fingerprint);
+        }
+        DeviceAction::Status(flag) => {
+            let s = client.status()?;
+            if flag.json {
+                return print_json(&s);
+            }
+            println!("running           {}", yes_no(s.running));
+            match s.output_fault {
+                Some(fault) => println!("output fault      {fault}"),
+                None => println!("output fault      none"),
+            }
+            println!("config source     {:?}", s.config_source);
+            println!("unsaved changes   {}", yes_no(s.unsaved_changes));
+            println!("save              {:?}", s.save);
+            println!("identify active   {}", yes_no(s.identify_active));
+            println!(
+                "frames received   {} ok, {} bad CRC, {} malformed, {} too long, {} wrong version",
+                s.rx_frames_ok,
+                s.rx_bad_crc,
+                s.rx_malformed,
+                s.rx_too_long,
+                s.rx_unsupported_version
+            );
+        }
+        DeviceAction::Get(flag) => {
+            let view = ConfigView::of(&client.config()?);
+            if flag.json {
+                return print_json(&view);
+            }
+            view.print();
+        }
+        DeviceAction::Set(set) => {
+            let current = client.config()?;
+            let config = config_from_args(set, current.running)?;
+            client.set_config(&config)?;
+            println!("configuration applied (not yet saved; run `meb device save`)");
+            ConfigView::of(&config).print();
+        }
+        DeviceAction::Save => match client.save_and_wait()? {
+            SaveOutcome::AlreadySaved => println!("already saved"),
+            SaveOutcome::Deferred => println!("saved"),
+        },
+        DeviceAction::Start => {
+            client.start()?;
+            println!("started");
+        }
+        DeviceAction::Stop => {
+            client.stop()?;
+            println!("stopped");
+        }
+        DeviceAction::Identify { seconds } => {
+            client.identify(*seconds)?;
+            println!("identifying for {seconds} s");
+        }
+        DeviceAction::Ping(ping) => return ping_repeatedly(client, ping),
+        DeviceAction::List(_) => {}
+        #[cfg(unix)]
+        DeviceAction::Emulate(_) => {}
+    }
+    Ok(())
+}
+
+/// Pings `ping.count` times, printing each round trip as it arrives (text) so that a link
+/// that breaks keeps what it measured; JSON prints the measured list, also on failure.
+fn ping_repeatedly(client: &mut DeviceClient, ping: &PingArgs) -> Result<()> {
+    let mut rtts_ms = Vec::new();
+    let mut failure = None;
+    for nonce in 0..ping.count {
+        match client.ping(nonce) {
+            Ok(rtt) => {
+                let ms = rtt.as_secs_f64() * 1e3;
+                if !ping.json {
+                    println!("pong in {ms:.2} ms");
+                    std::io::stdout().flush()?;
+                }
+                rtts_ms.push(ms);
+            }
+            Err(err) => {
+                failure = Some(err);
+                break;
+            }
+        }
+    }
+    if ping.json {
+        print_json(&serde_json::json!({ "round_trip_ms": rtts_ms }))?;
+    }
+    match failure {
+        None => Ok(()),
+        Some(err) => Err(anyhow::Error::new(err).context(format!(
+            "ping {} of {} failed",
+            rtts_ms.len() + 1,
+            ping.count
+        ))),
+    }
+}
+
+/// The full configuration `meb device set` sends.
+fn config_from_args(set: &SetArgs, running: bool) -> Result<LuminaireConfig> {
+    let n = usize::from(set.leds);
+    if n == 0 || n > MAX_LEDS {
+        bail!("--leds {} is outside 1..={MAX_LEDS}", set.leds);
+    }
+    let (min, max) = (ChipRate::MIN.hz(), ChipRate::MAX.hz());
+    // Checked in hertz: converting first would saturate 1e9 Hz to u32::MAX millihertz.
+    if !(set.rate >= min && set.rate <= max) {
+        bail!(
+            "--rate {} Hz is outside the supported {min:.3}..={max:.3} Hz",
+            set.rate
+        );
+    }
+    let mut brightness = [FULL_BRIGHTNESS_PERMILLE; MAX_LEDS];
+    if let Some(values) = &set.brightness {
+        per_led("--brightness", values, n, &mut brightness)?;
+    }
+    let mut phases = [0u16; MAX_LEDS];
+    if let Some(values) = &set.phase {
+        per_led("--phase", values, n, &mut phases)?;
+    }
+    Ok(LuminaireConfig {
+        led_count: set.leds,
+        chip_rate: ChipRate::from_hz(set.rate),
+        brightness_permille: brightness,
+        phase_chips: phases,
+        running,
+    })
+}
+
+fn per_led(flag: &str, values: &[u16], n: usize, out: &mut [u16; MAX_LEDS]) -> Result<()> {
+    if values.len() != n {
+        bail!(
+            "{flag} needs {n} values (one per LED), got {}",
+            values.len()
+        );
+    }
+    out[..n].copy_from_slice(values);
+    Ok(())
+}
+
+/// A configuration as printed: only the N LEDs in use, the rate in Hz.
+#[derive(Serialize)]
+struct ConfigView {
+    led_count: u8,
+    chip_rate_hz: f64,
+    chip_rate_millihertz: u32,
+    brightness_permille: Vec<u16>,
+    phase_chips: Vec<u16>,
+    running: bool,
+}
+
+impl ConfigView {
+    fn of(config: &LuminaireConfig) -> Self {
+        let n = usize::from(config.led_count).min(MAX_LEDS);
+        Self {
+            led_count: config.led_count,
+            chip_rate_hz: config.chip_rate.hz(),
+            chip_rate_millihertz: config.chip_rate.millihertz(),
+            brightness_permille: config.brightness_permille[..n].to_vec(),
+            phase_chips: config.phase_chips[..n].to_vec(),
+            running: config.running,
+        }
+    }
+
+    fn print(&self) {
+        let join = |v: &[u16]| v.iter().map(u16::to_string).collect::<Vec<_>>().join(",");
+        println!("leds        {}", self.led_count);
+        println!("chip rate   {:.3} Hz", self.chip_rate_hz);
+        println!("brightness  {} per mille", join(&self.brightness_permille));
+        println!("phase       {} chips", join(&self.phase_chips));
+        println!("running     {}", yes_no(self.running));
+    }
+}
+
+fn list(json: bool) -> Result<()> {
+    let ports = discovery::list_ports()?;
+    if json {
+        return print_json(&ports);
+    }
+    if ports.is_empty() {
+        println!("no serial ports");
+    }
+    for PortEntry {
+        path,
+        vid,
+        pid,
+        manufacturer,
+        product,
+        serial_number,
+        is_luminaire,
+    } in &ports
+    {
+        let ids = match (vid, pid) {
+            (Some(v), Some(p)) => format!("{v:04x}:{p:04x}"),
+            _ => "-".into(),
+        };
+        println!(
+            "{}{}  {ids}  {} / {}  {}",
+            if *is_luminaire { "* " } else { "  " },
+            path.display(),
+            manufacturer.as_deref().unwrap_or("-"),
+            product.as_deref().unwrap_or("-"),
+            serial_number.as_deref().unwrap_or("")
+        );
+    }
+    if ports.iter().any(|p| p.is_luminaire) {
+        println!("(* = meb luminaire)");
+    }
+    Ok(())
+}
+
+/// `meb device emulate` (pseudo-terminals and signals: Unix only).
+#[cfg(unix)]
+mod emulate {
+    use std::io::Write;
+    use std::path::Path;
+    use std::sync::Arc;
+    use std::sync::atomic::{AtomicBool, Ordering};
+    use std::time::Duration;
+
+    use anyhow::{Context, Result};
+    use meb_device::{EmulatorOptions, VirtualLuminaire};
+    use nix::sys::signal::{SigSet, Signal};
+
+    use super::EmulateArgs;
+
+    pub fn run(args: &EmulateArgs) -> Result<()> {
+        // Block SIGINT/SIGTERM in every thread; one watcher thread receives them with sigwait.
+        let mut signals = SigSet::empty();
+        signals.add(Signal::SIGINT);
+        signals.add(Signal::SIGTERM);
+        signals
+            .thread_block()
+            .context("cannot block SIGINT/SIGTERM")?;
+        let stop = Arc::new(AtomicBool::new(false));
+        let stop_flag = Arc::clone(&stop);
+        std::thread::spawn(move || {
+            let _ = signals.wait();
+            stop_flag.store(true, Ordering::Relaxed);
+        });
+
+        let emulator = VirtualLuminaire::spawn(EmulatorOptions {
+            storage: args.storage.clone(),
+            rate_error_ppm: args.rate_error_ppm,
+            timeline: args.timeline.clone(),
+            ..EmulatorOptions::default()
+        })?;
+        println!("{}", emulator.port_path().display());
+        std::io::stdout().flush()?;
+        eprintln!(
+            "virtual luminaire on {} (booted from {:?}); Ctrl-C to stop",
+            emulator.port_path().display(),
+            emulator.restored()
+        );
+        while !stop.load(Ordering::Relaxed) && emulator.is_running() {
+            std::thread::sleep(Duration::from_millis(50));
+        }
+        let timeline = emulator.shutdown()?;
+        eprintln!(
+            "virtual luminaire stopped after {} output change(s){}",
+            timeline.segments.len(),
+            args.timeline
+                .as_deref()
+                .map(|p: &Path| format!("; timeline in {}", p.display()))
+                .unwrap_or_default()
+        );
+        Ok(())
+    }
+}
+
+fn print_json<T: Serialize>(value: &T) -> Result<()> {
+    println!("{}", serde_json::to_string_pretty(value)?);
+    Ok(())
+}
+
+fn yes_no(flag: bool) -> &'static str {
+    if flag { "yes" } else { "no" }
+}

@@ -1,0 +1,193 @@
+//! The interactive 3-D view of a reconstructed surface in `report.html`: the depth map's mesh
+//! drawn with three.js (pinned in `host/viewer/package.json`, inlined by `build.rs`), so the
+//! page stays one file that works offline. Drag to turn the surface, scroll to zoom.
+//!
+//! three.js is embedded as a base64 `data:` module and imported dynamically. A build without
+//! npm has no copy to inline: the page then fetches the same pinned file from a CDN with
+//! subresource integrity ([`THREE_JS_SHA384`]), so the view needs the network there and a
+//! tampered or different file is refused by the browser. The mesh goes in the mesh goes in
+//! as base64 little-endian float32 positions and uint32 indices. Large surfaces are drawn from
+//! a sub-sampled grid so the page stays small. After its first frame the viewer sets
+//! `data-viewer="rendered"` on `<body>` (or `data-viewer="error: …"`), which tests read.
+
+use super::mesh::SurfaceMesh;
+use base64::Engine;
+
+/// three.js r170, the single-file ES module build (empty when the build had no npm).
+const THREE_JS: &str = include_str!(concat!(env!("OUT_DIR"), "/three.module.min.js"));
+
+/// Where the page fetches the pinned three.js when the build could not inline it.
+pub const THREE_JS_CDN: &str =
+    "https://cdn.jsdelivr.net/npm/three@0.170.0/build/three.module.min.js";
+
+/// Subresource-integrity digest of the pinned `three.module.min.js` (three 0.170.0).
+pub const THREE_JS_SHA384: &str =
+    "sha384-IDC7sAMAIMB/TZ6dgKKPPAKZ2bXXXP8+FBMBC8cU319eBhKITx+PaalhfDkDNH28";
+
+/// The JavaScript expression that imports three.js: the inlined module, or the CDN copy
+/// checked against [`THREE_JS_SHA384`].
+fn three_import() -> String {
+    if THREE_JS.is_empty() {
+        format!(
+            r#"(async () => {{ const r = await fetch("{THREE_JS_CDN}", {{ integrity: "{THREE_JS_SHA384}" }}); if (!r.ok) throw new Error("three.js: HTTP " + r.status); return import(URL.createObjectURL(new Blob([await r.text()], {{ type: "text/javascript" }}))); }})()"#
+        )
+    } else {
+        format!(
+            r#"import("data:text/javascript;base64,{}")"#,
+            base64::engine::general_purpose::STANDARD.encode(THREE_JS.as_bytes())
+        )
+    }
+}
+
+/// Most vertices the viewer draws; larger meshes are sub-sampled.
+pub const MAX_VIEWER_VERTICES: usize = 120_000;
+
+/// The HTML (canvas + module script) of the 3-D view of `mesh`.
+pub fn surface_viewer(mesh: &SurfaceMesh) -> String {
+    let b64 = |bytes: &[u8]| base64::engine::general_purpose::STANDARD.encode(bytes);
+    let positions: Vec<u8> = mesh
+        .vertices
+        .iter()
+        .flat_map(|v| v.iter().flat_map(|x| x.to_le_bytes()))
+        .collect();
+    let indices: Vec<u8> = mesh
+        .triangles
+        .iter()
+        .flat_map(|t| t.iter().flat_map(|i| i.to_le_bytes()))
+        .collect();
+    format!(
+        r#"<div id="meb-viewer" style="position:relative;width:720px;max-width:100%;height:480px;border:1px solid #ddd;background:#181a20">
+<canvas id="meb-surface" style="width:100%;height:100%;display:block;cursor:grab"></canvas>
+<div id="meb-viewer-note" style="position:absolute;left:8px;bottom:6px;color:#aaa;font-size:85%">drag to turn, scroll to zoom</div></div>
+<script type="module">
+const note = document.getElementById("meb-viewer-note");
+try {{
+  const THREE = await {three};
+  const bytes = (s) => Uint8Array.from(atob(s), (c) => c.charCodeAt(0)).buffer;
+  const geometry = new THREE.BufferGeometry();
+  geometry.setAttribute("position", new THREE.BufferAttribute(new Float32Array(bytes("{positions}")), 3));
+  geometry.setIndex(new THREE.BufferAttribute(new Uint32Array(bytes("{indices}")), 1));
+  geometry.computeVertexNormals();
+  geometry.computeBoundingSphere();
+  const sphere = geometry.boundingSphere;
+  geometry.translate(-sphere.center.x, -sphere.center.y, -sphere.center.z);
+  const canvas = document.getElementById("meb-surface");
+  const renderer = new THREE.WebGLRenderer({{ canvas, antialias: true, preserveDrawingBuffer: true }});
+  renderer.setPixelRatio(window.devicePixelRatio || 1);
+  const scene = new THREE.Scene();
+  scene.background = new THREE.Color(0x181a20);
+  const surface = new THREE.Mesh(geometry, new THREE.MeshStandardMaterial({{ color: 0xd7cdbe, roughness: 0.85, side: THREE.DoubleSide }}));
+  const pivot = new THREE.Group();
+  pivot.add(surface);
+  scene.add(pivot);
+  scene.add(new THREE.HemisphereLight(0xffffff, 0x303040, 1.2));
+  const camera = new THREE.PerspectiveCamera(35, 1, sphere.radius / 100, sphere.radius * 100);
+  const light = new THREE.DirectionalLight(0xffffff, 2.0);
+  light.position.set(-0.4, 0.5, 1.0);
+  camera.add(light);
+  scene.add(camera);
+  let distance = sphere.radius * 3.2, yaw = -0.5, pitch = 0.35;
+  const draw = () => {{
+    const w = canvas.clientWidth, h = canvas.clientHeight;
+    renderer.setSize(w, h, false);
+    camera.aspect = w / h;
+    camera.updateProjectionMatrix();
+    pivot.rotation.set(pitch, yaw, 0);
+    camera.position.set(0, 0, distance);
+    camera.lookAt(0, 0, 0);
+    renderer.render(scene, camera);
+  }};
+  let drag = null;
+  canvas.addEventListener("pointerdown", (e) => {{ drag = [e.clientX, e.clientY]; canvas.setPointerCapture(e.pointerId); }});
+  canvas.addEventListener("pointerup", () => {{ drag = null; }});
+  canvas.addEventListener("pointermove", (e) => {{
+    if (!drag) return;
+    yaw += (e.clientX - drag[0]) * 0.01;
+    pitch = Math.max(-1.5, Math.min(1.5, pitch + (e.clientY - drag[1]) * 0.01));
+    drag = [e.clientX, e.clientY];
+    draw();
+  }});
+  canvas.addEventListener("wheel", (e) => {{ e.preventDefault(); distance *= Math.exp(e.deltaY * 0.001); draw(); }}, {{ passive: false }});
+  window.addEventListener("resize", draw);
+  draw();
+  document.body.dataset.viewer = "rendered";
+}} catch (error) {{
+  note.textContent = "3-D view unavailable: " + error;
+  document.body.dataset.viewer = "error: " + error;
+}}
+</script>"#,
+        three = three_import(),
+        positions = b64(&positions),
+        indices = b64(&indices),
+    )
+}
+
+/// The mesh the viewer draws for `depth`: the full grid, or every k-th row and column when it
+/// would exceed [`MAX_VIEWER_VERTICES`].
+pub fn viewer_mesh(depth: &meb_core::types::DepthMap) -> SurfaceMesh {
+    let pixels = depth.depth_mm.iter().filter(|z| z.is_finite()).count();
+    let step = (1..)
+        .find(|k| pixels / (k * k) <= MAX_VIEWER_VERTICES)
+        .unwrap_or(1);
+    if step == 1 {
+        return SurfaceMesh::from_depth(depth);
+    }
+    let coarse = depth
+        .depth_mm
+        .slice(ndarray::s![..;step, ..;step])
+        .to_owned();
+    SurfaceMesh::from_depth(&meb_core::types::DepthMap {
+        depth_mm: coarse,
+        pitch_mm: depth.pitch_mm * step as f64,
+        perspective: depth.perspective.map(|p| p.every(step)),
+    })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use meb_core::types::DepthMap;
+    use ndarray::Array2;
+
+    #[test]
+    fn the_viewer_embeds_three_js_and_the_mesh() {
+        let depth = DepthMap {
+            depth_mm: Array2::from_elem((3, 3), 1.0),
+            pitch_mm: 1.0,
+            perspective: None,
+        };
+        let html = surface_viewer(&viewer_mesh(&depth));
+        assert!(html.contains("data-viewer") || html.contains("dataset.viewer"));
+        if THREE_JS.is_empty() {
+            assert!(
+                std::env::var_os("CI").is_none(),
+                "three.js was not inlined (the build had no npm); CI must install it"
+            );
+            assert!(html.contains(THREE_JS_CDN) && html.contains(THREE_JS_SHA384));
+        } else {
+            assert!(THREE_JS.contains("REVISION") || THREE_JS.contains("\"170\""));
+            assert!(html.contains("data:text/javascript;base64,"));
+            // The CDN fallback must load exactly the file a build with npm inlines.
+            use sha2::Digest;
+            let digest = sha2::Sha384::digest(THREE_JS.as_bytes());
+            let digest = base64::engine::general_purpose::STANDARD.encode(digest);
+            assert_eq!(THREE_JS_SHA384, format!("sha384-{digest}"));
+        }
+    }
+
+    #[test]
+    fn large_surfaces_are_sub_sampled() {
+        let depth = DepthMap {
+            depth_mm: Array2::from_elem((720, 1280), 1.0),
+            pitch_mm: 0.1,
+            perspective: None,
+        };
+        let mesh = viewer_mesh(&depth);
+        assert!(
+            mesh.vertices.len() <= MAX_VIEWER_VERTICES,
+            "{}",
+            mesh.vertices.len()
+        );
+        assert!(mesh.vertices.len() > MAX_VIEWER_VERTICES / 5);
+    }
+}

@@ -1,0 +1,6 @@
+//! The `meb` command-line tool's library: the demo (a simulated capture of the thesis' rig,
+//! decoded, reconstructed and scored) and the report (`report.json`, `report.html` with its
+//! three.js view, previews and surface meshes). The commands themselves are in the binary.
+
+pub mod demo;
+pub mod export;

@@ -1,0 +1,286 @@
+//! `meb device`: a session against `meb device emulate` run as a separate process, and
+//! `meb device` commands against an in-process virtual luminaire.
+#![cfg(unix)]
+
+use std::io::{BufRead, BufReader, Read};
+use std::path::Path;
+use std::process::{Child, Command, Output, Stdio};
+use std::sync::mpsc;
+use std::time::Duration;
+
+use meb_device::{EmulatorOptions, VirtualLuminaire};
+use protocol::wire::OutputFault;
+
+use nix::sys::signal::{Signal, kill};
+use nix::unistd::Pid;
+
+use crate::common;
+use common::{OUT_OF_PLANE_LEDS, rig_toml, stdout_of};
+
+const MEB: &str = env!("CARGO_BIN_EXE_meb");
+
+struct Emulator {
+    child: Child,
+    port: String,
+}
+
+impl Emulator {
+    fn start(dir: &Path) -> Self {
+        let mut child = Command::new(MEB)
+            .args(["device", "emulate", "--rate-error-ppm", "-25", "--storage"])
+            .arg(dir.join("flash.rec"))
+            .arg("--timeline")
+            .arg(dir.join("timeline.json"))
+            .stdout(Stdio::piped())
+            .stderr(Stdio::null())
+            .spawn()
+            .unwrap();
+        let mut line = String::new();
+        BufReader::new(child.stdout.take().unwrap())
+            .read_line(&mut line)
+            .unwrap();
+        let port = line.trim().to_string();
+        assert!(port.starts_with("/dev/"), "emulator printed {port:?}");
+        Self { child, port }
+    }
+
+    fn meb(&self, args: &[&str]) -> Output {
+        Command::new(MEB)
+            .args(["device", "--port", &self.port])
+            .args(args)
+            .output()
+            .unwrap()
+    }
+
+    /// SIGTERM, then the exit status must be success.
+    fn stop(mut self) {
+        kill(Pid::from_raw(self.child.id() as i32), Signal::SIGTERM).unwrap();
+        let status = self.child.wait().unwrap();
+        assert!(status.success(), "emulator exited with {status}");
+    }
+}
+
+impl Drop for Emulator {
+    fn drop(&mut self) {
+        let _ = self.child.kill();
+        let _ = self.child.wait();
+    }
+}
+
+#[test]
+fn set_get_save_survives_emulator_restart() {
+    let dir = tempfile::tempdir().unwrap();
+    let emulator = Emulator::start(dir.path());
+    stdout_of(&emulator.meb(&["ping"]));
+    stdout_of(&emulator.meb(&[
+        "set",
+        "--leds",
+        "4",
+        "--rate",
+        "959.5",
+        "--brightness",
+        "1000,800,1000,900",
+        "--phase",
+        "0,3,0,7",
+    ]));
+    let json: serde_json::Value =
+        serde_json::from_str(&stdout_of(&emulator.meb(&["get", "--json"]))).unwrap();
+    assert_eq!(json["chip_rate_millihertz"], 959_500);
+    assert_eq!(
+        json["brightness_permille"],
+        serde_json::json!([1000, 800, 1000, 900])
+    );
+    assert_eq!(json["phase_chips"], serde_json::json!([0, 3, 0, 7]));
+
+    // The device's own validation error reaches the user, naming the field.
+    let rejected = emulator.meb(&["set", "--leds", "2", "--rate", "960", "--phase", "0,8"]);
+    assert!(!rejected.status.success());
+    let message = String::from_utf8_lossy(&rejected.stderr);
+    assert!(message.contains("phase_chips[1]"), "{message}");
+
+    assert!(stdout_of(&emulator.meb(&["save"])).contains("saved"));
+    let status: serde_json::Value =
+        serde_json::from_str(&stdout_of(&emulator.meb(&["status", "--json"]))).unwrap();
+    assert_eq!(status["unsaved_changes"], false);
+    emulator.stop();
+
+    let timeline = std::fs::read_to_string(dir.path().join("timeline.json")).unwrap();
+    assert!(timeline.contains("959.47"), "{timeline}"); // 959.5 Hz × (1 − 25 ppm)
+
+    let emulator = Emulator::start(dir.path());
+    let json: serde_json::Value =
+        serde_json::from_str(&stdout_of(&emulator.meb(&["get", "--json"]))).unwrap();
+    assert_eq!(json["phase_chips"], serde_json::json!([0, 3, 0, 7]));
+    let status: serde_json::Value =
+        serde_json::from_str(&stdout_of(&emulator.meb(&["status", "--json"]))).unwrap();
+    assert_eq!(status["config_source"], "Restored");
+    emulator.stop();
+}
+
+#[test]
+fn simulate_renders_what_the_emulated_luminaire_emits() {
+    let dir = tempfile::tempdir().unwrap();
+    let emulator = Emulator::start(dir.path());
+    stdout_of(&emulator.meb(&[
+        "set",
+        "--leds",
+        "4",
+        "--rate",
+        "960",
+        "--phase",
+        "0,9,17,26",
+    ]));
+    emulator.stop();
+    let rig = dir.path().join("rig.toml");
+    std::fs::write(&rig, rig_toml(64, 48, 1.0, &OUT_OF_PLANE_LEDS)).unwrap();
+    let out = dir.path().join("capture");
+    let simulate = |leds_out: &Path, timeline: &str| {
+        Command::new(MEB)
+            .args(["simulate", "--frames", "8", "--rig"])
+            .arg(&rig)
+            .arg("--timeline")
+            .arg(dir.path().join(timeline))
+            .arg("--out")
+            .arg(leds_out)
+            .output()
+            .unwrap()
+    };
+    stdout_of(&simulate(&out, "timeline.json"));
+    assert!(out.join("frame_00007.png").exists());
+    // A timeline that is not one is a clear error, not a capture.
+    std::fs::write(dir.path().join("bad.json"), "{}").unwrap();
+    let bad = simulate(&dir.path().join("bad"), "bad.json");
+    assert!(!bad.status.success());
+    assert!(String::from_utf8_lossy(&bad.stderr).contains("not a meb luminaire timeline"));
+}
+
+#[test]
+fn missing_port_fails_with_one_clear_line() {
+    let output = Command::new(MEB)
+        .args(["device", "--port", "/dev/meb-none", "get"])
+        .output()
+        .unwrap();
+    assert!(!output.status.success());
+    let message = String::from_utf8_lossy(&output.stderr);
+    assert!(message.contains("no device at /dev/meb-none"), "{message}");
+    assert_eq!(message.matches("/dev/meb-none").count(), 1, "{message}");
+}
+
+#[test]
+fn a_rate_beyond_the_limit_is_refused_naming_the_value_and_the_limit() {
+    let dir = tempfile::tempdir().unwrap();
+    let emulator = Emulator::start(dir.path());
+    for rate in ["1e9", "4000.001", "0.5", "NaN"] {
+        let output = emulator.meb(&["set", "--leds", "4", "--rate", rate]);
+        assert!(!output.status.success(), "--rate {rate} accepted");
+        let message = String::from_utf8_lossy(&output.stderr);
+        assert!(message.contains("1.000..=4000.000 Hz"), "{message}");
+        assert!(!message.contains("4294967295"), "{message}");
+    }
+    let message = String::from_utf8_lossy(
+        &emulator
+            .meb(&["set", "--leds", "4", "--rate", "1e9"])
+            .stderr,
+    )
+    .into_owned();
+    assert!(message.contains("--rate 1000000000 Hz"), "{message}");
+    // The edges are accepted.
+    stdout_of(&emulator.meb(&["set", "--leds", "4", "--rate", "4000"]));
+    stdout_of(&emulator.meb(&["set", "--leds", "4", "--rate", "1"]));
+    emulator.stop();
+}
+
+#[test]
+fn ping_count_zero_is_refused() {
+    let output = Command::new(MEB)
+        .args(["device", "--port", "/dev/meb-none", "ping", "--count", "0"])
+        .output()
+        .unwrap();
+    assert!(!output.status.success());
+    let message = String::from_utf8_lossy(&output.stderr);
+    assert!(
+        message.contains("--count") && message.contains('0'),
+        "{message}"
+    );
+    assert!(
+        !message.contains("no device"),
+        "refused before connecting: {message}"
+    );
+}
+
+#[test]
+fn ping_prints_each_round_trip_as_it_arrives_and_keeps_them_when_the_link_breaks() {
+    let dir = tempfile::tempdir().unwrap();
+    let emulator = Emulator::start(dir.path());
+    let mut ping = Command::new(MEB)
+        .args([
+            "device",
+            "--port",
+            &emulator.port,
+            "--timeout-ms",
+            "200",
+            "--attempts",
+            "1",
+        ])
+        .args(["ping", "--count", "1000000"])
+        .stdout(Stdio::piped())
+        .stderr(Stdio::piped())
+        .spawn()
+        .unwrap();
+    let mut stdout = BufReader::new(ping.stdout.take().unwrap());
+    let (lines, received) = mpsc::channel();
+    std::thread::spawn(move || {
+        let mut line = String::new();
+        while stdout.read_line(&mut line).is_ok_and(|n| n > 0) {
+            let _ = lines.send(std::mem::take(&mut line));
+        }
+    });
+    // The first round trip shows up while the pinging goes on.
+    let first = received
+        .recv_timeout(Duration::from_secs(20))
+        .expect("no round trip printed while pinging");
+    assert!(first.starts_with("pong in "), "{first}");
+    drop(emulator); // the luminaire goes away mid-run
+    let status = ping.wait().unwrap();
+    assert!(!status.success(), "a broken link is a failure");
+    let mut stderr = String::new();
+    ping.stderr
+        .take()
+        .unwrap()
+        .read_to_string(&mut stderr)
+        .unwrap();
+    assert!(stderr.contains("of 1000000 failed"), "{stderr}");
+    let kept: Vec<String> = received.try_iter().collect();
+    assert!(kept.iter().all(|l| l.starts_with("pong in ")), "{kept:?}");
+}
+
+#[test]
+fn status_reports_an_output_fault() {
+    let emulator = VirtualLuminaire::spawn(EmulatorOptions::default()).unwrap();
+    let port = emulator.port_path().to_string_lossy().into_owned();
+    let status = |json: bool| {
+        let mut args = vec!["device", "--port", &port, "status"];
+        if json {
+            args.push("--json");
+        }
+        stdout_of(&Command::new(MEB).args(&args).output().unwrap())
+    };
+    assert!(status(false).contains("output fault      none"));
+    emulator.inject_output_fault(OutputFault::DmaTransferError);
+    let mut text = String::new();
+    for _ in 0..100 {
+        text = status(false);
+        if !text.contains("output fault      none") {
+            break;
+        }
+        std::thread::sleep(Duration::from_millis(20));
+    }
+    assert!(
+        text.contains("output fault      DMA transfer error"),
+        "{text}"
+    );
+    assert!(text.contains("running           no"), "{text}");
+    let json: serde_json::Value = serde_json::from_str(&status(true)).unwrap();
+    assert_eq!(json["output_fault"], "DmaTransferError");
+    assert_eq!(json["running"], false);
+}

@@ -1,0 +1,27 @@
+//! End-to-end tests of the `meb` tool and the library crates it is built on, one module per
+//! topic, in one test binary (one link for all of them).
+
+mod analytic_sphere;
+mod bad_input;
+mod capture_readers;
+mod common;
+mod decode_moving;
+mod decode_simulated;
+mod decode_start;
+mod decode_sweep;
+mod demo_end_to_end;
+mod device_cli;
+mod noise_free;
+mod output_folders;
+mod reconstruct_cli;
+mod reconstruct_targets;
+mod reference_data;
+mod report_page;
+mod simulate_cli;
+mod tof_calibration;
+mod tof_cli;
+mod tof_common;
+mod tof_hybrid;
+mod tof_range;
+mod video_cli;
+mod video_fallback;

@@ -1,0 +1,938 @@
+//! MEB-FDMA demodulation: a captured video → one image per LED (SPEC §3–§4).
+//!
+//! Every pixel p of a window of F frames reads (SPEC §3, notation of `docs/SPEC.md`)
+//!
+//! ```text
+//! r_j(p) = B(p) + Σ_i A_i(p)·u_i(j) + noise,   u_i(j) = ½ + ½·g_i(j·ρ + Δ_i),
+//! ```
+//!
+//! u_i LED i's on-fraction in frame j: its carrier s_i (period 2^(i+2) chips inside the
+//! n = 2^(N+1)-chip table) box-averaged over the exposure e·ρ chips (g_i, [`waveform`]),
+//! shifted by Δ_i = k_i + α_i chips and sampled at ρ chips per frame; a rolling shutter adds
+//! λ·r frame periods to row r's start. The timing (ρ, e, Δ_i, λ) is the same for every pixel,
+//! so it is estimated once per window from the pixels that carry modulation, and each pixel's
+//! A_i is then a linear least-squares fit against the N received waveforms (a matched
+//! filter, [`Estimator::Waveform`]): unbiased, because it models the integration instead of
+//! taking a maximum, and far less noisy than the thesis' subspace maximum, which is kept as
+//! [`Estimator::Thesis`] (Eqs. 3.25–3.30, [`thesis`]).
+//!
+//! The timing estimate is global, not a local search on the frame mean:
+//!
+//! 1. [`sample`]: the window's most modulated pixels (strided candidates ranked by temporal
+//!    variance), so a small object in a wide, dark view drives the estimate rather than the
+//!    unlit background. X is that sample, centred (pixels × F).
+//! 2. [`spectrum`]: the leading eigenvectors V of G = XᵀX span every LED's waveform, because
+//!    X = A·Tᵀ + noise with T = [u_0 … u_{N−1}] (F × N); per LED this is the rank-1 structure
+//!    of SPEC §4: the projection of the window onto LED i's subspace is, across pixels,
+//!    A_i(p)·(projected u_i)ᵀ. The eigenvalues beyond the signal give the noise energy σ²_G.
+//!    Randomised subspace iteration keeps it cheap.
+//! 3. [`seed`]: each LED's waveform is found in V on its own — the fraction |Vᵀt|²/|t|² of a
+//!    candidate template t that V holds is 1 for the true (ρ, e, Δ_i) and does not depend on
+//!    the A_i, so neither other LEDs nor a dark background bias it, and the scale and sign
+//!    ambiguity of singular vectors never arises (templates are scored, not read off V).
+//!    ρ comes from a one-dimensional scan, e from a scan at that ρ with Δ_i refined per LED
+//!    on a grid of shifts ([`SeedMethod::Grid`], the default). [`SeedMethod::RankOne`]
+//!    instead reads each LED's template off the window as the leading eigenvector of its
+//!    block of the signal space's coordinates in the LEDs' chip templates ([`template`]),
+//!    which gives Δ_i in closed form — exact at ρ = 1, a seed the refinement must correct
+//!    away from it.
+//! 4. [`fit`]: those seeds start a least-squares refinement of (ρ, e, Δ_i) on the sample
+//!    (variable projection), which pins the templates' amplitude — and with it each LED's
+//!    gain — to the physics of the integration; a rolling shutter is detected when row bands
+//!    disagree and fitted as a per-row phase ramp (λ, or given). The per-pixel filter then uses
+//!    one basis per row band narrow enough that the ramp moves the phase < 0.004 chip inside.
+//! 5. [`quality`]: the energy each LED's template explains against what noise alone would
+//!    give, the energy left unexplained in its subspace, and the uncertainty the timing's noise
+//!    puts on its gain; an implausible decode is refused (or kept with the verdict recorded,
+//!    [`OnImplausible`]).
+//!
+//! The LED-count check fits one LED more than requested (or the most the window allows, for
+//! [`LedCount::Auto`]) and counts the LEDs with signal above noise. Long captures are decoded
+//! in windows of bounded memory ([`window`]), each with its own timing fit, and averaged.
+//! [`WindowDecoder`] is that per-window core: template estimate + matched filter on a window of
+//! frames, returning per-LED images, noise and fit quality.
+//!
+//! Per-pixel noise: the residual of the per-pixel least-squares fit, as σ per frame sample.
+//! The thesis estimator reports the power of DFT bin 2^N instead.
+
+mod basis;
+pub mod config;
+mod error;
+pub mod fit;
+#[cfg(test)]
+pub(crate) mod fixture;
+mod levenberg;
+mod matched;
+pub mod output;
+pub mod quality;
+mod report;
+mod sample;
+mod seed;
+mod spectrum;
+mod stats;
+#[cfg(test)]
+pub(crate) mod synthetic;
+mod template;
+#[cfg(test)]
+mod tests;
+pub mod thesis;
+pub mod waveform;
+mod window;
+
+pub use config::{DecodeConfig, Estimator, LedCount, Linearize, OnImplausible, Roi, SeedMethod};
+pub use error::DemodError;
+pub use matched::WindowAmplitudes;
+pub use quality::{FitQuality, LedQuality, Verdict, VerdictStatus};
+pub use report::{DecodeReport, LedReport};
+pub use window::CodeMap;
+
+use config::FitLimits;
+use fit::{TimingFit, fit_timing, refit_timing};
+pub(crate) use matched::CodeLimits;
+use meb_core::capture::{FrameFormat, FrameSource, Samples};
+use meb_core::types::LedImages;
+use nalgebra::DMatrix;
+use ndarray::Array2;
+use rayon::prelude::*;
+use sample::{PixelSample, RowGrid};
+use spectrum::{SignalSpace, Spectrum};
+use stats::PixelStats;
+use waveform::ReceivedWaveform;
+use window::{Region, read_window};
+
+/// Largest LED count.
+pub const MAX_LEDS: usize = 8;
+/// Largest LED count `LedCount::Auto` looks for.
+const AUTO_MAX_LEDS: usize = 6;
+/// Largest decoding window, frames (bounds the cost of the timing fit).
+const MAX_WINDOW_FRAMES: usize = 256;
+/// Largest number of pixels the reported median noise is computed from.
+const MEDIAN_SAMPLE: usize = 1 << 16;
+/// Fewer LEDs than requested are put down to clipping, not to their absence, when the clipped
+/// candidate pixels number at least this share of the sample's pixels: enough to hold a
+/// face of their own. The 75 mm cube corner-on (thesis-out-of-plane rig, default gain): the
+/// top face, the only one LEDs 1 and 2 reach, clips whenever three LEDs are on, and the
+/// unclipped pixels show LEDs 3 and 4 alone; a specular highlight is a few pixels.
+const HIDING_CLIPPED_SHARE: f64 = 0.1;
+/// An LED counts as present when its mean on-level exceeds this fraction of the strongest's.
+const SIGNIFICANT_FRACTION: f64 = 0.03;
+/// Largest phase change, chips, of the rolling-shutter ramp inside one row band.
+const BAND_PHASE_STEP: f64 = 0.004;
+
+/// The result of a decode.
+#[derive(Debug, Clone)]
+pub struct Decoded {
+    /// A_i per LED as a fraction of the input's full scale (SPEC §3).
+    pub leds: LedImages,
+    /// Per-pixel noise σ of one frame sample, fraction of full scale.
+    pub noise: Array2<f32>,
+    /// Pixels that reached the white level in some frame.
+    pub saturated: Array2<bool>,
+    /// Pixels whose brightest frame stays below `underexposed_below`.
+    pub underexposed: Array2<bool>,
+    /// What the decoder measured.
+    pub report: DecodeReport,
+}
+
+/// Decodes the frames of `source` into one image per LED; `progress(done, total)` is called
+/// after every frame read (total is a best guess when the source does not know its length).
+pub fn decode(
+    source: &mut dyn FrameSource,
+    config: &DecodeConfig,
+    progress: &mut dyn FnMut(usize, usize),
+) -> Result<Decoded, DemodError> {
+    let format = stream_format(source.format(), config)?;
+    let decoder = WindowDecoder::new(&format, config)?;
+    skip_start(source, config.start)?;
+    if config.start > 0 && source.frame_count_hint() == Some(0) {
+        // The start skipped exactly every frame.
+        return Err(DemodError::StartBeyondEnd {
+            start: config.start,
+            available: config.start,
+        });
+    }
+    let plan = WindowPlan::new(config, &format, decoder.roi, source.frame_count_hint());
+    let mut state = Accumulated::default();
+    let mut read = 0usize;
+    loop {
+        let want = plan.next_window(read);
+        if want == 0 {
+            break;
+        }
+        let window = read_window(source, &format, decoder.roi, want, || {
+            read += 1;
+            progress(read, plan.progress_total.max(read));
+        })?;
+        let got = window.frames.len();
+        if !add_window(&decoder, &window.frames, config, &mut state)? || got < want {
+            break;
+        }
+    }
+    let decoded = finish(config, &format, decoder.roi, state)?;
+    apply_verdict(decoded, config.on_implausible)
+}
+
+/// Decodes `frames` already in memory (each of `format`'s size) as one window with `config`,
+/// as [`decode`] decodes a source of those frames in one window; the frame range settings
+/// (`start`, `frames`) are ignored. The frames are read where they lie (copied only when
+/// `config.roi` cuts them): `meb video` decodes each window of its stream this way. More
+/// frames than one window holds (256) are copied into a source and cut into windows by
+/// [`decode`].
+pub fn decode_frames(
+    frames: &[Samples],
+    format: &FrameFormat,
+    config: &DecodeConfig,
+) -> Result<Decoded, DemodError> {
+    if frames.len() > MAX_WINDOW_FRAMES {
+        // More than one window holds: cut into windows as `decode` cuts a source of them.
+        let owned = frames
+            .iter()
+            .enumerate()
+            .map(|(index, samples)| meb_core::capture::Frame {
+                index,
+                samples: samples.clone(),
+            })
+            .collect();
+        let mut source = meb_core::capture::memory::MemorySource::new(format.clone(), owned)?;
+        let config = DecodeConfig {
+            start: 0,
+            frames: None,
+            window_bytes: usize::MAX,
+            ..config.clone()
+        };
+        return decode(&mut source, &config, &mut |_, _| {});
+    }
+    let format = stream_format(format, config)?;
+    let decoder = WindowDecoder::new(&format, config)?;
+    if let Some((index, frame)) = frames
+        .iter()
+        .enumerate()
+        .find(|(_, f)| f.len() != format.pixels())
+    {
+        return Err(meb_core::capture::CaptureError::Other(format!(
+            "frame {index} has {} samples, expected {}x{}",
+            frame.len(),
+            format.width,
+            format.height
+        ))
+        .into());
+    }
+    let cropped: std::borrow::Cow<'_, [Samples]> = if decoder.roi.x == 0
+        && decoder.roi.y == 0
+        && (decoder.roi.width, decoder.roi.height) == (format.width, format.height)
+    {
+        std::borrow::Cow::Borrowed(frames)
+    } else {
+        std::borrow::Cow::Owned(
+            frames
+                .par_iter()
+                .map(|f| window::cut(f, format.width, decoder.roi))
+                .collect(),
+        )
+    };
+    let mut state = Accumulated::default();
+    let config = DecodeConfig {
+        start: 0,
+        ..config.clone()
+    };
+    add_window(&decoder, &cropped, &config, &mut state)?;
+    let decoded = finish(&config, &format, decoder.roi, state)?;
+    apply_verdict(decoded, config.on_implausible)
+}
+
+/// Adds one window of `frames` (cropped to the decoder's region) to `state`: `Ok(false)` when
+/// it holds too few frames for one carrier period after an earlier window (the stream's end),
+/// an error when it is the first.
+fn add_window(
+    decoder: &WindowDecoder,
+    frames: &[Samples],
+    config: &DecodeConfig,
+    state: &mut Accumulated,
+) -> Result<bool, DemodError> {
+    let got = frames.len();
+    let sample = decoder.sample(frames);
+    let (leds, seed) = match state.leds {
+        Some(n) => (n, None),
+        None => {
+            let count = decoder.count_leds(&sample, config.leds, config.check_led_count)?;
+            state.leds = Some(count.leds);
+            state.detected = count.detected;
+            (count.leds, count.fit)
+        }
+    };
+    if got < 1usize << (leds + 1) {
+        if state.windows == 0 && got == 0 && config.start > 0 {
+            // The start skipped exactly every frame.
+            return Err(DemodError::StartBeyondEnd {
+                start: config.start,
+                available: config.start,
+            });
+        }
+        if state.windows == 0 {
+            return Err(DemodError::TooFewFrames {
+                got,
+                need: 1 << (leds + 1),
+                leds,
+            });
+        }
+        return Ok(false);
+    }
+    state.add(decoder.decode(frames, &sample, leds, seed.as_ref()));
+    Ok(true)
+}
+
+/// The stream's format with the configured frame-rate override.
+fn stream_format(format: &FrameFormat, config: &DecodeConfig) -> Result<FrameFormat, DemodError> {
+    let mut format = format.clone();
+    if let Some(fps) = config.fps {
+        if !(fps.is_finite() && fps > 0.0) {
+            return Err(DemodError::InvalidConfig(format!(
+                "frame rate {fps} is not positive"
+            )));
+        }
+        format.fps = fps;
+    }
+    Ok(format)
+}
+
+/// Skips the first `start` frames.
+fn skip_start(source: &mut dyn FrameSource, start: usize) -> Result<(), DemodError> {
+    for skipped in 0..start {
+        if source.next_frame()?.is_none() {
+            return Err(DemodError::StartBeyondEnd {
+                start,
+                available: skipped,
+            });
+        }
+    }
+    Ok(())
+}
+
+/// How a capture is cut into windows.
+#[derive(Debug, Clone, Copy)]
+struct WindowPlan {
+    /// Frames per window.
+    length: usize,
+    /// Frames to decode in total, when known.
+    total: Option<usize>,
+    /// Total reported to the progress callback.
+    progress_total: usize,
+}
+
+impl WindowPlan {
+    /// Windows for `config` over a stream of `remaining` frames (after the start), within the
+    /// memory budget.
+    fn new(
+        config: &DecodeConfig,
+        format: &FrameFormat,
+        roi: Roi,
+        remaining: Option<usize>,
+    ) -> Self {
+        let total = match (config.frames, remaining) {
+            (Some(f), Some(h)) => Some(f.min(h)),
+            (Some(f), None) => Some(f),
+            (None, h) => h,
+        };
+        let sample_bytes = if format.bit_depth > 8 { 2 } else { 1 };
+        let frame_bytes = (roi.width * roi.height * sample_bytes).max(1);
+        let budget_frames = (config.window_bytes / frame_bytes).clamp(1, MAX_WINDOW_FRAMES);
+        let min_chips = match config.leds {
+            LedCount::Fixed(n) => 1usize << (n + 1),
+            LedCount::Auto => 4,
+        };
+        let mut length = budget_frames.max(min_chips);
+        if let Some(t) = total {
+            length = length.min(t.max(1));
+        }
+        if let LedCount::Fixed(_) = config.leds
+            && length > min_chips
+        {
+            length -= length % min_chips;
+        }
+        Self {
+            length,
+            total,
+            progress_total: total.unwrap_or(length),
+        }
+    }
+
+    /// Frames of the next window after `read` frames (0 at the end).
+    fn next_window(&self, read: usize) -> usize {
+        match self.total {
+            Some(t) => self.length.min(t.saturating_sub(read)),
+            None => self.length,
+        }
+    }
+}
+
+/// Checks the settings against the stream and returns the decoded region.
+fn validate(config: &DecodeConfig, format: &FrameFormat) -> Result<Roi, DemodError> {
+    let invalid = |text: String| Err(DemodError::InvalidConfig(text));
+    if let LedCount::Fixed(n) = config.leds
+        && !(1..=MAX_LEDS).contains(&n)
+    {
+        return invalid(format!("LED count {n} is outside 1..={MAX_LEDS}"));
+    }
+    if let Some(r) = config.rate_ratio
+        && !(r.is_finite() && r > 0.0)
+    {
+        return invalid(format!("rate ratio {r} is not positive"));
+    }
+    if let Some(e) = config.exposure
+        && !(e.is_finite() && e > 0.0 && e <= 1.0)
+    {
+        return invalid(format!("exposure {e} is outside (0, 1]"));
+    }
+    if let Some(t) = config.line_time_s
+        && !(t.is_finite() && t.abs() * format.fps < 1.0)
+    {
+        return invalid(format!(
+            "line time {t} s is not shorter than a frame period at {} fps",
+            format.fps
+        ));
+    }
+    if !(config.max_rate_mismatch.is_finite() && (0.0..0.5).contains(&config.max_rate_mismatch)) {
+        return invalid("the rate-ratio search range must be in [0, 0.5)".into());
+    }
+    if !config.underexposed_below.is_finite() {
+        return invalid("under-exposure threshold is NaN".into());
+    }
+    let roi = config.roi.unwrap_or(Roi {
+        x: 0,
+        y: 0,
+        width: format.width,
+        height: format.height,
+    });
+    if roi.width == 0
+        || roi.height == 0
+        || roi.x + roi.width > format.width
+        || roi.y + roi.height > format.height
+    {
+        return invalid(format!(
+            "region {}x{}+{}+{} is empty or outside the {}x{} frame",
+            roi.width, roi.height, roi.x, roi.y, format.width, format.height
+        ));
+    }
+    Ok(roi)
+}
+
+/// A window's pixel sample, its Gram matrix and that matrix's leading eigenpairs: the timing
+/// fit's input, shared by the LED-count check and the decode.
+#[derive(Debug, Clone)]
+pub struct WindowSample {
+    sample: PixelSample,
+    gram: DMatrix<f64>,
+    spectrum: Spectrum,
+}
+
+/// The outcome of the LED-count check.
+#[derive(Debug, Clone)]
+pub struct LedCountCheck {
+    /// LEDs to decode.
+    pub leds: usize,
+    /// Modulated LEDs seen in the window (when checked).
+    pub detected: Option<usize>,
+    /// The check's timing fit (of as many LEDs or more) and its quality, a starting point for
+    /// the decode's.
+    pub fit: Option<CheckedFit>,
+}
+
+/// A timing fit and what the window's sample says about it.
+#[derive(Debug, Clone)]
+pub struct CheckedFit {
+    /// The fit.
+    pub timing: TimingFit,
+    /// Its quality over the fitted LEDs.
+    pub quality: FitQuality,
+}
+
+/// One window decoded.
+#[derive(Debug, Clone)]
+pub struct WindowDecode {
+    /// Frames in the window.
+    pub frames: usize,
+    /// Per-pixel on-levels, noise and masks.
+    pub amplitudes: WindowAmplitudes,
+    /// The timing of the received waveforms.
+    pub fit: TimingFit,
+    /// How well it explains the window.
+    pub quality: FitQuality,
+    /// The window's verdict.
+    pub verdict: Verdict,
+    /// Row bands of the per-pixel fit.
+    pub bands: usize,
+    /// var(A_i) / σ² of the per-pixel fit, per LED (first band).
+    pub variance_factors: Vec<f64>,
+}
+
+/// The per-window decoder: planned once per stream, run on every window.
+#[derive(Debug, Clone)]
+pub struct WindowDecoder {
+    roi: Roi,
+    /// Pixels of the whole frame (the pixel sample's rows lie on its grid).
+    frame_pixels: usize,
+    map: CodeMap,
+    code_limits: CodeLimits,
+    fit_limits: FitLimits,
+    estimator: Estimator,
+    /// Most LEDs a window's signal space is analysed for (the count check's probe).
+    spectrum_leds: usize,
+}
+
+impl WindowDecoder {
+    /// Plans the decoder for a stream of `format` (frame-rate override applied) and `config`.
+    pub fn new(format: &FrameFormat, config: &DecodeConfig) -> Result<Self, DemodError> {
+        let roi = validate(config, format)?;
+        Ok(Self {
+            roi,
+            frame_pixels: format.pixels(),
+            map: CodeMap::new(format, config.linearize)?,
+            code_limits: CodeLimits::new(format, config.underexposed_below),
+            fit_limits: FitLimits {
+                max_rate_mismatch: config.max_rate_mismatch,
+                rate_ratio: config.rate_ratio,
+                exposure: config.exposure,
+                line_delay: config.line_time_s.map(|t| t * format.fps),
+                seeds: config.seeds,
+            },
+            estimator: config.estimator,
+            spectrum_leds: match config.leds {
+                LedCount::Fixed(n) if config.check_led_count => (n + 1).min(MAX_LEDS),
+                LedCount::Fixed(n) => n,
+                LedCount::Auto => AUTO_MAX_LEDS,
+            },
+        })
+    }
+
+    /// The decoded region.
+    pub fn roi(&self) -> Roi {
+        self.roi
+    }
+
+    /// Picks the pixel sample of a window of frames cropped to the region.
+    pub fn sample(&self, frames: &[Samples]) -> WindowSample {
+        let grid = RowGrid::new(
+            self.frame_pixels,
+            self.roi.y,
+            self.roi.width,
+            self.roi.height,
+        );
+        let sample = PixelSample::gather(
+            frames,
+            (self.roi.width, self.roi.height),
+            grid,
+            &self.map,
+            self.code_limits,
+        );
+        let gram = sample.gram();
+        let spectrum = Spectrum::new(&gram, self.spectrum_leds);
+        WindowSample {
+            sample,
+            gram,
+            spectrum,
+        }
+    }
+
+    /// The LED count to decode (module docs): with `check`, a fit of one LED more than a
+    /// fixed count (or of the most the window allows for `Auto`) counts the LEDs whose signal
+    /// stands above noise.
+    pub fn count_leds(
+        &self,
+        window: &WindowSample,
+        request: LedCount,
+        check: bool,
+    ) -> Result<LedCountCheck, DemodError> {
+        let frames = window.sample.frames();
+        let fits = |m: usize| (1usize << (m + 1)) <= frames;
+        let unchecked = |leds| LedCountCheck {
+            leds,
+            detected: None,
+            fit: None,
+        };
+        let probe = match request {
+            LedCount::Fixed(n) if !check || !fits(n) => return Ok(unchecked(n)),
+            LedCount::Fixed(n) if n < MAX_LEDS && fits(n + 1) => n + 1,
+            LedCount::Fixed(n) => n,
+            LedCount::Auto => match (1..=AUTO_MAX_LEDS).rev().find(|&m| fits(m)) {
+                Some(m) => m,
+                None => {
+                    return Err(DemodError::TooFewFrames {
+                        got: frames,
+                        need: 4,
+                        leds: 1,
+                    });
+                }
+            },
+        };
+        if window.sample.is_empty() {
+            return Err(DemodError::NothingToDecode("saturated"));
+        }
+        let waves: Vec<ReceivedWaveform> = (0..probe).map(ReceivedWaveform::new).collect();
+        let space = SignalSpace::from_spectrum(&window.spectrum, &window.gram, probe);
+        let fit = fit_timing(
+            &window.sample,
+            &space,
+            probe,
+            self.roi.height,
+            &self.fit_limits,
+        );
+        let quality = quality::measure(&window.sample, &window.gram, &space, &fit, &waves);
+        let strongest = quality.levels.iter().cloned().fold(0.0, f64::max);
+        let present: Vec<bool> = quality
+            .leds
+            .iter()
+            .zip(&quality.levels)
+            .map(|(q, &level)| {
+                q.signal_to_noise >= quality::MIN_SIGNAL_TO_NOISE
+                    && level > SIGNIFICANT_FRACTION * strongest
+            })
+            .collect();
+        let detected = present.iter().rposition(|&p| p).map_or(0, |i| i + 1);
+        if detected == 0 {
+            return Err(DemodError::NoModulation);
+        }
+        let leds = match request {
+            LedCount::Auto => detected,
+            LedCount::Fixed(n) => {
+                let all_present = present.iter().take(n).all(|&p| p);
+                if detected != n || !all_present {
+                    let detected = if all_present {
+                        detected
+                    } else {
+                        detected.min(n - 1)
+                    };
+                    let sample = &window.sample;
+                    if detected < n
+                        && sample.clipped() as f64 >= HIDING_CLIPPED_SHARE * sample.len() as f64
+                    {
+                        return Err(DemodError::LedsHiddenByClipping {
+                            requested: n,
+                            detected,
+                            clipped_percent: 100.0 * sample.clipped() as f64
+                                / sample.examined().max(1) as f64,
+                        });
+                    }
+                    return Err(DemodError::LedCountMismatch {
+                        requested: n,
+                        detected,
+                    });
+                }
+                n
+            }
+        };
+        Ok(LedCountCheck {
+            leds,
+            detected: Some(detected),
+            fit: Some(CheckedFit {
+                timing: fit,
+                quality,
+            }),
+        })
+    }
+
+    /// Decodes one window of `leds` LEDs (frames cropped to the region); `seed` is an earlier
+    /// fit of this window (of at least as many LEDs) to refine instead of starting afresh, or,
+    /// of as many LEDs, to use as it is (with its quality: the same fit of the same sample).
+    pub fn decode(
+        &self,
+        frames: &[Samples],
+        window: &WindowSample,
+        leds: usize,
+        seed: Option<&CheckedFit>,
+    ) -> WindowDecode {
+        let count = frames.len();
+        let height = self.roi.height;
+        let waves: Vec<ReceivedWaveform> = (0..leds).map(ReceivedWaveform::new).collect();
+        let space = SignalSpace::from_spectrum(&window.spectrum, &window.gram, leds);
+        let (fit, quality) = match seed {
+            Some(same) if same.timing.model.shifts.len() == leds => {
+                (same.timing.clone(), same.quality.clone())
+            }
+            _ => {
+                let fit = match seed {
+                    Some(more) if more.timing.model.shifts.len() > leds => refit_timing(
+                        &window.sample,
+                        &space,
+                        leds,
+                        height,
+                        &self.fit_limits,
+                        &more.timing,
+                    ),
+                    _ => fit_timing(&window.sample, &space, leds, height, &self.fit_limits),
+                };
+                let quality = quality::measure(&window.sample, &window.gram, &space, &fit, &waves);
+                (fit, quality)
+            }
+        };
+        let verdict = quality::judge(&quality.leds, &fit);
+        let bands = if fit.rolling {
+            let ramp = fit.model.ramp_chips(height).abs();
+            ((ramp / BAND_PHASE_STEP).ceil() as usize).clamp(1, height)
+        } else {
+            1
+        };
+        let region = Region {
+            roi: self.roi,
+            bands,
+        };
+        let bases: Vec<basis::TemplateBasis> = (0..bands)
+            .map(|b| fit.model.basis(&waves, region.band_centre(b), count))
+            .collect();
+        let amplitudes = match self.estimator {
+            Estimator::Waveform => {
+                matched::matched_filter(frames, region, &bases, &self.map, self.code_limits)
+            }
+            Estimator::Thesis => {
+                let chips = 1usize << (leds + 1);
+                let used = count - count % chips;
+                thesis::thesis_window(&frames[..used], region, leds, &self.map, self.code_limits)
+            }
+        };
+        let variance_factors = bases
+            .first()
+            .map(|b| (0..leds).map(|i| b.variance_factor(i + 1)).collect())
+            .unwrap_or_default();
+        WindowDecode {
+            frames: count,
+            amplitudes,
+            fit,
+            quality,
+            verdict,
+            bands,
+            variance_factors,
+        }
+    }
+}
+
+/// Running sums over windows.
+#[derive(Default)]
+struct Accumulated {
+    leds: Option<usize>,
+    detected: Option<usize>,
+    windows: usize,
+    frames: usize,
+    /// Frame-weighted mean over the windows so far of each LED's A_i.
+    mean_leds: Vec<Vec<f32>>,
+    /// Frame-weighted mean of the per-frame noise variance.
+    mean_variance: Vec<f32>,
+    /// Saturated in some window.
+    saturated: Vec<bool>,
+    /// Under-exposed in every window.
+    underexposed: Vec<bool>,
+    /// The first window's report statistics, when the kernel gathered them.
+    stats: Option<PixelStats>,
+    /// Each window's fit, quality and bands.
+    fits: Vec<(TimingFit, FitQuality, usize)>,
+    /// The verdict over the windows so far.
+    verdict: Option<Verdict>,
+    variance_factors: Vec<f64>,
+}
+
+impl Accumulated {
+    /// Adds one decoded window.
+    fn add(&mut self, window: WindowDecode) {
+        let count = window.frames;
+        let amplitudes = window.amplitudes;
+        if self.windows == 0 {
+            self.variance_factors = window.variance_factors;
+            self.mean_leds = amplitudes.leds;
+            self.mean_variance = amplitudes.noise_variance;
+            self.saturated = amplitudes.saturated;
+            self.underexposed = amplitudes.underexposed;
+            self.stats = amplitudes.stats;
+        } else {
+            // Running frame-weighted means: m += (x − m)·F / (F_total + F).
+            let step = (count as f64 / (self.frames + count) as f64) as f32;
+            let update = |mean: &mut Vec<f32>, window: &[f32]| {
+                mean.par_iter_mut()
+                    .zip(window)
+                    .for_each(|(m, &x)| *m += (x - *m) * step);
+            };
+            for (mean, image) in self.mean_leds.iter_mut().zip(&amplitudes.leds) {
+                update(mean, image);
+            }
+            update(&mut self.mean_variance, &amplitudes.noise_variance);
+            self.saturated
+                .par_iter_mut()
+                .zip(&amplitudes.saturated)
+                .for_each(|(s, &w)| *s |= w);
+            self.underexposed
+                .par_iter_mut()
+                .zip(&amplitudes.underexposed)
+                .for_each(|(u, &w)| *u &= w);
+        }
+        self.verdict = Some(match self.verdict.take() {
+            Some(v) => v.merge(&window.verdict),
+            None => window.verdict,
+        });
+        self.windows += 1;
+        self.frames += count;
+        self.fits.push((window.fit, window.quality, window.bands));
+    }
+}
+
+/// Turns the running sums into images, masks and the report.
+fn finish(
+    config: &DecodeConfig,
+    format: &FrameFormat,
+    roi: Roi,
+    state: Accumulated,
+) -> Result<Decoded, DemodError> {
+    let (height, width) = (roi.height, roi.width);
+    let leds = state.leds.unwrap_or(0);
+    if state.windows == 0 {
+        return Err(DemodError::TooFewFrames {
+            got: 0,
+            need: 1usize << (leds.max(1) + 1),
+            leds: leds.max(1),
+        });
+    }
+    let (saturated, underexposed) = (state.saturated, state.underexposed);
+    let stats = match state.stats {
+        Some(stats) if state.windows == 1 => stats,
+        _ => PixelStats::gather(
+            &state.mean_leds,
+            &state.mean_variance,
+            &saturated,
+            &underexposed,
+        ),
+    };
+    let mut noise_values = state.mean_variance;
+    noise_values
+        .par_iter_mut()
+        .for_each(|v| *v = v.max(0.0).sqrt());
+    let valid = |p: usize| !saturated[p] && !underexposed[p];
+    if stats.valid_pixels == 0 {
+        return Err(DemodError::NothingToDecode(
+            if stats.saturated_pixels >= stats.underexposed_pixels {
+                "saturated"
+            } else {
+                "under-exposed"
+            },
+        ));
+    }
+    let valid_count = stats.valid_pixels as f64;
+    let noise_power = stats.noise_power / valid_count;
+    let median_noise = median_of_valid(&noise_values, valid);
+    let (first_fit, first_quality, _) = &state.fits[0];
+    let per_led = (0..leds)
+        .map(|i| {
+            let mean_level = stats.level_sums[i] / valid_count;
+            let amplitude_noise =
+                (noise_power * state.variance_factors[i]).sqrt() / (state.windows as f64).sqrt();
+            LedReport {
+                led: i + 1,
+                phase_chips: first_fit.model.shifts[i],
+                mean_level,
+                snr_db: 20.0 * (mean_level.abs().max(1e-12) / amplitude_noise.max(1e-12)).log10(),
+                quality: first_quality.leds[i].clone(),
+            }
+        })
+        .collect();
+    let images = state
+        .mean_leds
+        .into_iter()
+        .map(|values| Array2::from_shape_vec((height, width), values))
+        .collect::<Result<Vec<_>, _>>()?;
+    let noise = Array2::from_shape_vec((height, width), noise_values)?;
+    let saturated = Array2::from_shape_vec((height, width), saturated)?;
+    let underexposed = Array2::from_shape_vec((height, width), underexposed)?;
+    let windows = state.fits.len() as f64;
+    let mean = |f: &dyn Fn(&(TimingFit, FitQuality, usize)) -> f64| {
+        state.fits.iter().map(f).sum::<f64>() / windows
+    };
+    let largest = |f: &dyn Fn(&(TimingFit, FitQuality, usize)) -> f64| {
+        state.fits.iter().map(f).fold(0.0f64, f64::max)
+    };
+    let rate_ratio = mean(&|(fit, _, _)| fit.model.timing.rate_ratio);
+    let line_delay = mean(&|(fit, _, _)| fit.model.line_delay);
+    let report = DecodeReport {
+        estimator: config.estimator,
+        leds,
+        detected_leds: state.detected,
+        frames_used: state.frames,
+        windows: state.windows,
+        width,
+        height,
+        rate_ratio,
+        fps: format.fps,
+        chip_rate_hz: rate_ratio * format.fps,
+        exposure: mean(&|(fit, _, _)| fit.model.timing.exposure),
+        exposure_std: largest(&|(fit, _, _)| fit.exposure_std),
+        line_time_us: if format.fps > 0.0 {
+            line_delay / format.fps * 1e6
+        } else {
+            0.0
+        },
+        line_delay_frames: line_delay,
+        line_delay_std_frames: largest(&|(fit, _, _)| fit.line_delay_std),
+        line_delay_evidence: state
+            .fits
+            .iter()
+            .map(|(fit, _, _)| fit.line_delay_evidence)
+            .reduce(f64::min)
+            .unwrap_or(0.0),
+        row_bands: state.fits.iter().map(|(_, _, b)| *b).max().unwrap_or(1),
+        fit_residual: mean(&|(_, quality, _)| quality.residual_rms),
+        median_noise,
+        saturated_pixels: stats.saturated_pixels,
+        underexposed_pixels: stats.underexposed_pixels,
+        per_led,
+        verdict: state
+            .verdict
+            .unwrap_or_else(|| Verdict::from_findings(Vec::new(), Vec::new())),
+    };
+    Ok(Decoded {
+        leds: LedImages { images },
+        noise,
+        saturated,
+        underexposed,
+        report,
+    })
+}
+
+/// Refuses an implausible decode, or keeps it with the verdict marked overridden.
+fn apply_verdict(mut decoded: Decoded, policy: OnImplausible) -> Result<Decoded, DemodError> {
+    let verdict = &mut decoded.report.verdict;
+    if verdict.is_plausible() {
+        return Ok(decoded);
+    }
+    match policy {
+        OnImplausible::Refuse => Err(DemodError::Implausible {
+            problems: verdict.problems.join("; "),
+            advice: verdict.advice.join("; "),
+        }),
+        OnImplausible::Keep => {
+            verdict.status = VerdictStatus::Overridden;
+            Ok(decoded)
+        }
+    }
+}
+
+/// Median of the valid pixels' values: exact up to [`MEDIAN_SAMPLE`] pixels, else the median
+/// of the valid ones among an evenly strided sample of that many (a report statistic,
+/// accurate to well under 1 % and independent of the image size).
+fn median_of_valid(values: &[f32], valid: impl Fn(usize) -> bool) -> f64 {
+    let stride = values.len().div_ceil(MEDIAN_SAMPLE).max(1);
+    let mut sample: Vec<f32> = (0..values.len())
+        .step_by(stride)
+        .filter(|&p| valid(p))
+        .map(|p| values[p])
+        .collect();
+    if sample.is_empty() {
+        // Few valid pixels, none on the stride: take them all.
+        sample = (0..values.len())
+            .filter(|&p| valid(p))
+            .map(|p| values[p])
+            .collect();
+    }
+    meb_core::stats::quantile_in_place(&mut sample, 0.5).map_or(f64::NAN, f64::from)
+}
+
+/// Bytes of a frame's samples (for memory budgeting by callers).
+pub fn frame_bytes(samples: &Samples) -> usize {
+    match samples {
+        Samples::U8(v) => v.len(),
+        Samples::U16(v) => 2 * v.len(),
+    }
+}
