@@ -1,4 +1,4 @@
-//! Manchester-encoded binary FDMA carriers (MEB-FDMA), SPEC §2.
+//! Manchester-encoded binary FDMA carriers (MEB-FDMA), docs/maths/carriers.md#the-carrier-table.
 //!
 //! For N LEDs (i = 0..N-1, LED 1 of the thesis is i = 0) a frame has n = 2^(N+1) chips:
 //!
@@ -41,7 +41,8 @@ impl core::fmt::Display for CarrierError {
 #[cfg(feature = "std")]
 impl std::error::Error for CarrierError {}
 
-/// Frame length n = 2^(N+1) in chips for `led_count` LEDs (SPEC §2).
+/// Frame length n = 2^(N+1) in chips for `led_count` LEDs
+/// (docs/maths/carriers.md#the-carrier-table).
 pub const fn chips_per_frame(led_count: u8) -> usize {
     1 << (led_count as usize + 1)
 }

@@ -1,5 +1,5 @@
 //! Luminaire configuration: LED count, chip rate, per-LED brightness and phase, running flag
-//! (SPEC §3).
+//! (docs/maths/carriers.md#playing-the-table-on-a-luminaire).
 //!
 //! The chip rate is a fixed-point number of millihertz so that fractional rates such as
 //! 959.5 Hz are exact on the wire and in flash. Supported range: [`ChipRate::MIN`] = 1.000 Hz

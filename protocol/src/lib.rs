@@ -1,6 +1,6 @@
 //! The contract between the meb luminaire firmware and the host.
 //!
-//! * [`carriers`]: MEB-FDMA chip tables (SPEC §2).
+//! * [`carriers`]: MEB-FDMA chip tables (docs/maths/carriers.md#the-carrier-table).
 //! * [`config`]: the luminaire configuration and its validation.
 //! * [`wire`]: header, request/response command table and payload types.
 //! * [`framing`]: COBS + CRC-32 framing, the streaming [`framing::FrameReader`].

@@ -1,4 +1,5 @@
-//! Timer arithmetic of the luminaire: the chip clock and the brightness PWM (SPEC §2).
+//! Timer arithmetic of the luminaire: the chip clock and the brightness PWM
+//! (docs/maths/carriers.md#playing-the-table-on-a-luminaire).
 //!
 //! The firmware plays the on-mask table at the chip rate (chip rate = camera frame rate). The
 //! chip period is an integer number of timer-clock ticks, `(PSC + 1) · (ARR + 1)`, so the rate a
@@ -199,10 +200,11 @@ fn slot_led_mask(table: &ChipTable, led_of_slot: &[Option<u8>]) -> u8 {
         .fold(0, |mask, &led| mask | (1 << led))
 }
 
-/// Smallest number of chips after which the on/off pattern of the LEDs in `led_of_slot`
-/// repeats: a power of two dividing the frame length. LED i's carrier has period 2^(i+2) chips
-/// whatever its phase (it depends on bits 0 and i+1 of the chip index, SPEC §2), so LEDs 1–4
-/// repeat within 32 chips even in a 512-chip frame, and a bank without LEDs has period 1.
+/// Smallest number of chips after which the on/off pattern of the LEDs in `led_of_slot` repeats: a
+/// power of two dividing the frame length. LED i's carrier has period 2^(i+2) chips whatever its
+/// phase (it depends on bits 0 and i+1 of the chip index,
+/// docs/maths/carriers.md#the-carrier-table), so LEDs 1–4 repeat within 32 chips even in a 512-chip
+/// frame, and a bank without LEDs has period 1.
 pub fn slot_pattern_period(table: &ChipTable, led_of_slot: &[Option<u8>]) -> usize {
     let mask = slot_led_mask(table, led_of_slot);
     let masks = table.masks();
@@ -396,7 +398,8 @@ mod tests {
 
     #[test]
     fn compare_frames_follow_the_chip_table() {
-        // N = 2: s_0 = [1 -1 -1 1 1 -1 -1 1], s_1 = [1 -1 1 -1 -1 1 -1 1] (SPEC §2).
+        // N = 2: s_0 = [1 -1 -1 1 1 -1 -1 1], s_1 = [1 -1 1 -1 -1 1 -1 1]
+        // (docs/maths/carriers.md#worked-values).
         let table = ChipTable::new(2).unwrap();
         let mut brightness = [1000u16; MAX_LEDS];
         brightness[1] = 250;

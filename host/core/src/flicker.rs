@@ -216,7 +216,8 @@ mod tests {
         let table = ChipTable::new(4).unwrap();
         let report = analyse(&table, 960.0, 200.0);
         assert_eq!(report.len(), 4);
-        // LED 4's subspace holds every odd bin q: lines at 30, 90, 150 Hz (SPEC §4).
+        // LED 4's subspace holds every odd bin q: lines at 30, 90, 150 Hz
+        // (docs/maths/carriers.md#spectrum-of-a-carrier).
         let freqs: Vec<f64> = report[3]
             .components
             .iter()

@@ -1,5 +1,6 @@
-//! The light a luminaire emits, as a recorded timeline of output states, and its on/off
-//! waveform (SPEC §2: the on-mask table played cyclically at the chip rate).
+//! The light a luminaire emits, as a recorded timeline of output states, and its on/off waveform
+//! (docs/maths/carriers.md#the-carrier-table: the on-mask table played cyclically at the chip
+//! rate).
 //!
 //! The virtual luminaire appends a [`TimelineSegment`] whenever its output changes (new chip
 //! table, rate, brightness, start, stop, identify). Within a segment playback starts at chip 0
@@ -437,7 +438,8 @@ impl PlayedSegment {
                 let c0 = (lo - self.t) * self.rate_hz;
                 let c1 = (hi - self.t) * self.rate_hz;
                 let n = self.table.chips() as f64;
-                // Whole table periods are on for exactly half their chips (50 % duty, SPEC §2).
+                // Whole table periods are on for exactly half their chips (50 % duty,
+                // docs/maths/carriers.md#duty-runs-and-half-period-negation).
                 let periods = ((c1 - c0) / n).floor();
                 let mut on_chips = periods * n / 2.0;
                 let mut c = c0 + periods * n;
@@ -494,7 +496,8 @@ mod tests {
                 );
             }
         }
-        // Half a chip late: SPEC §3's (1-α)s[j] + αs[j+1] with α = 0.5.
+        // Half a chip late: docs/maths/demodulation.md#the-received-signal's (1-α)s[j] + αs[j+1]
+        // with α = 0.5.
         let (s, t0) = (
             |j: usize| {
                 if table.masks()[j % 32] & 1 != 0 {

@@ -1,7 +1,8 @@
 //! Near-field Lambertian shading with attached and cast shadows, and the background light.
 //!
 //! Per pixel with visible surface point X, normal n and albedo ρ, LED i contributes
-//! (SPEC §5 with the exact per-point light vector of `rig::Led::light_vector_at`)
+//! (docs/maths/photometric-stereo.md#light-vectors with the exact per-point light vector of
+//! `rig::Led::light_vector_at`)
 //!
 //! ```text
 //! A_i = g · ρ · max(0, L_i(X)·n) · V_i(X)

@@ -1,12 +1,13 @@
 //! LED light waveforms: how much of an exposure window each LED is on.
 //!
 //! The simulator integrates each LED's on/off waveform over every row's exposure window
-//! (SPEC §3). [`LedWaveform`] is the pluggable source of that waveform; [`CarrierWaveform`]
-//! plays the MEB-FDMA chip table (SPEC §2, `protocol::carriers`) at a per-LED chip rate with a
-//! per-LED time shift Δ_i in chips: at camera time t (seconds) LED i shows chip
-//! `floor(t · rate_i + Δ_i) mod n`. With rate = fps and an exposure of one full frame, frame j
-//! then integrates `(1 − α_i)·s_i[j + k_i] + α_i·s_i[j + k_i + 1]` (Δ_i = k_i + α_i), exactly the
-//! received-signal formula of SPEC §3.
+//! (docs/maths/demodulation.md#the-received-signal). [`LedWaveform`] is the pluggable source of
+//! that waveform; [`CarrierWaveform`] plays the MEB-FDMA chip table
+//! (docs/maths/carriers.md#the-carrier-table, `protocol::carriers`) at a per-LED chip rate with a
+//! per-LED time shift Δ_i in chips: at camera time t (seconds) LED i shows chip `floor(t · rate_i +
+//! Δ_i) mod n`. With rate = fps and an exposure of one full frame, frame j then integrates `(1 −
+//! α_i)·s_i[j + k_i] + α_i·s_i[j + k_i + 1]` (Δ_i = k_i + α_i), exactly the received-signal formula
+//! of docs/maths/demodulation.md#the-received-signal.
 
 pub use meb_core::led_waveform::LedWaveform;
 use protocol::carriers::ChipTable;
@@ -80,7 +81,8 @@ impl LedWaveform for CarrierWaveform {
             };
         }
         let n = self.table.chips() as f64;
-        // Whole table periods contribute n/2 on-chips each (50 % duty, SPEC §2).
+        // Whole table periods contribute n/2 on-chips each (50 % duty,
+        // docs/maths/carriers.md#duty-runs-and-half-period-negation).
         let periods = ((c1 - c0) / n).floor();
         let mut on = periods * n / 2.0;
         let start = c0 + periods * n;
@@ -111,8 +113,8 @@ mod tests {
         }
     }
 
-    /// SPEC §3: a full-frame window at rate = 1 chip per frame integrates
-    /// (1 − α)·s[j + k] + α·s[j + k + 1] (as a ±1 value, i.e. 2·fraction − 1).
+    /// docs/maths/demodulation.md#the-received-signal: a full-frame window at rate = 1 chip per
+    /// frame integrates (1 − α)·s[j + k] + α·s[j + k + 1] (as a ±1 value, i.e. 2·fraction − 1).
     #[test]
     fn full_frame_window_matches_spec_formula() {
         let table = ChipTable::new(4).unwrap();

@@ -88,7 +88,7 @@ pub fn simulate_y4m(out: &Path, rig: &str, size: &str, frames: usize, scene: &[&
     run_ok(&args);
 }
 
-/// The thesis' out-of-plane LED positions (SPEC §5), mm.
+/// The thesis' out-of-plane LED positions (docs/formats/rig.md#presets), mm.
 pub const OUT_OF_PLANE_LEDS: [[f64; 3]; 4] = [
     [-270.0, 420.0, 100.0],
     [-140.0, 420.0, 350.0],

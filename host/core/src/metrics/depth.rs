@@ -147,7 +147,7 @@ fn contiguous<T: Clone>(row: ArrayView1<'_, T>) -> Cow<'_, [T]> {
 
 /// Scores `estimate` against `truth` (both mm, NaN = none) over the truth's finite pixels,
 /// restricted to `surface` when given: the offset is the mean difference over the compared
-/// pixels, the RMSE the root mean square about it (SPEC §6).
+/// pixels, the RMSE the root mean square about it (docs/maths/accuracy.md#depth-error).
 ///
 /// The rows are summed in parallel and their sums joined in row order, so the figures do not
 /// depend on how the rows were split. A 3-D video scores every window against its truth on

@@ -2,7 +2,7 @@
 
 use super::{Camera, Led, Rig, TofCamera};
 
-/// Names of the built-in rigs (SPEC §7).
+/// Names of the built-in rigs (docs/formats/rig.md#presets).
 pub const PRESETS: [&str; 4] = [
     "thesis-in-plane",
     "thesis-out-of-plane",
@@ -11,7 +11,7 @@ pub const PRESETS: [&str; 4] = [
 ];
 
 impl Rig {
-    /// A built-in thesis rig by name (SPEC §7), or `None`.
+    /// A built-in thesis rig by name (docs/formats/rig.md#presets), or `None`.
     pub fn preset(name: &str) -> Option<Self> {
         let out_of_plane_leds = [
             [-270.0, 420.0, 100.0],

@@ -1,17 +1,17 @@
 //! The timing fit: rate ratio ρ, exposure e, shifts Δ_i and rolling-shutter line delay, by
 //! least squares over the pixel sample, started from the signal-space seeds.
 //!
-//! Model (SPEC §3 with the exposure and rolling shutter of [`super::waveform`]): row r of frame j
-//! sees LED i's carrier from chip time `(j + λ·r)·ρ + Δ_i` for `e·ρ` chips, λ the line delay in
-//! frame periods per row (0 for a global shutter), so pixel p in row r reads
-//! `r_j = B_p + Σ_i A_i(p)·u_i(j; r)`. For given timing θ = (ρ, e, λ, Δ) the best B, A of every
-//! pixel are linear least squares, so θ maximises the energy the template span explains
-//! (variable projection: Golub & Pereyra, SIAM J. Numer. Anal. 1973) and the residual to
-//! minimise is `(I − Q_rQ_rᵀ)·X_rᵀ` summed over rows, Q_r an orthonormal basis of the
-//! templates at row r. The data enter compressed without loss of signal: a global shutter's
-//! signal is the span of the sample's Gram eigenvectors ([`super::spectrum`]), scaled by the
-//! square roots of their eigenvalues; a rolling shutter's rows each keep their own N leading
-//! singular directions (one row of the sample has one set of templates).
+//! Model (docs/maths/demodulation.md#the-received-signal with the exposure and rolling shutter of
+//! [`super::waveform`]): row r of frame j sees LED i's carrier from chip time `(j + λ·r)·ρ + Δ_i`
+//! for `e·ρ` chips, λ the line delay in frame periods per row (0 for a global shutter), so pixel p
+//! in row r reads `r_j = B_p + Σ_i A_i(p)·u_i(j; r)`. For given timing θ = (ρ, e, λ, Δ) the best B,
+//! A of every pixel are linear least squares, so θ maximises the energy the template span explains
+//! (variable projection: Golub & Pereyra, SIAM J. Numer. Anal. 1973) and the residual to minimise
+//! is `(I − Q_rQ_rᵀ)·X_rᵀ` summed over rows, Q_r an orthonormal basis of the templates at row r.
+//! The data enter compressed without loss of signal: a global shutter's signal is the span of the
+//! sample's Gram eigenvectors ([`super::spectrum`]), scaled by the square roots of their
+//! eigenvalues; a rolling shutter's rows each keep their own N leading singular directions (one row
+//! of the sample has one set of templates).
 //!
 //! The refinements from several starting points (the seeds, the exposures tried) and the
 //! rows-agree screen of each band are independent and run in parallel; the residual is
@@ -35,7 +35,7 @@
 //! flat direction and is not determined by the data. (λ's standard error is not the test:
 //! its correlation with that flat direction inflates it, and the likelihood ratio is the
 //! sharper question.) Finally each carrier's sign is chosen so that the sample's on-levels are positive (a
-//! half-period shift negates a carrier, SPEC §2).
+//! half-period shift negates a carrier, docs/maths/carriers.md#duty-runs-and-half-period-negation).
 
 use super::basis::TemplateBasis;
 use super::config::FitLimits;

@@ -1,6 +1,7 @@
-//! MEB-FDMA demodulation: a captured video → one image per LED (SPEC §3–§4).
+//! MEB-FDMA demodulation: a captured video → one image per LED
+//! (docs/maths/demodulation.md#demodulation).
 //!
-//! Every pixel p of a window of F frames reads (SPEC §3, notation of `docs/SPEC.md`)
+//! Every pixel p of a window of F frames reads (docs/maths/demodulation.md#the-received-signal)
 //!
 //! ```text
 //! r_j(p) = B(p) + Σ_i A_i(p)·u_i(j) + noise,   u_i(j) = ½ + ½·g_i(j·ρ + Δ_i),
@@ -22,10 +23,10 @@
 //!    variance), so a small object in a wide, dark view drives the estimate rather than the
 //!    unlit background. X is that sample, centred (pixels × F).
 //! 2. [`spectrum`]: the leading eigenvectors V of G = XᵀX span every LED's waveform, because
-//!    X = A·Tᵀ + noise with T = [u_0 … u_{N−1}] (F × N); per LED this is the rank-1 structure
-//!    of SPEC §4: the projection of the window onto LED i's subspace is, across pixels,
-//!    A_i(p)·(projected u_i)ᵀ. The eigenvalues beyond the signal give the noise energy σ²_G.
-//!    Randomised subspace iteration keeps it cheap.
+//! X = A·Tᵀ + noise with T = [u_0 … u_{N−1}] (F × N); per LED this is the rank-1 structure of
+//! docs/maths/demodulation.md#the-subspace-projection: the projection of the window onto LED i's
+//! subspace is, across pixels, A_i(p)·(projected u_i)ᵀ. The eigenvalues beyond the signal give the
+//! noise energy σ²_G. Randomised subspace iteration keeps it cheap.
 //! 3. [`seed`]: each LED's waveform is found in V on its own — the fraction |Vᵀt|²/|t|² of a
 //!    candidate template t that V holds is 1 for the true (ρ, e, Δ_i) and does not depend on
 //!    the A_i, so neither other LEDs nor a dark background bias it, and the scale and sign
@@ -122,7 +123,8 @@ const BAND_PHASE_STEP: f64 = 0.004;
 /// The result of a decode.
 #[derive(Debug, Clone)]
 pub struct Decoded {
-    /// A_i per LED as a fraction of the input's full scale (SPEC §3).
+    /// A_i per LED as a fraction of the input's full scale
+    /// (docs/maths/demodulation.md#the-received-signal).
     pub leds: LedImages,
     /// Per-pixel noise σ of one frame sample, fraction of full scale.
     pub noise: Array2<f32>,

@@ -1,4 +1,5 @@
-//! Decoder tests on synthetic captures (SPEC §3 rendered independently in `synthetic`).
+//! Decoder tests on synthetic captures (docs/maths/demodulation.md#the-received-signal rendered
+//! independently in `synthetic`).
 
 use super::synthetic::{Face, Scene, gain_and_noise, render};
 use super::*;

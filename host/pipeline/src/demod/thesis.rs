@@ -1,4 +1,5 @@
-//! The thesis' reference decoder (thesis Eqs. 3.25–3.30, SPEC §4).
+//! The thesis' reference decoder (thesis Eqs. 3.25–3.30,
+//! docs/maths/demodulation.md#the-subspace-projection).
 //!
 //! For LED i the n×n matrix of all cyclic shifts of s_i has rank l_i = 2^(i+1); stabilised
 //! Gram–Schmidt turns it into D_i (l_i × n). Per pixel r^(i) = D_iᵀD_i·r and I_i = max_j r^(i)_j,

@@ -1,4 +1,5 @@
-//! The received waveform of one LED: its carrier integrated over the camera's exposure (SPEC §3).
+//! The received waveform of one LED: its carrier integrated over the camera's exposure
+//! (docs/maths/demodulation.md#the-received-signal).
 //!
 //! Frame j of a camera running at ρ chips per frame exposes from chip time `j·ρ + Δ_i` (Δ_i the
 //! LED's unknown shift, integer and fractional part together) for `e·ρ` chips (e the exposure
@@ -6,18 +7,20 @@
 //! window, normalised by the window length, so its reading is
 //!
 //! ```text
-//! r_j = B + Σ_i A_i · on_i(j) = B' + Σ_i (A_i / 2) · g_i(j·ρ + Δ_i),
-//! g_i(t) = (1 / w) ∫_t^{t+w} s_i(u) du,   w = e·ρ,   s_i(u) = ±1 (SPEC §2)
+//! r_j = B + Σ_i A_i · on_i(j) = B' + Σ_i (A_i / 2) · g_i(j·ρ + Δ_i), g_i(t) = (1 / w) ∫_t^{t+w}
+//! s_i(u) du,   w = e·ρ,   s_i(u) = ±1 (docs/maths/carriers.md#the-carrier-table)
 //! ```
 //!
-//! With w = 1 and ρ = 1 this is exactly SPEC §3's `(1-α)·s[j+k] + α·s[j+k+1]`. The integral is
-//! evaluated in O(1) from the carrier's cumulative sum S, which is periodic because every
-//! carrier has 50 % duty: S(t) = S[m] + (t − m)·s[m] with m = ⌊t⌋.
+//! With w = 1 and ρ = 1 this is exactly docs/maths/demodulation.md#the-received-signal's
+//! `(1-α)·s[j+k] + α·s[j+k+1]`. The integral is evaluated in O(1) from the carrier's cumulative sum
+//! S, which is periodic because every carrier has 50 % duty: S(t) = S[m] + (t − m)·s[m] with m =
+//! ⌊t⌋.
 //!
-//! Whole templates ([`Timing::fill_template`], the seed scans' and the timing fit's innermost
-//! loop) use the carriers' Manchester structure instead of the tables, so that the loop
-//! vectorises without gathers: s_i[m] = +1 exactly when bit 0 of m equals bit i + 1 (SPEC §2),
-//! so every chip pair (2q, 2q+1) sums to zero and, with σ = 1 − 2·(bit i + 1 of m),
+//! Whole templates ([`Timing::fill_template`], the seed scans' and the timing fit's innermost loop)
+//! use the carriers' Manchester structure instead of the tables, so that the loop vectorises
+//! without gathers: s_i[m] = +1 exactly when bit 0 of m equals bit i + 1
+//! (docs/maths/carriers.md#the-carrier-table), so every chip pair (2q, 2q+1) sums to zero and, with
+//! σ = 1 − 2·(bit i + 1 of m),
 //!
 //! ```text
 //! m even: S[m] = 0, s[m] = σ;      m odd: S[m] = σ, s[m] = −σ,
@@ -30,7 +33,8 @@
 
 use protocol::carriers::chip_is_on;
 
-/// LED `led`'s carrier s_i as ±1 over one period of `2^(led+2)` chips (SPEC §2).
+/// LED `led`'s carrier s_i as ±1 over one period of `2^(led+2)` chips
+/// (docs/maths/carriers.md#the-carrier-table).
 pub fn carrier_period(led: usize) -> usize {
     1 << (led + 2)
 }

@@ -1,4 +1,4 @@
-//! The thesis' Fast Marching integrator (SPEC §6, after Ho et al.).
+//! The thesis' Fast Marching integrator (docs/maths/integration.md#fast-marching, after Ho et al.).
 //!
 //! With f = (x − u_x)² + (y − u_y)² the squared distance to a start pixel u, W = z + λf has a
 //! known gradient magnitude |∇W| = √((p + 2λ(x − u_x))² + (q + 2λ(y − u_y))²) (p = ∂z/∂x,

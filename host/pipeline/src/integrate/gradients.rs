@@ -1,4 +1,5 @@
-//! Surface slopes from normals: ∂z/∂x = −n_x/n_z, ∂z/∂y = −n_y/n_z, y up (SPEC §6).
+//! Surface slopes from normals: ∂z/∂x = −n_x/n_z, ∂z/∂y = −n_y/n_z, y up
+//! (docs/maths/integration.md#slopes-from-normals).
 
 use super::IntegrateError;
 use meb_core::types::NormalField;

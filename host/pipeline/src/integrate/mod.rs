@@ -1,4 +1,5 @@
-//! Normal integration: normals → depth on the camera grid (SPEC §6, thesis §3.2).
+//! Normal integration: normals → depth on the camera grid
+//! (docs/maths/integration.md#normal-integration, thesis §3.2).
 //!
 //! Normals become slopes of the unknown ([`grid`]): the height z with ∂z/∂x = −n_x/n_z,
 //! ∂z/∂y = −n_y/n_z (y up, towards row 0) for an orthographic camera, or a pixel-unit log depth

@@ -1,4 +1,5 @@
-//! Photometric stereo: per-LED images → unit normals and albedo (SPEC §5, thesis Eqs. 3.1–3.5).
+//! Photometric stereo: per-LED images → unit normals and albedo
+//! (docs/maths/photometric-stereo.md#the-lambertian-model, thesis Eqs. 3.1–3.5).
 //!
 //! Lambertian model A_i(p) = ρ(p) · max(0, n(p)·L_i(p)). Per pixel the LEDs that light it are
 //! chosen by a statistical test against each LED's noise ([`solve`], [`noise`]), G = L⁺A is

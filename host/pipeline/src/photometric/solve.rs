@@ -1,4 +1,5 @@
-//! The per-pixel solve G = L⁺A, ρ = |G|, n = G/ρ (SPEC §5) with a statistical shadow test.
+//! The per-pixel solve G = L⁺A, ρ = |G|, n = G/ρ
+//! (docs/maths/photometric-stereo.md#the-per-pixel-solve) with a statistical shadow test.
 //!
 //! Which LEDs light a pixel is decided from its values and their noise ([`PixelSolver`]):
 //!

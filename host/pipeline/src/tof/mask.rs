@@ -1,4 +1,5 @@
-//! Object masks in the PS camera's pixels from a ToF range map (thesis §6.6.1, SPEC §9).
+//! Object masks in the PS camera's pixels from a ToF range map (thesis §6.6.1,
+//! docs/maths/tof.md#layers-and-masks).
 //!
 //! A *layer* is a set of ToF pixels: either every pixel whose range lies in an interval (the
 //! thesis' selection, e.g. [0.24 m, 0.31 m]) or, with [`segment`], a connected region of the

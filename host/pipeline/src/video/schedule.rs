@@ -46,7 +46,7 @@ impl WindowSchedule {
     };
 
     /// A schedule that decodes at least `min_decoded` frames per window (2^(N+1) for N
-    /// LEDs, SPEC §4).
+    /// LEDs, docs/maths/demodulation.md#exposure-rate-ratio-and-rolling-shutter).
     pub fn new(
         window: usize,
         drop: usize,
