@@ -1,4 +1,4 @@
-//! Outputs of a reconstruction (ARCHITECTURE "export"): `.npy` arrays, PNG previews (normal map,
+//! Outputs of a reconstruction: `.npy` arrays, PNG previews (normal map,
 //! albedo, colour-mapped depth, error map, shaded renders of the surface), surface meshes
 //! (PLY, OBJ, STL) and the report (`report.json`, and `report.html`, one self-contained page with
 //! the previews embedded as base64 PNGs), all written through `meb_core::io`, the one file
