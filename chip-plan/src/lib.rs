@@ -1,6 +1,7 @@
 //! The luminaire's chip engine as data: every register value the firmware writes to play the
 //! MEB-FDMA carriers (docs/maths/carriers.md#playing-the-table-on-a-luminaire) on an STM32F411,
-//! computed here, host-tested, and only carried out by the board.
+//! computed here, host-tested, and only carried out
+//! by the board.
 //!
 //! * [`regs`]: addresses and fields from the reference manual RM0383.
 //! * [`outputs`]: which timer channel plays which LED; each bank's timer, DMA stream, trigger.

@@ -1,6 +1,6 @@
 //! The chip engine's register plans and the sequencing around them
-//! (docs/maths/carriers.md#playing-the-table-on-a-luminaire: the luminaire plays the on-mask table
-//! cyclically at the chip rate).
+//! (docs/maths/carriers.md#playing-the-table-on-a-luminaire: the luminaire plays
+//! the on-mask table cyclically at the chip rate).
 //!
 //! ```text
 //!  TIM2 (32-bit)   update every (PSC+1)(ARR+1) ticks = one chip       [timing::chip_timer_period]

@@ -200,11 +200,11 @@ fn slot_led_mask(table: &ChipTable, led_of_slot: &[Option<u8>]) -> u8 {
         .fold(0, |mask, &led| mask | (1 << led))
 }
 
-/// Smallest number of chips after which the on/off pattern of the LEDs in `led_of_slot` repeats: a
-/// power of two dividing the frame length. LED i's carrier has period 2^(i+2) chips whatever its
-/// phase (it depends on bits 0 and i+1 of the chip index,
-/// docs/maths/carriers.md#the-carrier-table), so LEDs 1–4 repeat within 32 chips even in a 512-chip
-/// frame, and a bank without LEDs has period 1.
+/// Smallest number of chips after which the on/off pattern of the LEDs in `led_of_slot`
+/// repeats: a power of two dividing the frame length. LED i's carrier has period 2^(i+2) chips
+/// whatever its phase (it depends on bits 0 and i+1 of the chip index,
+/// docs/maths/carriers.md#the-carrier-table), so LEDs 1–4
+/// repeat within 32 chips even in a 512-chip frame, and a bank without LEDs has period 1.
 pub fn slot_pattern_period(table: &ChipTable, led_of_slot: &[Option<u8>]) -> usize {
     let mask = slot_led_mask(table, led_of_slot);
     let masks = table.masks();

@@ -1,7 +1,8 @@
 //! The end-to-end demonstration (docs/maths/accuracy.md#the-demonstration): simulate a thesis
-//! scene, decode it with the MEB-FDMA demodulator, reconstruct it through the decoded-capture path
-//! every other caller uses ([`meb_pipeline::reconstruct::from_decoded`]), and compare with the
-//! simulator's ground truth over the surface lit by ≥ 3 LEDs.
+//! scene, decode it with the
+//! MEB-FDMA demodulator, reconstruct it through the decoded-capture path every other caller
+//! uses ([`meb_pipeline::reconstruct::from_decoded`]), and compare with the simulator's ground truth
+//! over the surface lit by ≥ 3 LEDs.
 //!
 //! The capture is exposed like a real one, so that nothing clips
 //! ([`meb_sim::exposure::expose_without_clipping`]).

@@ -1,9 +1,10 @@
 //! The LED light waveform seen by the camera: how much of an exposure window each LED is on.
 //!
-//! A neutral module shared by the two sides that produce light: the simulator's MEB-FDMA carriers
-//! (`simulate::CarrierWaveform`, docs/maths/demodulation.md#the-received-signal) and the virtual
-//! luminaire's recorded timeline (`device::TimelineWaveform`). The simulator integrates whichever
-//! source it is given over every row's exposure window.
+//! A neutral module shared by the two sides that produce light: the simulator's MEB-FDMA
+//! carriers (`simulate::CarrierWaveform`, docs/maths/demodulation.md#the-received-signal) and the
+//! virtual luminaire's recorded
+//! timeline (`device::TimelineWaveform`). The simulator integrates whichever source it is given
+//! over every row's exposure window.
 
 /// A source of LED on/off waveforms in camera time.
 pub trait LedWaveform: Send + Sync {

@@ -1,14 +1,15 @@
 //! Typed values passed between pipeline stages: per-LED images, normal fields, depth maps.
 //!
-//! Images are `ndarray` arrays indexed `[row, column]`, row 0 at the top of the picture. Scene
-//! coordinates follow docs/maths/coordinates.md#the-scene-frame: x to the right, y up (towards row
-//! 0), z towards the camera, millimetres, origin at the object centre.
+//! Images are `ndarray` arrays indexed `[row, column]`, row 0 at the top of the picture.
+//! Scene coordinates follow docs/maths/coordinates.md#the-scene-frame: x to the right, y up
+//! (towards row 0), z towards the
+//! camera, millimetres, origin at the object centre.
 
 use ndarray::{Array2, Array3};
 
 /// One image per LED, each the on-level A_i as a fraction of full scale
-/// (docs/maths/demodulation.md#the-received-signal), as if that LED alone were lit and the
-/// background removed.
+/// (docs/maths/demodulation.md#the-received-signal), as if that
+/// LED alone were lit and the background removed.
 #[derive(Debug, Clone, PartialEq)]
 pub struct LedImages {
     /// `images[i]` is LED i+1's image, all of the same shape.

@@ -1,6 +1,6 @@
-//! The light a luminaire emits, as a recorded timeline of output states, and its on/off waveform
-//! (docs/maths/carriers.md#the-carrier-table: the on-mask table played cyclically at the chip
-//! rate).
+//! The light a luminaire emits, as a recorded timeline of output states, and its on/off
+//! waveform (docs/maths/carriers.md#the-carrier-table: the on-mask table played cyclically at the
+//! chip rate).
 //!
 //! The virtual luminaire appends a [`TimelineSegment`] whenever its output changes (new chip
 //! table, rate, brightness, start, stop, identify). Within a segment playback starts at chip 0

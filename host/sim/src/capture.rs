@@ -1,8 +1,9 @@
 //! The simulated camera: renders frames on demand (a [`FrameSource`]) and the ground truth.
 //!
-//! Frame f starts at t_f = start + f/fps; row r of it integrates light over [t_f + r·line_time, t_f
-//! + r·line_time + exposure/fps) (rolling shutter; line time 0 is a global shutter). A pixel then
-//! reads, before noise and tone curve (docs/maths/demodulation.md#the-received-signal),
+//! Frame f starts at t_f = start + f/fps; row r of it integrates light over
+//! [t_f + r·line_time, t_f + r·line_time + exposure/fps) (rolling shutter; line time 0 is a
+//! global shutter). A pixel then reads, before noise and tone curve
+//! (docs/maths/demodulation.md#the-received-signal),
 //!
 //! ```text
 //! v = E_bg-term + Σ_i A_i · on_fraction_i(window)
@@ -339,9 +340,9 @@ impl SimulatedCapture {
         }
     }
 
-    /// Integrated light of frame `index` per pixel, as a fraction of full scale, before noise, tone
-    /// curve and quantisation (the docs/maths/demodulation.md#the-received-signal value r_j without
-    /// its noise term).
+    /// Integrated light of frame `index` per pixel, as a fraction of full scale, before
+    /// noise, tone curve and quantisation (the docs/maths/demodulation.md#the-received-signal value
+    /// r_j without its noise term).
     pub fn light_image(&self, index: usize) -> Array2<f32> {
         let t = self.frame_time(index);
         let shading = self.shading_at(t);
@@ -564,8 +565,8 @@ mod tests {
     }
 
     /// docs/maths/demodulation.md#the-received-signal with exposure 1, no noise: r_j = B + Σ
-    /// (A_i/2)((1−α)s[j+k] + α s[j+k+1]), B = background + Σ A_i/2; the quantised frame is that
-    /// value rounded to 16 bits.
+    /// (A_i/2)((1−α)s[j+k] + α s[j+k+1]),
+    /// B = background + Σ A_i/2; the quantised frame is that value rounded to 16 bits.
     #[test]
     fn frames_follow_the_spec_formula() {
         let capture = SimulatedCapture::new(small_rig(64, 36), sphere(), quiet(40)).unwrap();

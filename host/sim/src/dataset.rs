@@ -1,13 +1,14 @@
 //! The thesis' Ch. 7 synthetic data set (docs/formats/simulated-folders.md#the-synthetic-data-set):
-//! per random blobby object, one image per LED of the top-down in-plane rig (orthographic, 480×270
-//! by default), a binary mask, the light vectors and the ground-truth depth map (plus normals and
-//! albedo).
+//! per random blobby object, one image per
+//! LED of the top-down in-plane rig (orthographic, 480×270 by default), a binary mask, the
+//! light vectors and the ground-truth depth map (plus normals and albedo).
 //!
-//! Layout: `DIR/rig.toml`, `DIR/dataset.json`, and per object `DIR/object_0000/` holding `led1.npy
-//! … ledN.npy` (float32, fraction of full scale, noise-free, no background), `mask.png`,
-//! `depth.npy` (mm, NaN outside), `normals.npy`, `albedo.npy` and `light_vectors.json` (the
-//! distant-light vectors g·L_i(0) of docs/maths/photometric-stereo.md#light-vectors, so that A_i ≈
-//! ρ·max(0, n·L_i), and the LED positions for near-field use).
+//! Layout: `DIR/rig.toml`, `DIR/dataset.json`, and per object `DIR/object_0000/` holding
+//! `led1.npy … ledN.npy` (float32, fraction of full scale, noise-free, no background),
+//! `mask.png`, `depth.npy` (mm, NaN outside), `normals.npy`, `albedo.npy` and
+//! `light_vectors.json` (the distant-light vectors g·L_i(0) of
+//! docs/maths/photometric-stereo.md#light-vectors, so that
+//! A_i ≈ ρ·max(0, n·L_i), and the LED positions for near-field use).
 
 use super::SimulateError;
 use super::capture::{SimConfig, SimulatedCapture};

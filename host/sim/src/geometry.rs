@@ -2,10 +2,11 @@
 //!
 //! Every pixel's ray is parametrised by the height z of its points ([`meb_core::rig::PixelRay`]:
 //! parallel rays along −z for the orthographic camera of docs/maths/coordinates.md#pixels-and-rays,
-//! rays through the camera centre for a perspective one), so the visible surface is the hit with
-//! the largest z. Analytic shapes are intersected exactly per pixel (one rayon task per row);
-//! triangle meshes go through the shared rasteriser [`meb_core::mesh::rasterise_triangle`] into the
-//! same depth buffer (z-test, flat or smooth normals).
+//! rays through the camera centre
+//! for a perspective one), so the visible surface is the hit with the largest z. Analytic shapes
+//! are intersected exactly per pixel (one rayon task per row); triangle meshes go through the
+//! shared rasteriser [`meb_core::mesh::rasterise_triangle`] into the same depth buffer (z-test, flat
+//! or smooth normals).
 
 use super::scene::{Scene, Shape, intersect_analytic};
 use meb_core::mesh::{RayHit, rasterise_triangle};

@@ -1,15 +1,16 @@
 //! Synthetic MEB-FDMA captures with known ground truth: the test oracle of the pipeline.
 //!
-//! A [`Scene`] (analytic shapes, meshes, a ground plane, optional spin) is ray cast into a height
-//! field ([`geometry`]), shaded per LED with the exact near-field light vector, attached and cast
-//! shadows ([`lighting`], docs/maths/photometric-stereo.md#the-lambertian-model), and every frame
-//! integrates each LED's carrier over each row's exposure window ([`waveform`],
-//! docs/maths/demodulation.md#the-received-signal) before sensor noise, tone curve and quantisation
-//! ([`sensor`]). [`SimulatedCapture`] renders frames on demand as a
+//! A [`Scene`] (analytic shapes, meshes, a ground plane, optional spin) is ray cast into a
+//! height field ([`geometry`]), shaded per LED with the exact near-field light vector, attached
+//! and cast shadows ([`lighting`], docs/maths/photometric-stereo.md#the-lambertian-model), and
+//! every frame integrates each LED's carrier over
+//! each row's exposure window ([`waveform`], docs/maths/demodulation.md#the-received-signal) before
+//! sensor noise, tone curve and
+//! quantisation ([`sensor`]). [`SimulatedCapture`] renders frames on demand as a
 //! [`FrameSource`](meb_core::capture::FrameSource); [`output`] writes them and the truth to disk;
 //! [`dataset`] builds the thesis' Ch. 7 data set
-//! (docs/formats/simulated-folders.md#the-synthetic-data-set); [`exposure`] picks a gain that does
-//! not clip, as an auto-exposed camera would.
+//! (docs/formats/simulated-folders.md#the-synthetic-data-set); [`exposure`] picks a gain that
+//! does not clip, as an auto-exposed camera would.
 //!
 //! This module never uses `demod`, `photometric` or `integrate` code.
 

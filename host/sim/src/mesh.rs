@@ -1,7 +1,7 @@
 //! The seeded random "blobby" shapes of the thesis' synthetic data set (Ch. 7,
-//! docs/formats/simulated-folders.md#the-synthetic-data-set): a sphere whose radius is modulated by
-//! a few broad random bumps, so the surface has only low spatial frequencies. Meshes themselves
-//! (loading, rasterising) live in [`meb_core::mesh`].
+//! docs/formats/simulated-folders.md#the-synthetic-data-set): a
+//! sphere whose radius is modulated by a few broad random bumps, so the surface has only low
+//! spatial frequencies. Meshes themselves (loading, rasterising) live in [`meb_core::mesh`].
 
 pub use meb_core::mesh::TriMesh;
 use nalgebra::Vector3;

@@ -2,10 +2,10 @@
 //! motion, and an optional ground plane behind them.
 //!
 //! Coordinates follow docs/maths/coordinates.md#the-scene-frame: origin at the object centre, x
-//! right, y up, z towards the camera, millimetres. An object's shape is given in its own frame
-//! centred on the origin; its pose at time t is `X = R(t)·x + c` with `R(t) = Rot(axis,
-//! 2π·rpm/60·t) · R₀` when it spins (thesis Ch. 5: ellipsoid 100×60 mm turning at 7.5 rpm about a
-//! vertical axis).
+//! right, y up, z towards the
+//! camera, millimetres. An object's shape is given in its own frame centred on the origin;
+//! its pose at time t is `X = R(t)·x + c` with `R(t) = Rot(axis, 2π·rpm/60·t) · R₀` when it
+//! spins (thesis Ch. 5: ellipsoid 100×60 mm turning at 7.5 rpm about a vertical axis).
 
 use super::mesh::TriMesh;
 use meb_core::rig::PixelRay;

@@ -2,12 +2,13 @@
 //!
 //! The simulator integrates each LED's on/off waveform over every row's exposure window
 //! (docs/maths/demodulation.md#the-received-signal). [`LedWaveform`] is the pluggable source of
-//! that waveform; [`CarrierWaveform`] plays the MEB-FDMA chip table
-//! (docs/maths/carriers.md#the-carrier-table, `protocol::carriers`) at a per-LED chip rate with a
-//! per-LED time shift Δ_i in chips: at camera time t (seconds) LED i shows chip `floor(t · rate_i +
-//! Δ_i) mod n`. With rate = fps and an exposure of one full frame, frame j then integrates `(1 −
-//! α_i)·s_i[j + k_i] + α_i·s_i[j + k_i + 1]` (Δ_i = k_i + α_i), exactly the received-signal formula
-//! of docs/maths/demodulation.md#the-received-signal.
+//! that waveform; [`CarrierWaveform`]
+//! plays the MEB-FDMA chip table (docs/maths/carriers.md#the-carrier-table, `protocol::carriers`)
+//! at a per-LED chip rate with a
+//! per-LED time shift Δ_i in chips: at camera time t (seconds) LED i shows chip
+//! `floor(t · rate_i + Δ_i) mod n`. With rate = fps and an exposure of one full frame, frame j
+//! then integrates `(1 − α_i)·s_i[j + k_i] + α_i·s_i[j + k_i + 1]` (Δ_i = k_i + α_i), exactly the
+//! received-signal formula of docs/maths/demodulation.md#the-received-signal.
 
 pub use meb_core::led_waveform::LedWaveform;
 use protocol::carriers::ChipTable;
@@ -114,7 +115,8 @@ mod tests {
     }
 
     /// docs/maths/demodulation.md#the-received-signal: a full-frame window at rate = 1 chip per
-    /// frame integrates (1 − α)·s[j + k] + α·s[j + k + 1] (as a ±1 value, i.e. 2·fraction − 1).
+    /// frame integrates
+    /// (1 − α)·s[j + k] + α·s[j + k + 1] (as a ±1 value, i.e. 2·fraction − 1).
     #[test]
     fn full_frame_window_matches_spec_formula() {
         let table = ChipTable::new(4).unwrap();

@@ -1,7 +1,7 @@
-//! `meb reconstruct`: a capture (decoded on the fly) or a `meb decode` folder + a rig → normals,
-//! albedo, depth, mesh and report (docs/maths/photometric-stereo.md#the-near-field-loop),
-//! optionally compared with ground truth; with `--tof`, per object placed at and fused with a ToF
-//! range map ([`super::hybrid`]).
+//! `meb reconstruct`: a capture (decoded on the fly) or a `meb decode` folder + a rig →
+//! normals, albedo, depth, mesh and report (docs/maths/photometric-stereo.md#the-near-field-loop),
+//! optionally compared with ground truth;
+//! with `--tof`, per object placed at and fused with a ToF range map ([`super::hybrid`]).
 
 use super::decode::{DecodeOptions, check_folder_verdict, decode_capture};
 use super::integrate::IntegratorArg;

@@ -8,10 +8,10 @@
 //! rolling shutter on or off (a phase ramp of 0.2–1 chip over the frame), a sphere covering
 //! 0.5–30 % of the frame on a dark or lit (ground plane) background, N = 2..6 LEDs.
 //!
-//! A gain is the least-squares ratio of the decoded to the true on-levels over the lit pixels the
-//! decoder kept. On a small, noisy object that ratio is itself uncertain, so each LED's tolerance
-//! is widened by three standard errors of an oracle that knows the true waveforms (a per-pixel
-//! least-squares fit against the simulator's own on-fractions, written here from
+//! A gain is the least-squares ratio of the decoded to the true on-levels over the lit pixels
+//! the decoder kept. On a small, noisy object that ratio is itself uncertain, so each LED's
+//! tolerance is widened by three standard errors of an oracle that knows the true waveforms
+//! (a per-pixel least-squares fit against the simulator's own on-fractions, written here from
 //! docs/maths/demodulation.md#the-received-signal and the simulator's `CarrierWaveform`,
 //! independent of the decoder).
 

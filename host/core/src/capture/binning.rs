@@ -2,12 +2,12 @@
 //! frame, as a camera's on-sensor binning does.
 //!
 //! The demodulation is linear in the code values (docs/maths/demodulation.md#the-matched-filter:
-//! each LED image is a projection of the pixel's time series on its carrier), so demodulating the
-//! sum of a block's samples gives the sum of the block's LED images: binning before the decode
-//! costs the LED images nothing but resolution, while the decode, the photometric stereo and the
-//! integration each see k² times fewer pixels and the shot noise of a binned pixel falls by k
-//! relative to its signal. The binned pixel's ray is the one through the block's centre
-//! ([`crate::rig::Camera::binned`]).
+//! each LED image is a projection of the
+//! pixel's time series on its carrier), so demodulating the sum of a block's samples gives the
+//! sum of the block's LED images: binning before the decode costs the LED images nothing but
+//! resolution, while the decode, the photometric stereo and the integration each see k² times
+//! fewer pixels and the shot noise of a binned pixel falls by k relative to its signal. The
+//! binned pixel's ray is the one through the block's centre ([`crate::rig::Camera::binned`]).
 //!
 //! A block's samples are summed when the sum fits in 16 bits (black and white levels scale by
 //! k², the bit depth grows by ⌈log₂ k²⌉: 8-bit 2×2 blocks give 10-bit samples); otherwise they

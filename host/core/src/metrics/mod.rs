@@ -1,7 +1,8 @@
 //! Accuracy figures against ground truth (docs/maths/accuracy.md#depth-error): depth RMSE after
-//! removing the best constant offset, NRMSE = RMSE / (max − min of the true depth), % of the
-//! surface reconstructed, mean/median angular normal error, and per-pixel error maps. Ground truth
-//! is a depth map or a mesh rendered to depth in the rig's camera ([`mesh`]).
+//! removing the best
+//! constant offset, NRMSE = RMSE / (max − min of the true depth), % of the surface reconstructed,
+//! mean/median angular normal error, and per-pixel error maps. Ground truth is a depth map or a
+//! mesh rendered to depth in the rig's camera ([`mesh`]).
 
 pub mod angular;
 pub mod depth;

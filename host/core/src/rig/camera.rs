@@ -255,8 +255,8 @@ impl Camera {
     }
 
     /// Grid pitch h in mm per pixel: `pixel_pitch_mm`, else h = 2·d·tan(FOV/2)/width
-    /// (docs/maths/coordinates.md#grid-pitch); for a perspective camera the pitch on the object
-    /// plane z = 0, d/fx.
+    /// (docs/maths/coordinates.md#grid-pitch);
+    /// for a perspective camera the pitch on the object plane z = 0, d/fx.
     pub fn pitch_mm(&self) -> f64 {
         match (self.intrinsics, self.pixel_pitch_mm, self.fov_deg) {
             (Some(k), _, _) => self.distance_mm / k.fx,

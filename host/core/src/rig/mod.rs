@@ -1,15 +1,17 @@
 //! Camera and LED geometry of a capture rig (TOML files and the thesis' rigs as presets).
 //!
 //! Coordinates (docs/maths/coordinates.md#the-scene-frame): origin at the object centre, x right, y
-//! up, z towards the camera, millimetres. The camera looks along −z from (0, 0, `distance_mm`). It
-//! is orthographic (the thesis' model and presets: one grid pitch in mm per pixel) or, with
-//! `[camera.intrinsics]`, a pinhole camera with focal lengths fx, fy and principal point cx, cy in
-//! pixels (OpenCV convention: pixel centres at integer coordinates, u = column, v = row) and
-//! optional radial distortion x_d = x_u·(1 + k1·r² + k2·r⁴) of the normalised coordinates
-//! (Brown–Conrady, radial terms only). Every pixel has a ray ([`PixelRay`]): the scene points it
-//! sees, parametrised by their height z. An LED at P_i with axis a_i, relative intensity Φ_i and
-//! Lambert order m lights a surface point X along the light vector
-//! (docs/maths/photometric-stereo.md#light-vectors, thesis Eq. 3.3 generalised to the near field)
+//! up, z towards the camera,
+//! millimetres. The camera looks along −z from (0, 0, `distance_mm`). It is orthographic (the
+//! thesis' model and presets: one grid pitch in mm per pixel) or, with `[camera.intrinsics]`, a
+//! pinhole camera with focal lengths fx, fy and principal point cx, cy in pixels (OpenCV
+//! convention: pixel centres at integer coordinates, u = column, v = row) and optional radial
+//! distortion x_d = x_u·(1 + k1·r² + k2·r⁴) of the normalised coordinates (Brown–Conrady, radial
+//! terms only). Every pixel has a ray ([`PixelRay`]): the scene points it sees, parametrised by
+//! their height z.
+//! An LED at P_i with axis a_i, relative intensity Φ_i and Lambert order m lights a surface
+//! point X along the light vector (docs/maths/photometric-stereo.md#light-vectors, thesis Eq. 3.3
+//! generalised to the near field)
 //!
 //! ```text
 //! L_i(X) = Φ_i · cos^m(θ_i) / |P_i − X|² · (P_i − X)/|P_i − X|,   cos θ_i = a_i · (X − P_i)/|X − P_i|

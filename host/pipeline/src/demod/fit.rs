@@ -2,16 +2,17 @@
 //! least squares over the pixel sample, started from the signal-space seeds.
 //!
 //! Model (docs/maths/demodulation.md#the-received-signal with the exposure and rolling shutter of
-//! [`super::waveform`]): row r of frame j sees LED i's carrier from chip time `(j + λ·r)·ρ + Δ_i`
-//! for `e·ρ` chips, λ the line delay in frame periods per row (0 for a global shutter), so pixel p
-//! in row r reads `r_j = B_p + Σ_i A_i(p)·u_i(j; r)`. For given timing θ = (ρ, e, λ, Δ) the best B,
-//! A of every pixel are linear least squares, so θ maximises the energy the template span explains
-//! (variable projection: Golub & Pereyra, SIAM J. Numer. Anal. 1973) and the residual to minimise
-//! is `(I − Q_rQ_rᵀ)·X_rᵀ` summed over rows, Q_r an orthonormal basis of the templates at row r.
-//! The data enter compressed without loss of signal: a global shutter's signal is the span of the
-//! sample's Gram eigenvectors ([`super::spectrum`]), scaled by the square roots of their
-//! eigenvalues; a rolling shutter's rows each keep their own N leading singular directions (one row
-//! of the sample has one set of templates).
+//! [`super::waveform`]): row r of frame j
+//! sees LED i's carrier from chip time `(j + λ·r)·ρ + Δ_i` for `e·ρ` chips, λ the line delay in
+//! frame periods per row (0 for a global shutter), so pixel p in row r reads
+//! `r_j = B_p + Σ_i A_i(p)·u_i(j; r)`. For given timing θ = (ρ, e, λ, Δ) the best B, A of every
+//! pixel are linear least squares, so θ maximises the energy the template span explains
+//! (variable projection: Golub & Pereyra, SIAM J. Numer. Anal. 1973) and the residual to
+//! minimise is `(I − Q_rQ_rᵀ)·X_rᵀ` summed over rows, Q_r an orthonormal basis of the
+//! templates at row r. The data enter compressed without loss of signal: a global shutter's
+//! signal is the span of the sample's Gram eigenvectors ([`super::spectrum`]), scaled by the
+//! square roots of their eigenvalues; a rolling shutter's rows each keep their own N leading
+//! singular directions (one row of the sample has one set of templates).
 //!
 //! The refinements from several starting points (the seeds, the exposures tried) and the
 //! rows-agree screen of each band are independent and run in parallel; the residual is

@@ -23,10 +23,11 @@
 //!    variance), so a small object in a wide, dark view drives the estimate rather than the
 //!    unlit background. X is that sample, centred (pixels × F).
 //! 2. [`spectrum`]: the leading eigenvectors V of G = XᵀX span every LED's waveform, because
-//! X = A·Tᵀ + noise with T = [u_0 … u_{N−1}] (F × N); per LED this is the rank-1 structure of
-//! docs/maths/demodulation.md#the-subspace-projection: the projection of the window onto LED i's
-//! subspace is, across pixels, A_i(p)·(projected u_i)ᵀ. The eigenvalues beyond the signal give the
-//! noise energy σ²_G. Randomised subspace iteration keeps it cheap.
+//!    X = A·Tᵀ + noise with T = [u_0 … u_{N−1}] (F × N); per LED this is the rank-1 structure
+//!    of docs/maths/demodulation.md#the-subspace-projection: the projection of the window onto LED
+//!    i's subspace is, across pixels,
+//!    A_i(p)·(projected u_i)ᵀ. The eigenvalues beyond the signal give the noise energy σ²_G.
+//!    Randomised subspace iteration keeps it cheap.
 //! 3. [`seed`]: each LED's waveform is found in V on its own — the fraction |Vᵀt|²/|t|² of a
 //!    candidate template t that V holds is 1 for the true (ρ, e, Δ_i) and does not depend on
 //!    the A_i, so neither other LEDs nor a dark background bias it, and the scale and sign

@@ -7,11 +7,11 @@
 //! - signal: S_i = Σ_p (x_p·û_i)² − σ²_G, û_i the unit part of t_i orthogonal to the other
 //!   templates, i.e. the energy only LED i explains; `signal_to_noise` = S_i / σ²_G.
 //! - unexplained: U_i = Σ_p |Π_i (x_p − P_T x_p)|² − d_i·σ²_G, the energy left in LED i's
-//! subspace after the fit, above what noise alone leaves there. LED i's subspace is spanned by the
-//! strongest harmonics of its carrier at the fitted rate
-//! (docs/maths/demodulation.md#the-subspace-projection at ρ = 1: the DFT bins of LED i),
-//! orthogonalised against the templates (d_i directions). A wrong phase, rate, exposure or a
-//! rolling shutter the model misses leaves LED i's energy there.
+//!   subspace after the fit, above what noise alone leaves there. LED i's subspace is spanned
+//!   by the strongest harmonics of its carrier at the fitted rate
+//!   (docs/maths/demodulation.md#the-subspace-projection at ρ = 1: the DFT
+//!   bins of LED i), orthogonalised against the templates (d_i directions). A wrong phase,
+//!   rate, exposure or a rolling shutter the model misses leaves LED i's energy there.
 //! - gain uncertainty: the timing's statistical uncertainty carried into the LED's gain
 //!   ([`super::fit`]).
 //! - changing pixels: when an LED leaves modulation unexplained, the sums are split by pixel

@@ -1,15 +1,15 @@
 //! The pixel sample the timing fit works on: the pixels that carry the most modulation.
 //!
 //! Every pixel of a window is r_j = B + Σ_i A_i·u_i(j) + noise
-//! (docs/maths/demodulation.md#the-received-signal, u_i LED i's on-fraction in frame j). The timing
-//! (rate ratio, exposure, shifts Δ_i, line ramp) is the same for every pixel, so it is fitted on a
-//! sample: candidate pixels on every k-th row (at least [`CANDIDATE_PIXELS`] of them, so that the
-//! pass costs a fixed amount whatever the frame size), ranked by their temporal variance, of which
-//! the most variable non-saturated ones are kept. Pixels that no LED reaches (a dark background
-//! around a small object) have only the noise's variance and drop out, so a small object in a wide
-//! view still drives the fit; a saturated pixel's waveform is clipped and is left out. Each kept
-//! pixel's F values are converted to linear fractions of full scale and centred (its mean, the
-//! background B, removed).
+//! (docs/maths/demodulation.md#the-received-signal, u_i LED i's on-fraction
+//! in frame j). The timing (rate ratio, exposure, shifts Δ_i, line ramp) is the same for every
+//! pixel, so it is fitted on a sample: candidate pixels on every k-th row (at least
+//! [`CANDIDATE_PIXELS`] of them, so that the pass costs a fixed amount whatever the frame size),
+//! ranked by their temporal variance, of which the most variable non-saturated ones are kept.
+//! Pixels that no LED reaches (a dark background around a small object) have only the noise's
+//! variance and drop out, so a small object in a wide view still drives the fit; a saturated
+//! pixel's waveform is clipped and is left out. Each kept pixel's F values are converted to
+//! linear fractions of full scale and centred (its mean, the background B, removed).
 //!
 //! The rows lie on the whole frame's grid ([`RowGrid`]): a region of the frame (a decoding
 //! region, or `meb video`'s region around the object) examines the frame's candidate rows that

@@ -1,19 +1,20 @@
 //! Starting points of the timing fit from the signal space, without a joint parametric search.
 //!
 //! Every LED's received waveform u_i (docs/maths/demodulation.md#the-received-signal: its carrier
-//! s_i integrated over the exposure, shifted by Δ_i = k_i + α_i and sampled at ρ chips per frame)
-//! lies in the window's signal space V (the leading eigenvectors of the sample's Gram matrix,
-//! [`super::spectrum`]) whatever the on-levels A_i of the pixels, and a waveform with a wrong
-//! shift, exposure or rate does not. So each LED is scored on its own by the fraction of its
-//! centred template t that V holds, |Vᵀt|² / |t|² (a subspace-fitting score, as in MUSIC: Schmidt,
-//! IEEE Trans. Antennas Propag. 1986): the other LEDs, however bright or spatially alike, do not
-//! bias it, unlike a fit to the frame mean, where the LEDs' scene averages mix and a dark
-//! background dilutes them. The rate ratio ρ is the grid value (step ½/F, then a golden-section
-//! refinement) where the LEDs' best scores at full exposure sum highest; the exposure e is scanned
-//! at that rate with each LED's Δ_i refined per exposure. The local maxima of that scan (and a few
-//! spread exposures, because at ρ ≈ 1 the exposure barely changes the templates) start the
-//! least-squares refinement ([`super::fit`]), and, when the best start leaves an LED outside the
-//! signal space, so do the LEDs' shifts where the sample holds the most energy along their
+//! s_i integrated over the exposure,
+//! shifted by Δ_i = k_i + α_i and sampled at ρ chips per frame) lies in the window's signal
+//! space V (the leading eigenvectors of the sample's Gram matrix, [`super::spectrum`]) whatever
+//! the on-levels A_i of the pixels, and a waveform with a wrong shift, exposure or rate does
+//! not. So each LED is scored on its own by the fraction of its centred template t that V
+//! holds, |Vᵀt|² / |t|² (a subspace-fitting score, as in MUSIC: Schmidt, IEEE Trans. Antennas
+//! Propag. 1986): the other LEDs, however bright or spatially alike, do not bias it, unlike
+//! a fit to the frame mean, where the LEDs' scene averages mix and a dark background dilutes
+//! them. The rate ratio ρ is the grid value (step ½/F, then a golden-section refinement) where
+//! the LEDs' best scores at full exposure sum highest; the exposure e is scanned at that rate
+//! with each LED's Δ_i refined per exposure. The local maxima of that scan (and a few spread
+//! exposures, because at ρ ≈ 1 the exposure barely changes the templates) start the
+//! least-squares refinement ([`super::fit`]), and, when the best start leaves an LED outside
+//! the signal space, so do the LEDs' shifts where the sample holds the most energy along their
 //! templates (a nearly rank-one sample of one flat face: [`strongest_shift_starts`]).
 
 use super::config::{FitLimits, SeedMethod};
@@ -133,8 +134,8 @@ impl<'a> Scorer<'a> {
     }
 
     /// Half of one LED's carrier period, chips: a half-period shift negates a carrier
-    /// (docs/maths/carriers.md#duty-runs-and-half-period-negation), which leaves the score
-    /// unchanged, so shifts are searched in [0, half).
+    /// (docs/maths/carriers.md#duty-runs-and-half-period-negation),
+    /// which leaves the score unchanged, so shifts are searched in [0, half).
     fn half_period(&self, led: usize) -> f64 {
         self.waves.get(led).map_or(4, ReceivedWaveform::period) as f64 / 2.0
     }
@@ -358,12 +359,12 @@ pub fn starts(
 /// 75 mm cube face-on at (30, 0, 20) mm (thesis-out-of-plane, 128 frames): two significant
 /// eigenvalues (1569 and 1.2, noise 0.025), LEDs 1 and 4 (on-levels 0.03 against 0.18 and
 /// 0.19) peaking at 0.07 and 0.10, and LED 4's peak 10 chips from its shift, so every
-/// refinement stopped there and the decode was refused (82 % of its modulation unexplained). The
-/// energy the sample holds along a template, tᵀGt / tᵀt over the leading directions, does not need
-/// that direction: the carriers stay orthogonal under any shift
-/// (docs/maths/carriers.md#orthogonality-under-any-shift), so the other LEDs add nothing to it, and
-/// it peaks at the LED's own shift however weak. The refinement keeps the lowest residual, so these
-/// starts only win where they fit better.
+/// refinement stopped there and the decode was refused (82 % of its modulation unexplained).
+/// The energy the sample holds along a template, tᵀGt / tᵀt over the leading directions,
+/// does not need that direction: the carriers stay orthogonal under any shift
+/// (docs/maths/carriers.md#orthogonality-under-any-shift), so
+/// the other LEDs add nothing to it, and it peaks at the LED's own shift however weak. The
+/// refinement keeps the lowest residual, so these starts only win where they fit better.
 fn strongest_shift_starts(
     space: &SignalSpace,
     waves: &[ReceivedWaveform],

@@ -2,13 +2,13 @@
 //!
 //! With X the sample (pixels × F, centred) and G = XᵀX, the noise-free part of X is A·Tᵀ (A the
 //! pixels' on-levels A_i, T the F × N received waveforms u_i of
-//! docs/maths/demodulation.md#the-received-signal), so the signal lives in an N-dimensional
-//! subspace of R^F (a few more with a rolling shutter, whose rows see shifted waveforms) and white
-//! noise adds the same energy σ²_G = Σ_p σ_p² to every direction. The leading eigenpairs are found
-//! by randomised subspace iteration (Halko, Martinsson & Tropp, "Finding structure with
-//! randomness", SIAM Review 2011, Alg. 4.4) with a fixed seed, so a decode is deterministic; σ²_G
-//! is the mean of the trailing eigenvalues (the trace minus the leading ones), which only noise
-//! reaches.
+//! docs/maths/demodulation.md#the-received-signal), so the signal lives in
+//! an N-dimensional subspace of R^F (a few more with a rolling shutter, whose rows see shifted
+//! waveforms) and white noise adds the same energy σ²_G = Σ_p σ_p² to every direction. The
+//! leading eigenpairs are found by randomised subspace iteration (Halko, Martinsson & Tropp,
+//! "Finding structure with randomness", SIAM Review 2011, Alg. 4.4) with a fixed seed, so a
+//! decode is deterministic; σ²_G is the mean of the trailing eigenvalues (the trace minus the
+//! leading ones), which only noise reaches.
 
 use nalgebra::{DMatrix, SymmetricEigen};
 use rand::SeedableRng;

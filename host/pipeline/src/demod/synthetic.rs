@@ -1,6 +1,7 @@
 //! A small synthetic capture generator for the decoder's unit tests, written from
-//! docs/maths/demodulation.md#the-received-signal independently of the decoder's waveform model:
-//! each LED's on-time inside the exposure window is summed chip by chip.
+//! docs/maths/demodulation.md#the-received-signal
+//! independently of the decoder's waveform model: each LED's on-time inside the exposure
+//! window is summed chip by chip.
 
 use meb_core::capture::memory::MemorySource;
 use meb_core::capture::{Frame, FrameFormat, Samples};

@@ -1,16 +1,19 @@
 //! Each LED's received waveform read straight off the window: the rank-1 template.
 //!
 //! In the notation of docs/maths/demodulation.md#the-received-signal, pixel p of a window of F
-//! frames reads `r_j(p) = B(p) + Σ_i A_i(p)·u_i(j) + noise`, u_i LED i's on-fraction in frame j.
-//! LED i's subspace (docs/maths/demodulation.md#the-subspace-projection) is spanned by the cyclic
-//! shifts of its carrier s_i; sampled at the rate ratio ρ with full exposure they are the l_i =
-//! 2^(i+1) chip templates `c_{i,k}(j) = ½·g_i(j·ρ + k)`, k = 0..l_i−1 (a shift by l_i negates the
-//! carrier, docs/maths/carriers.md#duty-runs-and-half-period-negation). At ρ = 1 any exposure e ≤ 1
-//! and any shift Δ_i = k_i + α_i make u_i − ½ a combination `a·c_{i,k_i} + b·c_{i,k_i+1}` of two
-//! adjacent chip templates with a, b ≥ 0 and a + b = 1: the exposure window [Δ_i, Δ_i + e] spends
-//! the fraction a of its length in chip k_i and b in chip k_i + 1
-//! (docs/maths/demodulation.md#the-received-signal's `(1−α)·s[j+k] + α·s[j+k+1]` is e = 1). Away
-//! from ρ = 1 this holds approximately while the phase drifts by less than a chip over the window.
+//! frames reads
+//! `r_j(p) = B(p) + Σ_i A_i(p)·u_i(j) + noise`, u_i LED i's on-fraction in frame j. LED i's
+//! subspace (docs/maths/demodulation.md#the-subspace-projection) is spanned by the cyclic shifts of
+//! its carrier s_i; sampled at the rate
+//! ratio ρ with full exposure they are the l_i = 2^(i+1) chip templates
+//! `c_{i,k}(j) = ½·g_i(j·ρ + k)`, k = 0..l_i−1 (a shift by l_i negates the carrier,
+//! docs/maths/carriers.md#duty-runs-and-half-period-negation).
+//! At ρ = 1 any exposure e ≤ 1 and any shift Δ_i = k_i + α_i make u_i − ½ a combination
+//! `a·c_{i,k_i} + b·c_{i,k_i+1}` of two adjacent chip templates with a, b ≥ 0 and a + b = 1:
+//! the exposure window [Δ_i, Δ_i + e] spends the fraction a of its length in chip k_i and b in
+//! chip k_i + 1 (docs/maths/demodulation.md#the-received-signal's `(1−α)·s[j+k] + α·s[j+k+1]` is e
+//! = 1). Away from ρ = 1 this holds
+//! approximately while the phase drifts by less than a chip over the window.
 //!
 //! So let C = [C_0 … C_{N−1}] be every LED's chip templates (F × D, centred, D = Σ l_i) and
 //! Y = X·C·(CᵀC)⁻¹ the oblique coordinates of the centred window X (pixels × F) in them. LED

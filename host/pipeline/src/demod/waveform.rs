@@ -7,20 +7,21 @@
 //! window, normalised by the window length, so its reading is
 //!
 //! ```text
-//! r_j = B + Σ_i A_i · on_i(j) = B' + Σ_i (A_i / 2) · g_i(j·ρ + Δ_i), g_i(t) = (1 / w) ∫_t^{t+w}
-//! s_i(u) du,   w = e·ρ,   s_i(u) = ±1 (docs/maths/carriers.md#the-carrier-table)
+//! r_j = B + Σ_i A_i · on_i(j) = B' + Σ_i (A_i / 2) · g_i(j·ρ + Δ_i),
+//! g_i(t) = (1 / w) ∫_t^{t+w} s_i(u) du,   w = e·ρ,   s_i(u) = ±1
+//! (docs/maths/carriers.md#the-carrier-table)
 //! ```
 //!
 //! With w = 1 and ρ = 1 this is exactly docs/maths/demodulation.md#the-received-signal's
-//! `(1-α)·s[j+k] + α·s[j+k+1]`. The integral is evaluated in O(1) from the carrier's cumulative sum
-//! S, which is periodic because every carrier has 50 % duty: S(t) = S[m] + (t − m)·s[m] with m =
-//! ⌊t⌋.
+//! `(1-α)·s[j+k] + α·s[j+k+1]`. The integral is
+//! evaluated in O(1) from the carrier's cumulative sum S, which is periodic because every
+//! carrier has 50 % duty: S(t) = S[m] + (t − m)·s[m] with m = ⌊t⌋.
 //!
-//! Whole templates ([`Timing::fill_template`], the seed scans' and the timing fit's innermost loop)
-//! use the carriers' Manchester structure instead of the tables, so that the loop vectorises
-//! without gathers: s_i[m] = +1 exactly when bit 0 of m equals bit i + 1
-//! (docs/maths/carriers.md#the-carrier-table), so every chip pair (2q, 2q+1) sums to zero and, with
-//! σ = 1 − 2·(bit i + 1 of m),
+//! Whole templates ([`Timing::fill_template`], the seed scans' and the timing fit's innermost
+//! loop) use the carriers' Manchester structure instead of the tables, so that the loop
+//! vectorises without gathers: s_i[m] = +1 exactly when bit 0 of m equals bit i + 1
+//! (docs/maths/carriers.md#the-carrier-table),
+//! so every chip pair (2q, 2q+1) sums to zero and, with σ = 1 − 2·(bit i + 1 of m),
 //!
 //! ```text
 //! m even: S[m] = 0, s[m] = σ;      m odd: S[m] = σ, s[m] = −σ,

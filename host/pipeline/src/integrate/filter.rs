@@ -1,5 +1,5 @@
-//! The thesis' artefact filter: drop grid points whose depth jumps more than a threshold (10 mm)
-//! from a 4-neighbour, and report the fraction of the surface kept
+//! The thesis' artefact filter: drop grid points whose depth jumps more than a threshold
+//! (10 mm) from a 4-neighbour, and report the fraction of the surface kept
 //! (docs/maths/integration.md#the-artefact-filter).
 
 use ndarray::Array2;

@@ -4,9 +4,10 @@
 //! SIGGRAPH 2005, on the masked pixel grid of an orthographic camera).
 //!
 //! With slopes g from the normals (docs/maths/integration.md#slopes-from-normals), every pair of
-//! 4-neighbouring mask pixels i, j gives the normal equation z_j − z_i = h·(g_i + g_j)/2 with
-//! standard deviation σ_e = σ_g·h (σ_g the slope noise), and every pixel with a prior position p_i
-//! of weight w_i = 1/σ_i² one position equation z_i = p_i. Minimising
+//! 4-neighbouring mask pixels i, j gives
+//! the normal equation z_j − z_i = h·(g_i + g_j)/2 with standard deviation σ_e = σ_g·h (σ_g the
+//! slope noise), and every pixel with a prior position p_i of weight w_i = 1/σ_i² one position
+//! equation z_i = p_i. Minimising
 //!
 //! ```text
 //! E(z) = Σ_edges (z_j − z_i − h·ḡ_ij)² + Σ_i λ_i (z_i − p_i)²,     λ_i = σ_e²·w_i

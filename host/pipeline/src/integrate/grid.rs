@@ -1,8 +1,8 @@
 //! The unknown the integrators solve for, and how surface normals turn into its slopes.
 //!
 //! Orthographic camera (docs/maths/integration.md#slopes-from-normals): the unknown is the height z
-//! in mm on a grid of pitch h; slopes s_x = ∂z/∂x = −n_x/n_z and s_y = ∂z/∂y = −n_y/n_z (y up) are
-//! dimensionless.
+//! in mm on a grid of pitch h;
+//! slopes s_x = ∂z/∂x = −n_x/n_z and s_y = ∂z/∂y = −n_y/n_z (y up) are dimensionless.
 //!
 //! Perspective camera (Quéau, Durou & Aujol, "Normal integration: a survey", 2018, §2.2, the
 //! log-depth change of variable): a pixel with undistorted normalised coordinates (x, y) (camera

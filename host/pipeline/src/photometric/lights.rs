@@ -1,8 +1,8 @@
 //! Light and view vectors per pixel: the distant model L_i = L_i(0) or the near-field L_i(X(p))
 //! with X(p) the point of pixel p's ray at the current depth estimate z(p)
-//! (docs/maths/photometric-stereo.md#light-vectors, thesis Eq. 3.3; for a perspective camera the
-//! ray runs through the camera centre), and checks of the light geometry (three independent
-//! directions are needed).
+//! (docs/maths/photometric-stereo.md#light-vectors, thesis
+//! Eq. 3.3; for a perspective camera the ray runs through the camera centre), and checks of the
+//! light geometry (three independent directions are needed).
 
 use super::PhotometricError;
 use meb_core::rig::{Emitter, PixelRay, Projection, Rig};

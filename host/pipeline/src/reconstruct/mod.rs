@@ -89,17 +89,18 @@ const EARLY_PASS_REWEIGHTINGS: usize = 8;
 /// NRMSE 0.35 % at k = 2, 0.67 % at k = 10).
 const BILATERAL_STIFFNESS: f64 = 10.0;
 
-/// Median absolute depth change in mm, from the depth a warm pass's light vectors were computed at
-/// to the depth it found, up to which a warm start stops after that pass. Near-field light vectors
-/// L_i(X) = Φ_i (P_i − X) cos θ_i / |P_i − X|³ (docs/maths/photometric-stereo.md#light-vectors)
-/// move slowly with X: a point moved by δ along its ray turns L_i by at most δ/|P_i − X| rad and
-/// changes its length by about 3δ/|P_i − X|, mostly common to all LEDs (which only scales the
-/// albedo). On the thesis rigs the LEDs stand 420–560 mm from the object, so 1.5 mm turns each L_i
-/// by ≤ 0.2° and tilts the solved normals by at most [`WARM_LIGHTS_NORMAL_DEG`] (measured by the
-/// unit test `stale_light_vectors_tilt_normals_by_less_than_the_stated_bound`), below the
-/// photometric noise of a decoded capture. The turning ellipsoid's surface moves about 1–1.5 mm
-/// between windows of 40 frames: at 1 mm, 10 of its 49 warm windows (2000 frames, 1280×720) ran a
-/// second or third pass; at 1.5 mm none did, and the per-frame depth RMSE against truth every 20
+/// Median absolute depth change in mm, from the depth a warm pass's light vectors were computed
+/// at to the depth it found, up to which a warm start stops after that pass. Near-field light
+/// vectors L_i(X) = Φ_i (P_i − X) cos θ_i / |P_i − X|³
+/// (docs/maths/photometric-stereo.md#light-vectors) move slowly with X: a point
+/// moved by δ along its ray turns L_i by at most δ/|P_i − X| rad and changes its length by
+/// about 3δ/|P_i − X|, mostly common to all LEDs (which only scales the albedo). On the thesis
+/// rigs the LEDs stand 420–560 mm from the object, so 1.5 mm turns each L_i by ≤ 0.2° and
+/// tilts the solved normals by at most [`WARM_LIGHTS_NORMAL_DEG`] (measured by the unit test
+/// `stale_light_vectors_tilt_normals_by_less_than_the_stated_bound`), below the photometric
+/// noise of a decoded capture. The turning ellipsoid's surface moves about 1–1.5 mm between
+/// windows of 40 frames: at 1 mm, 10 of its 49 warm windows (2000 frames, 1280×720) ran a second
+/// or third pass; at 1.5 mm none did, and the per-frame depth RMSE against truth every 20
 /// frames stayed as it was (median 0.659 → 0.669 mm, mean 0.755 → 0.744 mm, worst 1.274 →
 /// 1.195 mm; binned 2×2: median 0.422 mm either way, worst 1.154 → 1.102 mm).
 pub const WARM_LIGHTS_MOVED_MM: f64 = 1.5;

@@ -1,11 +1,12 @@
 //! Hybrid time-of-flight + photometric stereo (thesis Ch. 6, docs/maths/tof.md#the-hybrid-scanner):
-//! TCSPC histograms of a SPAD camera → range map ([`range`]), chequerboard calibration between the
-//! SPAD and the photometric-stereo camera ([`chequerboard`], [`calibration`]), per-object masks in
-//! the PS camera's pixels ([`mask`]), range maps on disk ([`range_folder`]), and per-object
-//! reconstruction placed at, and fused with, the absolute ToF range ([`hybrid`], its offset and
-//! tilt from the ToF by [`rigid`]; the fusion is Nehab, Rusinkiewicz, Davis & Ramamoorthi,
-//! "Efficiently combining positions and normals for precise 3D geometry", SIGGRAPH 2005, solved by
-//! [`crate::integrate::fusion`]).
+//! TCSPC histograms of a
+//! SPAD camera → range map ([`range`]), chequerboard calibration between the SPAD and the
+//! photometric-stereo camera ([`chequerboard`], [`calibration`]), per-object masks in the PS
+//! camera's pixels ([`mask`]), range maps on disk ([`range_folder`]), and per-object
+//! reconstruction placed at, and fused with, the absolute ToF range ([`hybrid`], its offset
+//! and tilt from the ToF by [`rigid`]; the fusion is Nehab, Rusinkiewicz, Davis & Ramamoorthi,
+//! "Efficiently combining positions and normals for precise 3D geometry", SIGGRAPH 2005, solved
+//! by [`crate::integrate::fusion`]).
 //!
 //! The range is the distance along the ToF camera's optical axis ("axial depth"), in mm. The
 //! emitter is taken to be co-located with the SPAD (the thesis' LED array sits beside it), so a

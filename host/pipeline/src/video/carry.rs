@@ -2,16 +2,17 @@
 //!
 //! The decoder fits each LED's received waveform — shift, exposure, camera/chip rate ratio and
 //! rolling-shutter line delay — from a window's spatial mean
-//! (docs/maths/demodulation.md#the-timing-fit). Exposure, line delay and rate ratio belong to the
-//! camera's sensor and the luminaire's clock, not to the window: they stay put for a whole clip,
-//! while a 32-frame fit of them can go astray when the object's mean brightness drifts (with the
-//! decoder's earlier per-window fit, one window in five of a turning ellipsoid fitted a 1.6 % rate
-//! error and 4 % exposure, and its 3-D frame came out 38 mm wrong). So the video decodes every
-//! window with the timing of the best free fit so far and fits only the shifts. Carrying the line
-//! delay also spares each window the fit's rolling-shutter test (band-wise and row-wise
-//! refinements, more than half of the timing fit's work); a global-shutter fit carries a line delay
-//! of 0. A setting the user gives (`DecodeConfig`) is never replaced by a carried one, in a
-//! region's decode as in a whole frame's.
+//! (docs/maths/demodulation.md#the-timing-fit). Exposure, line delay
+//! and rate ratio belong to the camera's sensor and the luminaire's clock, not to the window:
+//! they stay put for a whole clip, while a 32-frame fit of them can go astray when the object's
+//! mean brightness drifts (with the decoder's earlier per-window fit, one window in five of a
+//! turning ellipsoid fitted a 1.6 % rate error and 4 % exposure, and its 3-D frame came out
+//! 38 mm wrong). So the video decodes every window with the timing of the best free fit so far
+//! and fits only the shifts. Carrying the line delay also spares each window the fit's
+//! rolling-shutter test (band-wise and row-wise refinements, more than half of the timing
+//! fit's work); a global-shutter fit carries a line delay of 0. A setting the user gives
+//! (`DecodeConfig`) is never replaced by a carried one, in a region's decode as in a whole
+//! frame's.
 //!
 //! "Best" is the lowest median per-pixel residual σ of the decode (how well the LED model
 //! explains the pixels). The first [`FREE_WINDOWS`] windows are decoded both ways; later a

@@ -3,14 +3,14 @@
 //!
 //! The decoder fits every pixel of a window with a still scene: a background plus each LED's
 //! received waveform times the pixel's on-level A_i
-//! (docs/maths/demodulation.md#the-matched-filter). What that fit leaves over — the energy outside
-//! the LED waveforms, reported as the per-pixel noise σ — is sensor noise for a still object, but
-//! an object that moves during the window changes its pixels' brightness in ways no carrier does (a
-//! silhouette edge sweeping over a pixel is a step, a turning surface a ramp), and that lands in
-//! the residual. This is the thesis' proposed frame selection (Ch. 5.4: detect when the object
-//! moves, decode where it is still) done on the decoder's own residual instead of frame
-//! differences, which the LED modulation itself would trip — except across one code period, which
-//! it does not trip:
+//! (docs/maths/demodulation.md#the-matched-filter). What that fit leaves over —
+//! the energy outside the LED waveforms, reported as the per-pixel noise σ — is sensor noise
+//! for a still object, but an object that moves during the window changes its pixels'
+//! brightness in ways no carrier does (a silhouette edge sweeping over a pixel is a step, a
+//! turning surface a ramp), and that lands in the residual. This is the thesis' proposed
+//! frame selection (Ch. 5.4: detect when the object moves, decode where it is still) done on
+//! the decoder's own residual instead of frame differences, which the LED modulation itself
+//! would trip — except across one code period, which it does not trip:
 //!
 //! - **Residual outliers.** A pixel counts as moving when its σ exceeds `sigmas` times the σ
 //!   typical of still lit pixels at least as bright in the same window (the smallest median σ
@@ -18,7 +18,7 @@
 //!   not motion, while half-covered, moving edge pixels crowd the dim octiles). The window's
 //!   score is the fraction of lit pixels that move; above `threshold` the window is moving.
 //! - **Frames one code period apart.** The carriers repeat every n = 2^(N+1) chips
-//! (docs/maths/carriers.md#the-carrier-table),
+//!   (docs/maths/carriers.md#the-carrier-table),
 //!   so when the window's frames run n·|ρ − 1| ≪ 1 chip off the code, frames j and j + n of a
 //!   still pixel differ by noise alone, E[(r_{j+n} − r_j)²] = 2σ², whatever the LEDs do. The
 //!   ratio q = mean over lit pixels and pairs of (r_{j+n} − r_j)²/2σ² is 1 for a still scene
