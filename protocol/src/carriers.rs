@@ -7,7 +7,7 @@
 //! Manchester        s_i[2m] = -b_i[m],  s_i[2m+1] = +b_i[m]
 //! ```
 //!
-//! s_i[j] = +1 means LED i is on during chip j. Written with the bits of the chip index j,
+//! s_i\[j\] = +1 means LED i is on during chip j. Written with the bits of the chip index j,
 //! LED i is on exactly when bit 0 of j equals bit i+1 of j: for an even chip (bit 0 = 0) the
 //! Manchester half is -b, which is +1 when floor(m/2^i) is even, i.e. bit i+1 of j is 0; for an
 //! odd chip it is +b, +1 when bit i+1 is 1. Every row has 50 % duty, no run longer than two

@@ -2,5 +2,7 @@
 //! decoded, reconstructed and scored) and the report (`report.json`, `report.html` with its
 //! three.js view, previews and surface meshes). The commands themselves are in the binary.
 
+#![deny(missing_docs)]
+
 pub mod demo;
 pub mod export;

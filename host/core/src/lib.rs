@@ -14,6 +14,8 @@
 //! Nothing here decodes, reconstructs or simulates: those are `meb-pipeline` and `meb-sim`,
 //! which both depend on this crate and never on each other.
 
+#![deny(missing_docs)]
+
 pub mod capture;
 pub mod datasets;
 pub mod flicker;

@@ -106,7 +106,7 @@ pub struct NormalPlane {
 const MAX_TILT_RAD: f64 = 80.0 * std::f64::consts::PI / 180.0;
 
 impl NormalPlane {
-    /// The normal on the circle nearest `n` in angle, within [`MAX_TILT_RAD`] of the direction
+    /// The normal on the circle nearest `n` in angle, within \[`MAX_TILT_RAD`\] of the direction
     /// of `towards` in the plane; `None` when the constraint is degenerate or `n` is not finite.
     ///
     /// With e₁ the direction of `towards` in the circle's plane and e₂ = m̂ × e₁, `n` lies at the

@@ -11,6 +11,8 @@
 //! The wire format, the configuration, the USB identity and the luminaire's behaviour all come
 //! from the `protocol` crate, so the host, the firmware and the emulator cannot disagree.
 
+#![deny(missing_docs)]
+
 pub mod client;
 pub mod discovery;
 #[cfg(unix)]

@@ -3,37 +3,15 @@
 //! straightforward implementation: per-pixel SVD pseudo-inverse and unpreconditioned conjugate
 //! gradients. The "stages" group times the two halves of "meb" separately.
 //!
-//! Measured on the 2-core dev machine (shared with other jobs; medians of two runs of
-//! `cargo bench -p meb --bench reconstruct -- --sample-size 10`):
-//!
-//! | case                        | before (MIC(0)-PCG) | after (multigrid PCG) |
-//! |-----------------------------|---------------------|-----------------------|
-//! | meb, PS + integration       | 92 ms               | 13.9 ms               |
-//! | straightforward             | 90 ms               | 86 ms                 |
-//! | stage: photometric stereo   | 11 ms               | 5.9 ms                |
-//! | stage: LS integration       | 56 ms (104 CG it.)  | 9.2 ms (9 CG it.)     |
-//!
-//! meb is ≈ 6× faster than the straightforward version; the issue's target is ≤ 25 ms.
-//!
 //! The "near-field" group times the per-pixel solve as `meb video`'s near-field stages run it:
 //! light vectors per pixel from the sphere's depth (no cached inverses) and a noise map.
-//! Session 41: the normal equations' inverse from the symmetric adjugate with one reciprocal
-//! (nalgebra's `try_inverse` divides nine times, after a separate determinant), decisions taken
-//! on G = ρn (n·v, n·L_i have G's signs) with ρ and n formed once at the end, the χ² limits
-//! tabulated per degree of freedom, and a Lambertian emitter's light vector without its square
-//! root (Φ·cos θ/d³ = Φ·(d cos θ)/d⁴). Alternated runs of main and this code, three pairs:
-//! `model_misfit_at_one_offset` 1.61 → 1.39 ms (−14 %); `estimate_normals` unchanged within the
-//! noise (8.7–9.7 ms; whole-frame passes over 921 600 pixels dominate, 27 104 are solved).
 //!
-//! End to end against numpy/scipy (the issue's "`meb reconstruct` of a 32-frame PNG capture ≥ 5×
-//! a straightforward numpy/scipy pipeline"; `scripts/reference_pipeline.py` with numpy 2.4.6,
-//! scipy 1.17.1 and Pillow in a throw-away virtual environment): the 1280×720 capture of
-//! `meb simulate --frames 32 --camera-size 1280x720` (thesis-out-of-plane sphere), session 49,
-//! runs alternated. Before the report's previews were drawn in parallel: `meb` 0.49–0.51 s
-//! against 2.50 s (5.0×; read and decode 75 ms, four near-field passes 240–280 ms, the report's
-//! files 85 ms, of which the previews 46 ms, and the folder's commit 25 ms). After: `meb`
-//! 0.44–0.45 s against 2.91–2.99 s (6.5×; the reference's first run, with its imports cold,
-//! took 5.48 s).
+//! Current figures (2-core machine of the CI's kind): PS + integration 13.9 ms against 86 ms
+//! for the straightforward implementation (≈ 6×; photometric stereo 5.9 ms, least-squares
+//! integration 9.2 ms in 9 preconditioned CG iterations); `model_misfit_at_one_offset`
+//! 1.39 ms, `estimate_normals` 8.7–9.7 ms. End to end, `meb reconstruct` of a 32-frame
+//! 1280×720 PNG capture takes 0.44–0.45 s against 2.91–2.99 s for the numpy/scipy pipeline
+//! of `scripts/reference_pipeline.py` (6.5×). Dated measurements are in `NOTES.md`.
 
 use criterion::{Criterion, criterion_group, criterion_main};
 use meb_core::rig::Rig;

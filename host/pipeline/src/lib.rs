@@ -7,6 +7,8 @@
 //! 3-D frames; [`tof`] turns time-of-flight histograms into ranges, masks and fused depth.
 //! Inputs and outputs are `meb-core`'s types; the simulator (`meb-sim`) is used by tests only.
 
+#![deny(missing_docs)]
+
 pub mod demod;
 pub mod integrate;
 pub mod photometric;

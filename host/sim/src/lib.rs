@@ -12,7 +12,10 @@
 //! (docs/formats/simulated-folders.md#the-synthetic-data-set); [`exposure`] picks a gain that
 //! does not clip, as an auto-exposed camera would.
 //!
-//! This module never uses `demod`, `photometric` or `integrate` code.
+//! This crate depends on `meb-core` only: it cannot use the decoder or the reconstruction it is
+//! the oracle of.
+
+#![deny(missing_docs)]
 
 pub mod capture;
 pub mod dataset;

@@ -1,5 +1,6 @@
 //! `meb decode`: demodulate a capture into one image per LED and write the output directory.
 
+use super::parse;
 use anyhow::{Context, Result, bail};
 use clap::Args;
 use indicatif::{ProgressBar, ProgressStyle};
@@ -33,88 +34,76 @@ pub struct DecodeArgs {
 #[derive(Args)]
 pub struct DecodeOptions {
     /// Number of LEDs (1..=8) or `auto` [default: 4, or the rig's LED count in `reconstruct`].
-    #[arg(long)]
-    leds: Option<String>,
+    #[arg(long, value_parser = parse::leds)]
+    leds: Option<LedCount>,
     /// Number of frames to use (≥ 2^(N+1)); default all.
-    #[arg(long)]
-    frames: Option<usize>,
+    #[arg(long, value_parser = clap::value_parser!(u32).range(2..))]
+    frames: Option<u32>,
     /// Frames to skip at the start.
     #[arg(long, default_value_t = 0)]
     start: usize,
-    /// Amplitude estimator: `waveform` (matched filter, default) or `thesis`.
-    #[arg(long, default_value = "waveform")]
-    estimator: String,
+    /// Amplitude estimator.
+    #[arg(long, value_enum, default_value_t = EstimatorArg::Waveform)]
+    estimator: EstimatorArg,
     /// Code-value linearisation: `none`, `srgb` or `gamma:G`.
-    #[arg(long, default_value = "none")]
-    linearize: String,
+    #[arg(long, default_value = "none", value_parser = parse::linearize)]
+    linearize: Linearize,
     /// Region of interest WxH+X+Y.
-    #[arg(long)]
-    roi: Option<String>,
+    #[arg(long, value_parser = parse::roi)]
+    roi: Option<Roi>,
     /// Camera frame rate override (phone containers may store the playback rate).
-    #[arg(long)]
+    #[arg(long, value_parser = parse::positive)]
     fps: Option<f64>,
     /// Known chips per frame (chip rate / frame rate) instead of estimating it.
-    #[arg(long)]
+    #[arg(long, value_parser = parse::positive)]
     rate_ratio: Option<f64>,
     /// Largest |chips per frame − 1| searched when the rate ratio is estimated.
-    #[arg(long, default_value_t = 0.06)]
+    #[arg(long, default_value_t = 0.06, value_parser = parse::non_negative)]
     max_rate_mismatch: f64,
-    /// Known exposure as a fraction of the frame period instead of estimating it.
-    #[arg(long)]
+    /// Known exposure as a fraction of the frame period (0, 1] instead of estimating it.
+    #[arg(long, value_parser = parse::fraction)]
     exposure: Option<f64>,
     /// Known rolling-shutter line time in microseconds (0 = global shutter); fitted from
     /// the video when absent.
-    #[arg(long)]
+    #[arg(long, value_parser = parse::non_negative)]
     line_time_us: Option<f64>,
     /// Raw input layout WxHxBITS (e.g. 1280x720x8).
-    #[arg(long)]
-    raw: Option<String>,
+    #[arg(long, value_parser = parse::raw)]
+    raw: Option<RawLayout>,
     /// Decode even when the video shows a different LED count than --leds.
     #[arg(long)]
     no_led_check: bool,
 }
 
-/// Parses "W x H + X + Y".
-fn parse_roi(text: &str) -> Result<Roi> {
-    let (size, offset) = text.split_once('+').unwrap_or((text, "0+0"));
-    let (w, h) = size.split_once('x').context("--roi needs WxH+X+Y")?;
-    let (x, y) = offset.split_once('+').context("--roi needs WxH+X+Y")?;
-    Ok(Roi {
-        width: w.parse().context("--roi width")?,
-        height: h.parse().context("--roi height")?,
-        x: x.parse().context("--roi x")?,
-        y: y.parse().context("--roi y")?,
-    })
+/// The amplitude estimators `--estimator` accepts.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, clap::ValueEnum)]
+enum EstimatorArg {
+    /// The matched filter on the waveform fitted from the whole image.
+    Waveform,
+    /// The thesis' projection and maximum (Eqs. 3.25–3.30).
+    Thesis,
+}
+
+impl From<EstimatorArg> for Estimator {
+    fn from(arg: EstimatorArg) -> Self {
+        match arg {
+            EstimatorArg::Waveform => Estimator::Waveform,
+            EstimatorArg::Thesis => Estimator::Thesis,
+        }
+    }
 }
 
 /// Builds the decoder settings; `default_leds` applies when --leds is absent, `force` keeps
 /// a result the quality verdict finds implausible (recorded as overridden).
 pub fn config(args: &DecodeOptions, default_leds: usize, force: bool) -> Result<DecodeConfig> {
-    let leds = match args.leds.as_deref() {
-        None => LedCount::Fixed(default_leds),
-        Some("auto") => LedCount::Auto,
-        Some(n) => LedCount::Fixed(n.parse().context("--leds must be a number or `auto`")?),
-    };
-    let estimator = match args.estimator.as_str() {
-        "waveform" => Estimator::Waveform,
-        "thesis" => Estimator::Thesis,
-        other => bail!("unknown --estimator {other} (waveform or thesis)"),
-    };
-    let linearize = match args.linearize.as_str() {
-        "none" => Linearize::None,
-        "srgb" => Linearize::Srgb,
-        other => match other.strip_prefix("gamma:") {
-            Some(g) => Linearize::Gamma(g.parse().context("--linearize gamma:G")?),
-            None => bail!("unknown --linearize {other} (none, srgb or gamma:G)"),
-        },
-    };
+    let leds = args.leds.unwrap_or(LedCount::Fixed(default_leds));
     Ok(DecodeConfig {
         leds,
-        frames: args.frames,
+        frames: args.frames.map(|f| f as usize),
         start: args.start,
-        estimator,
-        linearize,
-        roi: args.roi.as_deref().map(parse_roi).transpose()?,
+        estimator: args.estimator.into(),
+        linearize: args.linearize,
+        roi: args.roi,
         fps: args.fps,
         rate_ratio: args.rate_ratio,
         max_rate_mismatch: args.max_rate_mismatch,
@@ -130,24 +119,11 @@ pub fn config(args: &DecodeOptions, default_leds: usize, force: bool) -> Result<
     })
 }
 
-/// Parses "WxHxBITS".
-fn parse_raw(text: &str) -> Result<RawLayout> {
-    let parts: Vec<&str> = text.split('x').collect();
-    let [w, h, b] = parts.as_slice() else {
-        bail!("--raw needs WxHxBITS, e.g. 1280x720x8");
-    };
-    Ok(RawLayout {
-        width: w.parse().context("--raw width")?,
-        height: h.parse().context("--raw height")?,
-        bit_depth: b.parse().context("--raw bits")?,
-    })
-}
-
 /// How to open the input: frame rate override and raw layout.
 pub fn open_options(options: &DecodeOptions) -> Result<OpenOptions> {
     Ok(OpenOptions {
         fps: options.fps,
-        raw: options.raw.as_deref().map(parse_raw).transpose()?,
+        raw: options.raw,
     })
 }
 

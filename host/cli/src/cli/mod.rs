@@ -7,6 +7,7 @@ pub mod demo;
 pub mod device;
 pub mod hybrid;
 pub mod integrate;
+pub mod parse;
 pub mod photometric;
 pub mod reconstruct;
 pub mod simulate;

@@ -47,7 +47,7 @@ pub struct ReconstructArgs {
     /// Hybrid reconstruction (thesis Ch. 6): a `meb tof range` folder. Every object the range
     /// map separates is reconstructed in its own mask, placed at its absolute ToF depth and
     /// fused with it (one folder per object and objects.json); needs --calibration and a rig
-    /// with a [tof_camera].
+    /// with a `[tof_camera]` table.
     #[arg(long, requires = "calibration")]
     tof: Option<PathBuf>,
     /// With --tof: the `meb tof calibrate` folder (or its calibration.toml).

@@ -188,8 +188,8 @@ struct CaptureArgs {
     timeline_start: Option<f64>,
     /// Resize the rig's camera to WxH pixels, keeping its field of view (e.g. 384x216 for a
     /// quick run of a 1280x720 preset).
-    #[arg(long, value_name = "WxH")]
-    camera_size: Option<String>,
+    #[arg(long, value_name = "WxH", value_parser = super::parse::size)]
+    camera_size: Option<(usize, usize)>,
     /// Also render the rig's time-of-flight camera (thesis Ch. 6): SPAD histograms of the
     /// scene and of a reference board, chequerboard images in both cameras and the truth, in
     /// tof/ (see tof/tof.json for the `meb tof` and `meb reconstruct --tof` commands).
@@ -258,7 +258,7 @@ fn run_capture(args: &CaptureArgs) -> Result<()> {
         .as_ref()
         .context("--out DIR is required (where to write the capture)")?;
     let mut rig = Rig::load(&args.rig)?;
-    if let Some(size) = &args.camera_size {
+    if let Some(size) = args.camera_size {
         resize_camera(&mut rig, size)?;
     }
     if args.tof && rig.tof_camera.is_none() {
@@ -376,20 +376,8 @@ fn run_capture(args: &CaptureArgs) -> Result<()> {
     Ok(())
 }
 
-/// Sets the rig camera's size from "WxH", keeping its field of view.
-fn resize_camera(rig: &mut Rig, text: &str) -> Result<()> {
-    let parsed = text
-        .split_once(['x', 'X'])
-        .and_then(|(w, h)| {
-            Some((
-                w.trim().parse::<usize>().ok()?,
-                h.trim().parse::<usize>().ok()?,
-            ))
-        })
-        .filter(|&(w, h)| w > 0 && h > 0);
-    let Some((width, height)) = parsed else {
-        bail!("--camera-size {text:?}: expected WxH in pixels, e.g. 384x216");
-    };
+/// Sets the rig camera's size to (width, height), keeping its field of view.
+fn resize_camera(rig: &mut Rig, (width, height): (usize, usize)) -> Result<()> {
     let camera = &mut rig.camera;
     if camera.intrinsics.is_some() {
         bail!(

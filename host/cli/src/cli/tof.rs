@@ -83,8 +83,8 @@ pub struct CalibrateArgs {
     #[arg(long, value_delimiter = ',', required = true)]
     camera: Vec<PathBuf>,
     /// Inner corners of the board, COLSxROWS (e.g. 8x5).
-    #[arg(long)]
-    board: String,
+    #[arg(long, value_parser = super::parse::board)]
+    board: BoardSize,
     /// Square size, mm (recorded in the calibration).
     #[arg(long)]
     square_mm: Option<f64>,
@@ -112,9 +112,10 @@ pub struct MaskArgs {
         long,
         value_name = "A..B",
         conflicts_with = "segment",
-        required_unless_present = "segment"
+        required_unless_present = "segment",
+        value_parser = super::parse::interval
     )]
-    interval: Option<String>,
+    interval: Option<(f64, f64)>,
     /// Split the range map at range jumps and write one mask per object.
     #[arg(long)]
     segment: bool,
@@ -233,7 +234,7 @@ fn calibrate(args: &CalibrateArgs) -> Result<()> {
         args.range_mm.len(),
         args.tof.len()
     );
-    let board = BoardSize::parse(&args.board)?;
+    let board = args.board;
     require_corner_detector()?;
     let folder = super::common::output_folder(&args.out, "tof calibrate", args.force)?;
     let mut views = Vec::with_capacity(args.tof.len());
@@ -311,9 +312,8 @@ fn mask(args: &MaskArgs) -> Result<()> {
     let range: Array2<f32> = read_float::<Ix2>(&range_path, &[None, None])?;
     let calibration = load_calibration(&args.calibration)?;
     let masks: Vec<(Layer, Array2<bool>)> = match &args.interval {
-        Some(text) => {
-            let (lo, hi) = parse_interval(text)?;
-            vec![interval_mask(&range, lo, hi, &calibration, true)?]
+        Some((lo, hi)) => {
+            vec![interval_mask(&range, *lo, *hi, &calibration, true)?]
         }
         None => {
             let config = HybridConfig {
@@ -416,14 +416,6 @@ pub fn load_calibration(path: &Path) -> Result<Calibration> {
     Ok(Calibration::load(&file)?)
 }
 
-/// "A..B" in mm.
-fn parse_interval(text: &str) -> Result<(f64, f64)> {
-    let parsed = text
-        .split_once("..")
-        .and_then(|(a, b)| Some((a.trim().parse().ok()?, b.trim().parse().ok()?)));
-    parsed.with_context(|| format!("--interval {text:?}: expected A..B in mm, e.g. 650..760"))
-}
-
 /// A grey image: a 2-D float .npy, or an image file converted to luminance in [0, 1].
 fn read_grey(path: &Path) -> Result<Array2<f32>> {
     if path
@@ -450,16 +442,4 @@ pub fn write_json(path: &Path, value: &impl serde::Serialize) -> Result<()> {
     let text = serde_json::to_string_pretty(value)?;
     std::fs::write(path, text).map_err(|e| FilesError::write(path, e))?;
     Ok(())
-}
-
-#[cfg(test)]
-mod tests {
-    use super::*;
-
-    #[test]
-    fn intervals_parse_or_are_refused() {
-        assert_eq!(parse_interval("650..760").unwrap(), (650.0, 760.0));
-        let err = parse_interval("650-760").unwrap_err().to_string();
-        assert!(err.contains("A..B"), "{err}");
-    }
 }

@@ -153,3 +153,33 @@ fn a_mesh_without_area_is_an_error() {
     );
     assert!(!out.exists());
 }
+
+/// Structured and enumerated flags are parsed by clap: a bad value is a usage error (exit 2)
+/// that names the flag and what it accepts, before any input is opened.
+#[test]
+fn bad_flag_values_are_usage_errors_that_list_what_is_accepted() {
+    let cases: [(&[&str], &[&str]); 6] = [
+        (
+            &["--estimator", "median"],
+            &["--estimator", "waveform", "thesis"],
+        ),
+        (&["--leds", "9"], &["--leds", "1 to 8", "auto"]),
+        (&["--linearize", "gamma:0"], &["--linearize", "gamma:G"]),
+        (&["--roi", "64x48+1"], &["--roi", "WxH+X+Y"]),
+        (&["--raw", "64x48"], &["--raw", "WxHxBITS"]),
+        (&["--exposure", "1.5"], &["--exposure", "at most 1"]),
+    ];
+    for (flag, wanted) in cases {
+        let mut args = vec!["decode", "no-such-capture.y4m", "--out", "no-such-folder"];
+        args.extend_from_slice(flag);
+        let out = meb(&args);
+        assert_eq!(out.status.code(), Some(2), "meb {args:?}: {:?}", out.status);
+        let stderr = String::from_utf8_lossy(&out.stderr);
+        for w in wanted {
+            assert!(
+                stderr.contains(w),
+                "meb {args:?}: {w:?} missing from {stderr}"
+            );
+        }
+    }
+}

@@ -1,4 +1,4 @@
-//! Regression (issue #12, session 24): a clean window of a turning object decodes.
+//! Regression: a clean window of a turning object decodes.
 //!
 //! The thesis-dynamic rig's ellipsoid (100×60×60 mm) turning at 7.5 rpm, simulated with the
 //! defaults of `meb simulate` (exposure 1, chip rate = frame rate, seed 0) and decoded 32 frames

@@ -259,8 +259,9 @@ fn thesis_rig() -> Rig {
 
 #[test]
 fn three_percent_rate_offset_decodes_every_seed() {
-    // Chip rate 988.8 Hz at 960 fps (ρ = 1.03), exposure 0.9: seeds 13, 16 and 21 used to
-    // decode with exit 0 but exposure 0.02 / 0.51 / 0.76 and gains off by up to 30 %.
+    // Chip rate 988.8 Hz at 960 fps (ρ = 1.03), exposure 0.9: on seeds 13, 16 and 21 a timing
+    // fit that locks on the wrong minimum reports exposure 0.02 / 0.51 / 0.76 and gains off by
+    // up to 30 % with exit 0.
     for seed in [13, 16, 21] {
         let config = SimConfig {
             exposure: 0.9,
@@ -303,7 +304,7 @@ fn rate_offset_with_given_phases_keeps_all_four_leds() {
 
 #[test]
 fn short_exposures_at_the_chip_rate_keep_gains_within_one_percent() {
-    // ρ = 1, exposure 0.5 and 0.3, seed 3: LED 3 used to come out at 0.985 and 1.012.
+    // ρ = 1, exposure 0.5 and 0.3, seed 3: a biased exposure fit puts LED 3 at 0.985 and 1.012.
     for exposure in [0.5, 0.3] {
         let config = SimConfig {
             exposure,
@@ -318,8 +319,8 @@ fn short_exposures_at_the_chip_rate_keep_gains_within_one_percent() {
 
 #[test]
 fn rolling_shutter_is_fitted_by_default() {
-    // Line time 1.4 µs (a 0.97-chip phase ramp over 720 rows), exposure 0.5: LED 3 used to
-    // come out at 1.086 by default and 1.052 with 8 row bands.
+    // Line time 1.4 µs (a 0.97-chip phase ramp over 720 rows), exposure 0.5: a decoder that
+    // takes the shutter as global puts LED 3 at 1.086 (1.052 with 8 row bands).
     let config = SimConfig {
         exposure: 0.5,
         line_time_s: 1.4e-6,
@@ -441,7 +442,7 @@ fn implausible_decode_is_refused_unless_forced_and_reconstruct_checks_the_verdic
         "{text}"
     );
     assert!(!tmp.path().join("rec").exists());
-    // With --force the verdict no longer stops it (the reconstruction's own checks may still
+    // With --force the verdict does not stop it (the reconstruction's own checks may still
     // refuse these amplitudes, which are wrong).
     let forced = reconstruct(true);
     let text = String::from_utf8_lossy(&forced.stderr);
@@ -534,9 +535,9 @@ fn hil_settings_decode_without_a_line_delay() {
 
 /// The 75 mm cube corner-on at the default gain (thesis-out-of-plane rig, 256×144): the top
 /// face, the only one LEDs 1 and 2 reach, clips whenever three LEDs are on, so the pixels that
-/// do not clip show LEDs 3 and 4 alone. For these carrier phasings the decode used to be
-/// refused as "the video shows 3 modulated LEDs (decode 3)", which sent the user to a wrong
-/// decode; it must name the clipping instead. The same scene exposed without clipping must
+/// do not clip show LEDs 3 and 4 alone. For these carrier phasings a decoder that counts the
+/// LEDs of the unclipped pixels refuses as "the video shows 3 modulated LEDs (decode 3)",
+/// which sends the user to a wrong decode; it must name the clipping instead. The same scene exposed without clipping must
 /// decode all four LEDs, so the refusal is the clipping's and not the geometry's.
 #[test]
 fn leds_seen_only_in_clipped_pixels_are_refused_for_the_clipping() {

@@ -246,9 +246,9 @@ fn the_turning_ellipsoid_is_scored_frame_by_frame_within_the_thesis_accuracy() {
     }
     // Binned 2×2 before decoding: 160×90 3-D frames scored against the truth's block means.
     // At a quarter of the pixels the ellipsoid spans ~35×25 of them, so the shape is coarser
-    // (0.80–2.18 mm per 3-D frame when this was written, against 0.40–0.51 mm at full
-    // resolution) but still within the thesis' 4.8–11 mm. (At 1280×720 binned to 640×360 the
-    // binned frames are the more accurate: `benches/video.rs`, session 29.)
+    // (0.80–2.18 mm per 3-D frame measured, against 0.40–0.51 mm at full resolution) but still
+    // within the thesis' 4.8–11 mm. (At 1280×720 binned to 640×360 the binned frames are the
+    // more accurate: `host/pipeline/benches/NOTES.md`.)
     let (binned, binned_json) = scored("binned", &["--bin", "2"]);
     assert_eq!(binned_json["settings"]["bin"], 2);
     assert_eq!(binned_json["summary"]["reconstructed"], 5);

@@ -12,7 +12,7 @@
 //! A block's samples are summed when the sum fits in 16 bits (black and white levels scale by
 //! k², the bit depth grows by ⌈log₂ k²⌉: 8-bit 2×2 blocks give 10-bit samples); otherwise they
 //! are averaged with rounding at the stream's own depth and levels. A block with any saturated
-//! sample (at or above the last code that rounds to white, as [`meb_pipeline::demod`] classifies
+//! sample (at or above the last code that rounds to white, as the decoder (`meb-pipeline`) classifies
 //! pixels) is saturated as a whole: its sum would look unsaturated but is not linear in the
 //! light. Rows and columns that do not fill a whole block at the bottom and right are dropped.
 //! Binning code values is exact only for linear codes: a linearising decoder must refuse binned

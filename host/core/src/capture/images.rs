@@ -62,7 +62,7 @@ const DECODE_AHEAD: usize = 8;
 /// A decoded still: width, height, bit depth and samples.
 type Still = (usize, usize, u8, Samples);
 
-/// A directory of still frames, read in name order; files are decoded [`DECODE_AHEAD`] at a
+/// A directory of still frames, read in name order; files are decoded \[`DECODE_AHEAD`\] at a
 /// time in parallel, so memory holds at most that many frames beyond the caller's.
 #[derive(Debug)]
 pub struct ImageSequence {

@@ -91,11 +91,11 @@ pub struct DecodeConfig {
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize)]
 #[serde(rename_all = "kebab-case")]
 pub enum SeedMethod {
-    /// Each LED's rank-1 template read off the window's signal space ([`super::template`]):
+    /// Each LED's rank-1 template read off the window's signal space (\[`super::template`\]):
     /// shifts in closed form, a few exposures.
     RankOne,
     /// Each LED's parametric template scored against the signal space on a grid of shifts
-    /// and exposures ([`super::seed`]).
+    /// and exposures (\[`super::seed`\]).
     #[default]
     Grid,
 }

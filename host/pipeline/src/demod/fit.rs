@@ -10,7 +10,7 @@
 //! (variable projection: Golub & Pereyra, SIAM J. Numer. Anal. 1973) and the residual to
 //! minimise is `(I − Q_rQ_rᵀ)·X_rᵀ` summed over rows, Q_r an orthonormal basis of the
 //! templates at row r. The data enter compressed without loss of signal: a global shutter's
-//! signal is the span of the sample's Gram eigenvectors ([`super::spectrum`]), scaled by the
+//! signal is the span of the sample's Gram eigenvectors (\[`super::spectrum`\]), scaled by the
 //! square roots of their eigenvalues; a rolling shutter's rows each keep their own N leading
 //! singular directions (one row of the sample has one set of templates).
 //!
@@ -18,7 +18,7 @@
 //! rows-agree screen of each band are independent and run in parallel; the residual is
 //! evaluated in a reused work space (a fit evaluates it hundreds of times).
 //!
-//! Phases ([`fit_timing`]): (1) each seed of [`super::seed`] is refined with λ = 0 and the best
+//! Phases ([`fit_timing`]): (1) each seed of \[`super::seed`\] is refined with λ = 0 and the best
 //! kept; (2) unless the line delay is given, row bands of the sample get their own shifts, the
 //! shifts' trend across the bands seeds λ, and a band-wise refinement (several exposures, then
 //! a grid re-search of each LED's shift, then again least squares) decides whether the rows
@@ -68,7 +68,7 @@ const ROWS_PER_TEST_BAND: usize = 8;
 /// Smallest phase ramp over the region, chips, that counts as a rolling shutter.
 const MIN_RAMP_CHIPS: f64 = 0.01;
 /// A line delay is kept when it lowers the band-wise cost by this many noise variances (and
-/// by more than one extra parameter per band would by noise, see [`ramp_threshold`]), and
+/// by more than one extra parameter per band would by noise, see \[`ramp_threshold`\]), and
 /// the row-wise cost by as many.
 pub const RAMP_SIGNIFICANCE: f64 = 25.0;
 /// A standard error is reported as at most this (exposure in frame periods, line delay in
@@ -168,7 +168,7 @@ pub struct TimingFit {
     /// The fitted line delay sits at the largest one searched.
     pub line_delay_at_limit: bool,
     /// 1σ standard error of the exposure (frame periods) from the fit's covariance; 0 when
-    /// given, [`UNDETERMINED_STD`] when the data do not constrain it or it ended on a bound.
+    /// given, \[`UNDETERMINED_STD`\] when the data do not constrain it or it ended on a bound.
     pub exposure_std: f64,
     /// 1σ standard error of the line delay (frame periods per row); 0 when given or not fitted.
     pub line_delay_std: f64,

@@ -19,23 +19,23 @@
 //!
 //! The timing estimate is global, not a local search on the frame mean:
 //!
-//! 1. [`sample`]: the window's most modulated pixels (strided candidates ranked by temporal
+//! 1. \[`sample`\]: the window's most modulated pixels (strided candidates ranked by temporal
 //!    variance), so a small object in a wide, dark view drives the estimate rather than the
 //!    unlit background. X is that sample, centred (pixels × F).
-//! 2. [`spectrum`]: the leading eigenvectors V of G = XᵀX span every LED's waveform, because
+//! 2. \[`spectrum`\]: the leading eigenvectors V of G = XᵀX span every LED's waveform, because
 //!    X = A·Tᵀ + noise with T = [u_0 … u_{N−1}] (F × N); per LED this is the rank-1 structure
 //!    of docs/maths/demodulation.md#the-subspace-projection: the projection of the window onto LED
 //!    i's subspace is, across pixels,
 //!    A_i(p)·(projected u_i)ᵀ. The eigenvalues beyond the signal give the noise energy σ²_G.
 //!    Randomised subspace iteration keeps it cheap.
-//! 3. [`seed`]: each LED's waveform is found in V on its own — the fraction |Vᵀt|²/|t|² of a
+//! 3. \[`seed`\]: each LED's waveform is found in V on its own — the fraction |Vᵀt|²/|t|² of a
 //!    candidate template t that V holds is 1 for the true (ρ, e, Δ_i) and does not depend on
 //!    the A_i, so neither other LEDs nor a dark background bias it, and the scale and sign
 //!    ambiguity of singular vectors never arises (templates are scored, not read off V).
 //!    ρ comes from a one-dimensional scan, e from a scan at that ρ with Δ_i refined per LED
 //!    on a grid of shifts ([`SeedMethod::Grid`], the default). [`SeedMethod::RankOne`]
 //!    instead reads each LED's template off the window as the leading eigenvector of its
-//!    block of the signal space's coordinates in the LEDs' chip templates ([`template`]),
+//!    block of the signal space's coordinates in the LEDs' chip templates (\[`template`\]),
 //!    which gives Δ_i in closed form — exact at ρ = 1, a seed the refinement must correct
 //!    away from it.
 //! 4. [`fit`]: those seeds start a least-squares refinement of (ρ, e, Δ_i) on the sample
@@ -50,7 +50,7 @@
 //!
 //! The LED-count check fits one LED more than requested (or the most the window allows, for
 //! [`LedCount::Auto`]) and counts the LEDs with signal above noise. Long captures are decoded
-//! in windows of bounded memory ([`window`]), each with its own timing fit, and averaged.
+//! in windows of bounded memory (\[`window`\]), each with its own timing fit, and averaged.
 //! [`WindowDecoder`] is that per-window core: template estimate + matched filter on a window of
 //! frames, returning per-LED images, noise and fit quality.
 //!

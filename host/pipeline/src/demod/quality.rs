@@ -1,7 +1,7 @@
 //! How well the fitted timing explains each LED's modulation, and the verdict on a decode.
 //!
 //! On the pixel sample (centred values x_p, noise energy σ²_G = Σ_p σ_p² per direction, see
-//! [`super::spectrum`]), for LED i with template t_i
+//! \[`super::spectrum`\]), for LED i with template t_i
 //! (docs/maths/demodulation.md#the-received-signal) at each pixel's row:
 //!
 //! - signal: S_i = Σ_p (x_p·û_i)² − σ²_G, û_i the unit part of t_i orthogonal to the other
@@ -20,9 +20,9 @@
 //!   the step lands on the low harmonics that span the slow carriers' subspaces although the
 //!   timing is right; a wrong timing leaves a misfit in proportion to every pixel's modulation
 //!   (a wrong shift, rate or exposure moves or reshapes the same chip edges everywhere). So a
-//!   pixel is set aside as changing when U_p exceeds noise alone by [`CHANGING_NOISE_SIGMAS`]
-//!   standard deviations (σ²·√(2·d_p)) *and* its share U_p / S_p is [`CHANGING_SHARE_RATIO`]
-//!   times the sample's median share; at most [`MAX_CHANGING_SHARE`] of the sample (beyond it
+//!   pixel is set aside as changing when U_p exceeds noise alone by \[`CHANGING_NOISE_SIGMAS`\]
+//!   standard deviations (σ²·√(2·d_p)) *and* its share U_p / S_p is \[`CHANGING_SHARE_RATIO`\]
+//!   times the sample's median share; at most \[`MAX_CHANGING_SHARE`\] of the sample (beyond it
 //!   the misfit is not local and nothing is set aside), and the LEDs' figures are measured
 //!   again on the pixels kept. `changing_share` records what was set aside.
 //!

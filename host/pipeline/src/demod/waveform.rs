@@ -15,11 +15,11 @@
 //! With w = 1 and ρ = 1 this is exactly docs/maths/demodulation.md#the-received-signal's
 //! `(1-α)·s[j+k] + α·s[j+k+1]`. The integral is
 //! evaluated in O(1) from the carrier's cumulative sum S, which is periodic because every
-//! carrier has 50 % duty: S(t) = S[m] + (t − m)·s[m] with m = ⌊t⌋.
+//! carrier has 50 % duty: S(t) = S\[m\] + (t − m)·s\[m\] with m = ⌊t⌋.
 //!
 //! Whole templates ([`Timing::fill_template`], the seed scans' and the timing fit's innermost
 //! loop) use the carriers' Manchester structure instead of the tables, so that the loop
-//! vectorises without gathers: s_i[m] = +1 exactly when bit 0 of m equals bit i + 1
+//! vectorises without gathers: s_i\[m\] = +1 exactly when bit 0 of m equals bit i + 1
 //! (docs/maths/carriers.md#the-carrier-table),
 //! so every chip pair (2q, 2q+1) sums to zero and, with σ = 1 − 2·(bit i + 1 of m),
 //!

@@ -14,7 +14,7 @@
 //! together. The weights are updated from the current depth and the weighted problem re-solved
 //! (iteratively reweighted least squares) until the energy changes by less than a tolerance.
 //! Each edge collects the forward equation of its left/upper pixel and the backward equation of
-//! its right/lower one; their weighted mean is the edge's target ([`side_equations`]), so every
+//! its right/lower one; their weighted mean is the edge's target (\[`side_equations`\]), so every
 //! solve is a weighted graph Laplacian for the multigrid-preconditioned CG of
 //! [`super::least_squares`]. With w⁺ = w⁻ = ½ and no n_z factor this is plain least squares.
 

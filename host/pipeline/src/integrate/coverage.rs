@@ -4,9 +4,9 @@
 //! n·m = 0 with m = A₂·L₁ − A₁·L₂, and n·L₁ > 0 picks the lit half of that great circle. The
 //! missing angle comes from the integrability of the surface (Onn & Bruckstein, "Integrability
 //! disambiguates surface recovery in two-image photometric stereo", IJCV 1990). Since the normal
-//! is an affine function of the slopes ([`super::grid`]), the circle is a line in slope space, and
+//! is an affine function of the slopes (\[`super::grid`\]), the circle is a line in slope space, and
 //! the integrator alternates between solving for depth and moving each such pixel's slopes to the
-//! point of its line that best fits the current depth ([`slopes_on_line`]), kept on the lit half
+//! point of its line that best fits the current depth (\[`slopes_on_line`\]), kept on the lit half
 //! of the circle and within a tilt limit ([`NormalPlane::project`]). The albedo then fixes the
 //! angle up to a mirror choice: ρn = g₀ ± √(ρ² − |g₀|²)·ĉ, with g₀ the least-norm solution of
 //! both readings (in the plane of L₁ and L₂) and ĉ the circle's direction perpendicular to it.
@@ -24,7 +24,7 @@
 //! of simulator seeds 1–4 from 5.24 / 4.53 / 5.69 / 5.23 mm to 3.97 / 4.02 / 4.78 / 3.46 mm.
 //!
 //! Holes (pixels lit by fewer than two LEDs that the object surrounds) get slopes interpolated
-//! from their surroundings by push–pull ([`super::inpaint`]) and a low weight, so the integrator bridges
+//! from their surroundings by push–pull (\[`super::inpaint`\]) and a low weight, so the integrator bridges
 //! them instead of cutting the object into islands.
 
 use super::least_squares::Topology;

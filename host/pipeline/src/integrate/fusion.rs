@@ -16,7 +16,7 @@
 //! is the linear system (L + Λ) z = Dᵀḡ + Λ p: the mask's graph Laplacian plus a diagonal.
 //! Its slowest mode is a constant per connected component (the offset the positions fix), whose
 //! eigenvalue Σλ_i is tiny next to the Laplacian's, so conjugate gradients is preconditioned by
-//! the aggregation multigrid V-cycle of [`super::multigrid`] *plus* an exact solve on the space of
+//! the aggregation multigrid V-cycle of \[`super::multigrid`\] *plus* an exact solve on the space of
 //! per-component constants (additive two-level deflation; Tang, Nabben, Vuik & Erlangga,
 //! J. Sci. Comput. 2009): B r = MG(r) + Σ_c 1_c·(Σ_{i∈c} r_i)/(Σ_{i∈c} λ_i). Components with no
 //! position at all cannot be placed and are left out.

@@ -7,7 +7,7 @@
 //! ([`super::coverage`]) reweight the two one-sided equations of each edge. The normal equations
 //! are a weighted graph Laplacian on the mask (Neumann boundary, any shape, one free constant per
 //! connected piece), solved by conjugate gradients preconditioned with an aggregation multigrid
-//! V-cycle ([`super::multigrid`]), which keeps the iteration count nearly independent of the
+//! V-cycle (\[`super::multigrid`\]), which keeps the iteration count nearly independent of the
 //! mask's size.
 
 use super::multigrid::{GridLaplacian, Multigrid, NONE, PARALLEL_BAND as NODES_PER_TASK};

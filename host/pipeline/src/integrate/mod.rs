@@ -1,7 +1,7 @@
 //! Normal integration: normals → depth on the camera grid
 //! (docs/maths/integration.md#normal-integration, thesis §3.2).
 //!
-//! Normals become slopes of the unknown ([`grid`]): the height z with ∂z/∂x = −n_x/n_z,
+//! Normals become slopes of the unknown (\[`grid`\]): the height z with ∂z/∂x = −n_x/n_z,
 //! ∂z/∂y = −n_y/n_z (y up, towards row 0) for an orthographic camera, or a pixel-unit log depth
 //! for a perspective one (Quéau, Durou & Aujol, "Normal integration: a survey", 2018). Three
 //! integrators work on arbitrary masks:
@@ -12,7 +12,7 @@
 //! - the thesis' Fast Marching integrator on W = z + λf ([`fast_marching`]).
 //!
 //! The least-squares solves use conjugate gradients with an aggregation-multigrid preconditioner
-//! ([`multigrid`]). Pixels lit by only two LEDs and holes inside the object are integrated too
+//! (\[`multigrid`\]). Pixels lit by only two LEDs and holes inside the object are integrated too
 //! ([`coverage`]), so the object is not cut into islands; separate pieces of the mask are anchored
 //! (and Fast-Marched) separately. Depth zero is put on each piece's outline. The thesis' artefact
 //! filter ([`filter`]) then drops points that jump more than 10 mm from a neighbour. Everything

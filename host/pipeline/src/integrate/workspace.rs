@@ -5,7 +5,7 @@
 //! their mask. [`IntegrationWorkspace`] keeps the last solve's integration graph;
 //! [`super::integrate_surface_with`] reuses it when the next problem has the same mask on the
 //! same window, with its multigrid aggregation (levels, node maps, components). The coarse
-//! operators themselves are recomputed for every solve ([`Multigrid::reweight`]): the two-LED
+//! operators themselves are recomputed for every solve (\[`Multigrid::reweight`\]): the two-LED
 //! pixels' edge weights follow their slopes, and operators built for the first coverage pass
 //! doubled the conjugate-gradient iterations of the later ones on the turning ellipsoid (75
 //! instead of 36). The graph's Laplacian is kept too and takes each solve's edge weights in

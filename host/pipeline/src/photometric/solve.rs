@@ -1,7 +1,7 @@
 //! The per-pixel solve G = L⁺A, ρ = |G|, n = G/ρ
 //! (docs/maths/photometric-stereo.md#the-per-pixel-solve) with a statistical shadow test.
 //!
-//! Which LEDs light a pixel is decided from its values and their noise ([`PixelSolver`]):
+//! Which LEDs light a pixel is decided from its values and their noise (\[`PixelSolver`\]):
 //!
 //! 1. LED i counts as lit when A_i > k·σ_i, σ_i = g_i·σ(p) the pixel's level noise times the
 //!    LED's noise gain ([`super::noise`]); k = `shadow_sigmas`. Without a noise map, when A_i >

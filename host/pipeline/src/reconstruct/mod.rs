@@ -131,7 +131,7 @@ const WARM_COVERAGE_ALTERNATIONS: usize = 1;
 
 /// Relative residual at which conjugate gradients stops in a warm pass. It starts next to the
 /// answer; on the turning ellipsoid 10⁻⁴ instead of 10⁻⁵ moved no window's depth RMSE by more
-/// than 0.1 µm. 10⁻³ instead of 10⁻⁴ (session 36; 1280×720, 600 frames, 15 windows against
+/// than 0.1 µm. 10⁻³ instead of 10⁻⁴ (1280×720, 600 frames, 15 windows against
 /// truth every 20 frames) moved them by −1.1 to +2.4 µm (median +0.6 µm, on RMSEs of
 /// 0.52–0.80 mm) and cut a warm window's iterations from 5 to 3 (≈ 2 ms of a 40 ms 3-D frame).
 const WARM_SOLVE_TOLERANCE: f64 = 1e-3;
@@ -230,7 +230,7 @@ pub struct Reconstruction {
     pub timings: Vec<StageTiming>,
     /// Whether it started from a warm start.
     pub start: Start,
-    /// Whether the depth rests on what the LEDs measured ([`support`]): a result to refuse
+    /// Whether the depth rests on what the LEDs measured (\[`support`\]): a result to refuse
     /// unless its verdict is plausible.
     pub support: Support,
 }

@@ -34,10 +34,10 @@ use meb_core::types::ConfidenceCounts;
 /// share of 0.77 or more (spheres 0.78, ellipsoids 0.77–0.98, blobby shapes 0.83–0.98); the
 /// two-LED cubes that were 8–13 mm off had 0.04–0.08, and the turning corner-on cube's
 /// windows 0.27–0.39. The windows of the turning ellipsoid (1280×720, thesis-dynamic, 0.4–1.6
-/// mm) go down to 0.688. It was 0.5 until the corner-on cube was captured without clipping
-/// (`meb simulate --auto-exposure`, out-of-plane and dynamic rigs, 320×180 and 1280×720): one
-/// face measured, the other lit by two LEDs and tilted by the integrator's guess, at a share
-/// of 0.505–0.507 and 5.1–11 mm depth RMSE, written with exit 0.
+/// mm) go down to 0.688. A floor of 0.5 is too low: the corner-on cube captured without
+/// clipping (`meb simulate --auto-exposure`, out-of-plane and dynamic rigs, 320×180 and
+/// 1280×720), one face measured and the other lit by two LEDs and tilted by the integrator's
+/// guess, has a share of 0.505–0.507 at 5.1–11 mm depth RMSE.
 pub const MIN_MEASURED_SHARE: f64 = 0.6;
 
 /// What the check found: the verdict and the figures behind it.

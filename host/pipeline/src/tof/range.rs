@@ -1,5 +1,5 @@
 //! Range from TCSPC histograms by cross-correlation with a reference histogram (thesis §6.2.2,
-//! after Griffiths et al. [62]: the shift of the scene histogram against a histogram of a white
+//! after Griffiths et al. \[62\]: the shift of the scene histogram against a histogram of a white
 //! board at a known distance).
 //!
 //! Per pixel, the central part of the histogram (all but `m` bins at each end, m = the largest
@@ -10,7 +10,7 @@
 //! ```
 //!
 //! computed for all k at once by FFT (rustfft; one plan per run), and normalised by the spread
-//! of the reference under the template, q[k]/σ_r(k) (normalised cross-correlation; Lewis, "Fast
+//! of the reference under the template, q\[k\]/σ_r(k) (normalised cross-correlation; Lewis, "Fast
 //! normalized cross-correlation", 1995, with sliding sums). Every lag sees the same bins of the
 //! scene, so there is no overlap bias towards lag 0; the zero-mean template makes q blind to any
 //! constant background in either histogram; the normalisation removes the pull of pulse energy

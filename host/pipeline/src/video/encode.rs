@@ -3,7 +3,7 @@
 //!
 //! A [`VideoEncoder`] writes several videos of the same picture size side by side, one picture
 //! of each per step. MP4: one FFmpeg process takes them all, stacked one above the other as
-//! one raw `yuv420p` frame (converted here, [`super::yuv`]), and splits and crops them back
+//! one raw `yuv420p` frame (converted here, \[`super::yuv`\]), and splits and crops them back
 //! into one `libx264` MP4 each (`-filter_complex split,crop`; no conversion in FFmpeg). Each
 //! picture is piped as it is made, so nothing accumulates in memory, and the process starts
 //! once: FFmpeg's start-up (dynamic linking of its 200-odd libraries) costs about 60 ms of CPU,

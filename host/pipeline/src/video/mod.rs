@@ -496,11 +496,11 @@ enum LeftOut {
 /// Runs the video pipeline over `source` (module docs), calling `sink` with every window as
 /// soon as it is done; `truth` scores the 3-D frames.
 ///
-/// Two stages overlap: a decoding thread (with a pool of its own, [`DECODING_THREADS`]) reads
+/// Two stages overlap: a decoding thread (with a pool of its own, \[`DECODING_THREADS`\]) reads
 /// each window ([`FrameStream`]), decodes it with the carried timing ([`carry`]), measures its
 /// motion and, with [`MotionPolicy::Place`], places it, and reads the truth for the chosen
 /// window; the calling thread reconstructs the chosen windows in order (each warm-started from the one before, in a pool on every core,
-/// [`stage_pool`]), scores them and hands them to `sink`. At most [`DECODED_AHEAD`] decoded
+/// \[`stage_pool`\]), scores them and hands them to `sink`. At most [`DECODED_AHEAD`] decoded
 /// windows wait between the two, so memory stays bounded by a few windows.
 pub fn process(
     source: Box<dyn FrameSource>,

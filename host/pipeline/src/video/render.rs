@@ -82,9 +82,9 @@ impl SampledObject {
 /// The two pictures of one 3-D frame, drawn from one sampling of its depth.
 #[derive(Debug, Clone, PartialEq)]
 pub struct Pictures {
-    /// Depth through the colour ramp ([`depth_picture`]).
+    /// Depth through the colour ramp (\[`depth_picture`\]).
     pub depth: RgbImage,
-    /// The surface shaded from the camera's viewpoint ([`shaded_picture`]).
+    /// The surface shaded from the camera's viewpoint (\[`shaded_picture`\]).
     pub shaded: RgbImage,
 }
 
