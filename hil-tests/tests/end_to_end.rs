@@ -12,7 +12,7 @@ use meb_core::metrics::depth::compare_depth;
 use meb_core::rig::Rig;
 use meb_device::{EmulatorOptions, TimelineWaveform, VirtualLuminaire};
 use meb_pipeline::demod::{DecodeConfig, Linearize, decode};
-use meb_pipeline::reconstruct::{ReconstructConfig, from_decoded};
+use meb_pipeline::reconstruct::{ReconstructConfig, Request, Source, reconstruct};
 use meb_sim::exposure::expose_without_clipping;
 use meb_sim::{NoiseModel, Scene, SceneObject, Shape, SimConfig, SimulatedCapture, ToneCurve};
 use ndarray::Array2;
@@ -97,8 +97,13 @@ fn configured_luminaire_to_depth_map_meets_the_target() {
         !decoded.saturated.iter().any(|&s| s),
         "the capture must not clip"
     );
-    let reconstruction =
-        from_decoded(&decoded, &rig, None, &ReconstructConfig::decoded_capture()).unwrap();
+    let reconstruction = reconstruct(
+        Source::Decoded(&decoded),
+        &rig,
+        &ReconstructConfig::decoded_capture(),
+        Request::default(),
+    )
+    .unwrap();
     assert!(
         reconstruction.support.verdict.is_plausible(),
         "{:?}",

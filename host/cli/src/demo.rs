@@ -1,7 +1,7 @@
 //! The end-to-end demonstration (docs/maths/accuracy.md#the-demonstration): simulate a thesis
 //! scene, decode it with the
 //! MEB-FDMA demodulator, reconstruct it through the decoded-capture path every other caller
-//! uses ([`meb_pipeline::reconstruct::from_decoded`]), and compare with the simulator's ground truth
+//! uses ([`meb_pipeline::reconstruct::reconstruct`]), and compare with the simulator's ground truth
 //! over the surface lit by ≥ 3 LEDs.
 //!
 //! The capture is exposed like a real one, so that nothing clips
@@ -13,7 +13,7 @@ use meb_core::rig::Rig;
 use meb_core::timing::StageTiming;
 use meb_pipeline::demod::{DecodeConfig, Decoded, DemodError, Linearize, decode};
 use meb_pipeline::reconstruct::{
-    ReconstructConfig, ReconstructError, Reconstruction, from_decoded,
+    ReconstructConfig, ReconstructError, Reconstruction, Request, Source, reconstruct,
 };
 use meb_sim::exposure::expose_without_clipping;
 use meb_sim::{
@@ -108,7 +108,7 @@ pub fn run(
     let source: &mut dyn FrameSource = &mut capture;
     let decoded = decode(source, decode_config, progress)?;
     timings.push(StageTiming::since("render frames + decode", start));
-    let reconstruction = from_decoded(&decoded, rig, None, config)?;
+    let reconstruction = reconstruct(Source::Decoded(&decoded), rig, config, Request::default())?;
     timings.extend(reconstruction.timings.iter().cloned());
     let lit_by_three = Array2::from_shape_fn(truth.mask.dim(), |p| {
         truth.mask[p]

@@ -1,5 +1,5 @@
 //! Integration of one 3-D video frame: the photometric-stereo result of the thesis-dynamic
-//! turning ellipsoid (1280×720, frames 4..36 decoded, near-field PS from `from_decoded`)
+//! turning ellipsoid (1280×720, frames 4..36 decoded, near-field PS from `reconstruct`)
 //! integrated by `integrate_surface` with the settings `reconstruct` gives a pass
 //! ([`meb_pipeline::reconstruct::pass_integration`]): an early pass of a cold window (at most 8 two-LED
 //! alternations, relative residual 10⁻⁵) for `cold` and `warm_same`, a warm window's pass (one
@@ -126,7 +126,7 @@ use meb_pipeline::integrate::{
     integrate_surface, integrate_surface_with,
 };
 use meb_pipeline::photometric::PhotometricResult;
-use meb_pipeline::reconstruct::{Reconstruction, from_decoded, pass_integration};
+use meb_pipeline::reconstruct::{Reconstruction, Request, Source, pass_integration, reconstruct};
 use meb_pipeline::video::VideoConfig;
 use nalgebra::Vector3;
 use ndarray::Array2;
@@ -237,8 +237,20 @@ fn simulated_windows(rig: &Rig, config: &VideoConfig) -> Option<(WindowResult, W
     let frames: Vec<Samples> = clip.into_iter().map(|f| f.samples).collect();
     let first = decode_frames(frames.get(4..36)?, &format, &config.decode).ok()?;
     let second = decode_frames(frames.get(44..76)?, &format, &config.decode).ok()?;
-    let first = from_decoded(&first, rig, None, &config.reconstruct).ok()?;
-    let second = from_decoded(&second, rig, None, &config.reconstruct).ok()?;
+    let first = reconstruct(
+        Source::Decoded(&first),
+        rig,
+        &config.reconstruct,
+        Request::default(),
+    )
+    .ok()?;
+    let second = reconstruct(
+        Source::Decoded(&second),
+        rig,
+        &config.reconstruct,
+        Request::default(),
+    )
+    .ok()?;
     Some((WindowResult::of(first), WindowResult::of(second)))
 }
 

@@ -14,7 +14,7 @@
 //! frames in memory: decode (carried timing) and warm reconstruction of the second window in series;
 //! `frame_warm_bin2` bins its 32 frames first; `frame_warm_region` decodes and reconstructs in
 //! the region around the object, as `meb video` does once its timing has settled
-//! ([`meb_pipeline::reconstruct::from_decoded_region`]). The bench first prints both per-stage profiles and
+//! ([`meb_pipeline::reconstruct::Request::region`]). The bench first prints both per-stage profiles and
 //! how far the warm result lies from a cold reconstruction of the same window.
 //!
 //! Current figures (criterion, 1280×720, an idle 2-core machine of the CI's kind, the clip in
@@ -35,7 +35,7 @@ use meb_core::capture::{Frame, FrameFormat, FrameSource, Samples};
 use meb_core::rig::Rig;
 use meb_pipeline::demod::DecodeConfig;
 use meb_pipeline::demod::decode_frames;
-use meb_pipeline::reconstruct::{WarmStart, from_decoded, from_decoded_region, from_decoded_warm};
+use meb_pipeline::reconstruct::{Request, Source, WarmStart, reconstruct, reconstruct_extent};
 use meb_pipeline::video::{VideoConfig, process};
 use std::hint::black_box;
 
@@ -75,7 +75,12 @@ fn bench(c: &mut Criterion) {
     };
     // The per-stage profile of one reconstruction, cold and warm, printed once (criterion times
     // the whole).
-    let Ok(first) = from_decoded(&decoded, &rig, None, &config.reconstruct) else {
+    let Ok(first) = reconstruct(
+        Source::Decoded(&decoded),
+        &rig,
+        &config.reconstruct,
+        Request::default(),
+    ) else {
         eprintln!("the first window does not reconstruct");
         return;
     };
@@ -87,8 +92,21 @@ fn bench(c: &mut Criterion) {
         }
     };
     profile("first window, cold", &first);
-    let warm_second = from_decoded_warm(&second, &rig, None, &config.reconstruct, Some(&warm));
-    let cold_second = from_decoded(&second, &rig, None, &config.reconstruct);
+    let warm_second = reconstruct(
+        Source::Decoded(&second),
+        &rig,
+        &config.reconstruct,
+        Request {
+            warm: Some(&warm),
+            ..Request::default()
+        },
+    );
+    let cold_second = reconstruct(
+        Source::Decoded(&second),
+        &rig,
+        &config.reconstruct,
+        Request::default(),
+    );
     if let (Ok(warm_second), Ok(cold_second)) = (&warm_second, &cold_second) {
         profile("second window, warm", warm_second);
         profile("second window, cold", cold_second);
@@ -148,11 +166,32 @@ fn bench(c: &mut Criterion) {
         b.iter(|| black_box(decode_frames(&second_frames, &format, &around_object).ok()))
     });
     group.bench_function("reconstruct", |b| {
-        b.iter(|| black_box(from_decoded(&decoded, &rig, None, &config.reconstruct).ok()))
+        b.iter(|| {
+            black_box(
+                reconstruct(
+                    Source::Decoded(&decoded),
+                    &rig,
+                    &config.reconstruct,
+                    Request::default(),
+                )
+                .ok(),
+            )
+        })
     });
     group.bench_function("window_warm", |b| {
         b.iter(|| {
-            black_box(from_decoded_warm(&second, &rig, None, &config.reconstruct, Some(&warm)).ok())
+            black_box(
+                reconstruct(
+                    Source::Decoded(&second),
+                    &rig,
+                    &config.reconstruct,
+                    Request {
+                        warm: Some(&warm),
+                        ..Request::default()
+                    },
+                )
+                .ok(),
+            )
         })
     });
     // The one 3-D frame: decode (carried timing) and warm reconstruction in series.
@@ -160,7 +199,16 @@ fn bench(c: &mut Criterion) {
         b.iter(|| {
             let decoded = decode_frames(&second_frames, &format, &carried).ok()?;
             black_box(
-                from_decoded_warm(&decoded, &rig, None, &config.reconstruct, Some(&warm)).ok(),
+                reconstruct(
+                    Source::Decoded(&decoded),
+                    &rig,
+                    &config.reconstruct,
+                    Request {
+                        warm: Some(&warm),
+                        ..Request::default()
+                    },
+                )
+                .ok(),
             )
         })
     });
@@ -179,7 +227,17 @@ fn bench(c: &mut Criterion) {
                 let decoded = decode_frames(&second_frames, &format, &around_object).ok()?;
                 let roi = around_object.roi?;
                 black_box(
-                    from_decoded_region(&decoded, roi, &rig, &config.reconstruct, Some(&warm)).ok(),
+                    reconstruct_extent(
+                        Source::Decoded(&decoded),
+                        &rig,
+                        &config.reconstruct,
+                        Request {
+                            warm: Some(&warm),
+                            region: Some(roi),
+                            ..Request::default()
+                        },
+                    )
+                    .ok(),
                 )
             })
         })
@@ -224,15 +282,26 @@ fn binned(
     };
     let (Ok(second), Ok(first)) = (
         decode_frames(&binned[44..76], &binned_format, &carried),
-        from_decoded(&first, &binned_rig, None, &config.reconstruct),
+        reconstruct(
+            Source::Decoded(&first),
+            &binned_rig,
+            &config.reconstruct,
+            Request::default(),
+        ),
     ) else {
         eprintln!("the binned clip does not reconstruct");
         return;
     };
     let warm = WarmStart::of(&first);
-    if let Ok(warm_second) =
-        from_decoded_warm(&second, &binned_rig, None, &config.reconstruct, Some(&warm))
-    {
+    if let Ok(warm_second) = reconstruct(
+        Source::Decoded(&second),
+        &binned_rig,
+        &config.reconstruct,
+        Request {
+            warm: Some(&warm),
+            ..Request::default()
+        },
+    ) {
         eprintln!("second window binned 2x2, warm: {:?}", warm_second.start);
         for stage in &warm_second.timings {
             eprintln!("stage {:>8.1} ms  {}", stage.ms, stage.stage);
@@ -252,12 +321,14 @@ fn binned(
                 .collect::<Result<Vec<_>, _>>();
             let decoded = decode_frames(&binned_frames.ok()?, &binned_format, &carried).ok()?;
             black_box(
-                from_decoded_warm(
-                    &decoded,
+                reconstruct(
+                    Source::Decoded(&decoded),
                     &binned_rig,
-                    None,
                     &config.reconstruct,
-                    Some(&warm),
+                    Request {
+                        warm: Some(&warm),
+                        ..Request::default()
+                    },
                 )
                 .ok(),
             )
@@ -266,8 +337,16 @@ fn binned(
     group.bench_function("window_warm_bin2", |b| {
         b.iter(|| {
             black_box(
-                from_decoded_warm(&second, &binned_rig, None, &config.reconstruct, Some(&warm))
-                    .ok(),
+                reconstruct(
+                    Source::Decoded(&second),
+                    &binned_rig,
+                    &config.reconstruct,
+                    Request {
+                        warm: Some(&warm),
+                        ..Request::default()
+                    },
+                )
+                .ok(),
             )
         })
     });

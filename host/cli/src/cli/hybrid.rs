@@ -3,7 +3,7 @@
 //! inside its own mask, and each is placed at its absolute ToF depth and fused with it. The
 //! fusion follows Nehab, Rusinkiewicz, Davis & Ramamoorthi, "Efficiently combining positions and
 //! normals for precise 3D geometry", SIGGRAPH 2005 ([`meb_pipeline::tof::hybrid::reconstruct_objects`]).
-//! It gets the LED images and their noise exactly as [`meb_pipeline::reconstruct::from_decoded`] gives
+//! It gets the LED images and their noise exactly as [`meb_pipeline::reconstruct::reconstruct`] gives
 //! them to the plain command. Writes one folder per object and `objects.json` with a row per
 //! object.
 

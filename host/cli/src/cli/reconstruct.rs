@@ -14,7 +14,7 @@ use meb_core::rig::Rig;
 use meb_pipeline::demod::Decoded;
 use meb_pipeline::demod::output::read_decode_dir;
 use meb_pipeline::reconstruct::{
-    AbsoluteDepth, LightModel, ReconstructConfig, Reconstruction, from_decoded,
+    AbsoluteDepth, LightModel, ReconstructConfig, Reconstruction, Request, Source, reconstruct,
 };
 use std::path::PathBuf;
 
@@ -105,7 +105,15 @@ pub fn run(args: &ReconstructArgs) -> Result<()> {
         println!("objects: {}", out.join("objects.json").display());
         return Ok(());
     }
-    let reconstruction = from_decoded(&inputs.decoded, &inputs.rig, inputs.mask.as_ref(), &config)?;
+    let reconstruction = reconstruct(
+        Source::Decoded(&inputs.decoded),
+        &inputs.rig,
+        &config,
+        Request {
+            mask: inputs.mask.as_ref(),
+            ..Request::default()
+        },
+    )?;
     super::common::check_support(&reconstruction, args.force)?;
     let field = &reconstruction.photometric.field;
     let depth = &reconstruction.integration.depth;

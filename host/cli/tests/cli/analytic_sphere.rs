@@ -6,7 +6,9 @@
 use meb_core::metrics::{compare_depth, compare_normals};
 use meb_core::rig::{Intrinsics, Rig};
 use meb_core::types::LedImages;
-use meb_pipeline::reconstruct::{LightModel, ReconstructConfig, ReconstructError, reconstruct};
+use meb_pipeline::reconstruct::{
+    LightModel, ReconstructConfig, ReconstructError, Request, Source, reconstruct,
+};
 use nalgebra::Vector3;
 use ndarray::{Array2, Array3};
 
@@ -55,7 +57,16 @@ fn lit_by_three(images: &LedImages) -> Array2<bool> {
 #[test]
 fn near_field_sphere_reconstructs_within_a_tenth_of_a_millimetre() {
     let (rig, images, depth, normals) = scene();
-    let out = reconstruct(&images, &rig, None, None, &ReconstructConfig::default()).unwrap();
+    let out = reconstruct(
+        Source::Images {
+            images: &images,
+            noise: None,
+        },
+        &rig,
+        &ReconstructConfig::default(),
+        Request::default(),
+    )
+    .unwrap();
     let surface = lit_by_three(&images);
     let e = compare_depth(&out.integration.depth.depth_mm, &depth, Some(&surface)).unwrap();
     let a = compare_normals(&out.photometric.field.normals, &normals, &surface).unwrap();
@@ -82,8 +93,26 @@ fn distant_model_is_worse_than_near_field() {
         light_model: LightModel::Distant,
         ..Default::default()
     };
-    let distant = reconstruct(&images, &rig, None, None, &config).unwrap();
-    let near = reconstruct(&images, &rig, None, None, &ReconstructConfig::default()).unwrap();
+    let distant = reconstruct(
+        Source::Images {
+            images: &images,
+            noise: None,
+        },
+        &rig,
+        &config,
+        Request::default(),
+    )
+    .unwrap();
+    let near = reconstruct(
+        Source::Images {
+            images: &images,
+            noise: None,
+        },
+        &rig,
+        &ReconstructConfig::default(),
+        Request::default(),
+    )
+    .unwrap();
     let ed = compare_normals(&distant.photometric.field.normals, &normals, &surface).unwrap();
     let en = compare_normals(&near.photometric.field.normals, &normals, &surface).unwrap();
     eprintln!(
@@ -98,7 +127,16 @@ fn rig_with_two_leds_is_rejected() {
     let (mut rig, mut images, _, _) = scene();
     rig.leds.truncate(2);
     images.images.truncate(2);
-    let err = reconstruct(&images, &rig, None, None, &ReconstructConfig::default()).unwrap_err();
+    let err = reconstruct(
+        Source::Images {
+            images: &images,
+            noise: None,
+        },
+        &rig,
+        &ReconstructConfig::default(),
+        Request::default(),
+    )
+    .unwrap_err();
     assert!(matches!(err, ReconstructError::Rig(_)));
     assert!(err.to_string().contains("at least 3 LEDs"), "{err}");
 }
@@ -166,13 +204,31 @@ fn perspective_sphere_reconstructs_in_metric_depth() {
     let rig = perspective_rig();
     let (images, depth) = render_spheres(&rig, &[(Vector3::zeros(), RADIUS)]);
     let surface = lit_by_three(&images);
-    let out = reconstruct(&images, &rig, None, None, &ReconstructConfig::default()).unwrap();
+    let out = reconstruct(
+        Source::Images {
+            images: &images,
+            noise: None,
+        },
+        &rig,
+        &ReconstructConfig::default(),
+        Request::default(),
+    )
+    .unwrap();
     let e = compare_depth(&out.integration.depth.depth_mm, &depth, Some(&surface)).unwrap();
     // The same images read as if the camera were orthographic (same pitch at the object).
     let mut ortho = rig.clone();
     ortho.camera.intrinsics = None;
     ortho.camera.pixel_pitch_mm = Some(rig.camera.pitch_mm());
-    let wrong = reconstruct(&images, &ortho, None, None, &ReconstructConfig::default()).unwrap();
+    let wrong = reconstruct(
+        Source::Images {
+            images: &images,
+            noise: None,
+        },
+        &ortho,
+        &ReconstructConfig::default(),
+        Request::default(),
+    )
+    .unwrap();
     let w = compare_depth(&wrong.integration.depth.depth_mm, &depth, Some(&surface)).unwrap();
     eprintln!(
         "perspective sphere: RMSE {:.4} mm over {:.1} % of the ≥3-lit surface, offset {:.3} mm; \
@@ -208,7 +264,16 @@ fn separate_objects_are_placed_at_their_own_depth() {
     ];
     let (images, depth) = render_spheres(&rig, &spheres);
     let surface = lit_by_three(&images);
-    let out = reconstruct(&images, &rig, None, None, &ReconstructConfig::default()).unwrap();
+    let out = reconstruct(
+        Source::Images {
+            images: &images,
+            noise: None,
+        },
+        &rig,
+        &ReconstructConfig::default(),
+        Request::default(),
+    )
+    .unwrap();
     assert_eq!(out.integration.pieces, 2);
     for (i, (centre, _)) in spheres.iter().enumerate() {
         let this = Array2::from_shape_fn(depth.dim(), |(r, c)| {

@@ -4,7 +4,7 @@
 
 use meb_cli::demo::{run, thesis_capture_config, thesis_decode_config};
 use meb_core::rig::Rig;
-use meb_pipeline::reconstruct::ReconstructConfig;
+use meb_pipeline::reconstruct::{ReconstructConfig, Request, Source};
 use meb_sim::exposure::expose_without_clipping;
 use meb_sim::{Scene, SceneObject};
 use ndarray::Array2;
@@ -41,11 +41,13 @@ fn simulated_sphere_depth_rmse_within_half_a_millimetre() {
     );
     // Oracle: the same reconstruction on the simulator's noise-free per-LED images.
     let oracle = meb_pipeline::reconstruct::reconstruct(
-        &out.truth.led_true,
+        Source::Images {
+            images: &out.truth.led_true,
+            noise: None,
+        },
         &rig,
-        None,
-        None,
         &ReconstructConfig::default(),
+        Request::default(),
     )
     .unwrap();
     let o = meb_core::metrics::compare_depth(

@@ -9,8 +9,8 @@ use meb_core::capture::{OpenOptions, open};
 use meb_core::rig::Rig;
 use meb_pipeline::demod::{DecodeConfig, decode};
 use meb_pipeline::reconstruct::{
-    ReconstructConfig, ReconstructError, Reconstruction, Start, WarmStart, bin_decoded,
-    from_decoded, from_decoded_region, from_decoded_warm,
+    ReconstructConfig, ReconstructError, Reconstruction, Request, Source, Start, WarmStart,
+    bin_decoded, reconstruct, reconstruct_extent,
 };
 use meb_pipeline::video::truth::TruthFolder;
 use meb_pipeline::video::{FrameStatus, TimingSource, VideoConfig, WindowSchedule, process};
@@ -578,11 +578,19 @@ fn windows_are_decoded_around_the_object_and_whole_when_it_jumps() {
         &mut |_, _| {},
     )
     .unwrap();
-    let refused = from_decoded_region(&decoded_half, half, &rig, &config.reconstruct, None);
+    let refused = reconstruct_extent(
+        Source::Decoded(&decoded_half),
+        &rig,
+        &config.reconstruct,
+        Request {
+            region: Some(half),
+            ..Request::default()
+        },
+    );
     assert!(
         matches!(refused, Err(ReconstructError::Region(_))),
         "{:?}",
-        refused.map(|r| r.reconstruction.start)
+        refused.map(|r| r.into_frame(&rig.camera.projection()).start)
     );
 }
 
@@ -634,17 +642,25 @@ fn still_window(
 fn a_warm_started_window_equals_a_cold_one_on_a_still_object() {
     let tmp = tempfile::tempdir().unwrap();
     let (rig, config, decoded, _) = still_window(tmp.path(), 320, 180);
-    let cold = from_decoded(&decoded, &rig, None, &config.reconstruct).unwrap();
+    let cold = reconstruct(
+        Source::Decoded(&decoded),
+        &rig,
+        &config.reconstruct,
+        Request::default(),
+    )
+    .unwrap();
     assert_eq!(cold.start, Start::Cold);
     let cold_depth = &cold.integration.depth.depth_mm;
     // The same window warm-started from its own cold result: one or two passes, and the depth
     // within 0.1 mm RMS of the cold one (the ellipsoid's accuracy is 0.5–1 mm).
-    let warm = from_decoded_warm(
-        &decoded,
+    let warm = reconstruct(
+        Source::Decoded(&decoded),
         &rig,
-        None,
         &config.reconstruct,
-        Some(&WarmStart::of(&cold)),
+        Request {
+            warm: Some(&WarmStart::of(&cold)),
+            ..Request::default()
+        },
     )
     .unwrap();
     let Start::Warm { passes, moved_mm } = warm.start else {
@@ -659,8 +675,16 @@ fn a_warm_started_window_equals_a_cold_one_on_a_still_object() {
     let started_off = |mm: f32| {
         let mut off = WarmStart::of(&cold);
         off.depth_mm.mapv_inplace(|z| z + mm);
-        let result =
-            from_decoded_warm(&decoded, &rig, None, &config.reconstruct, Some(&off)).unwrap();
+        let result = reconstruct(
+            Source::Decoded(&decoded),
+            &rig,
+            &config.reconstruct,
+            Request {
+                warm: Some(&off),
+                ..Request::default()
+            },
+        )
+        .unwrap();
         let (rms, shared) = depth_difference(&result.integration.depth.depth_mm, cold_depth);
         (result.start, rms, shared)
     };
@@ -695,9 +719,21 @@ fn coarse_and_cold(
         coarse_start: false,
         ..config.reconstruct.clone()
     };
-    let cold = from_decoded(decoded, rig, None, &cold_config).unwrap();
+    let cold = reconstruct(
+        Source::Decoded(decoded),
+        rig,
+        &cold_config,
+        Request::default(),
+    )
+    .unwrap();
     assert_eq!(cold.start, Start::Cold);
-    let coarse = from_decoded(decoded, rig, None, &config.reconstruct).unwrap();
+    let coarse = reconstruct(
+        Source::Decoded(decoded),
+        rig,
+        &config.reconstruct,
+        Request::default(),
+    )
+    .unwrap();
     (coarse, cold)
 }
 
@@ -767,7 +803,16 @@ fn a_coarse_started_window_equals_a_cold_one() {
     // Warm-started 30 mm off, out of both brackets: redone from the coarse start.
     let mut off = WarmStart::of(&cold);
     off.depth_mm.mapv_inplace(|z| z + 30.0);
-    let redone = from_decoded_warm(&decoded, &rig, None, &config.reconstruct, Some(&off)).unwrap();
+    let redone = reconstruct(
+        Source::Decoded(&decoded),
+        &rig,
+        &config.reconstruct,
+        Request {
+            warm: Some(&off),
+            ..Request::default()
+        },
+    )
+    .unwrap();
     assert!(
         matches!(&redone.start, Start::Redone { reason } if reason.contains("binned 2×2")),
         "{:?}",
@@ -779,11 +824,11 @@ fn a_coarse_started_window_equals_a_cold_one() {
         "redone vs cold: {rms} mm RMS, {shared} shared"
     );
     // The same window binned, 320×180: below the coarse start's size, reconstructed cold.
-    let small = from_decoded(
-        &bin_decoded(&decoded, 2),
+    let small = reconstruct(
+        Source::Decoded(&bin_decoded(&decoded, 2)),
         &rig.binned(2),
-        None,
         &config.reconstruct,
+        Request::default(),
     )
     .unwrap();
     assert_eq!(small.start, Start::Cold);

@@ -17,7 +17,7 @@
 //! resolution, so a coarse start never gives a result the warm checks would have refused. A
 //! window whose previous window's warm start strayed is redone this way too.
 
-use super::inputs::Inputs;
+use super::inputs::Source;
 use super::{ReconstructConfig, StageTiming, WarmStart};
 use crate::demod::Decoded;
 use meb_core::rig::Rig;
@@ -43,13 +43,13 @@ const RIM_PX: usize = 2;
 /// `None` below [`COARSE_MIN_PIXELS`], for inputs other than a decoded capture of the rig's
 /// frame, or when the binned window cannot be reconstructed.
 pub(super) fn start(
-    inputs: &Inputs,
+    inputs: &Source,
     rig: &Rig,
     config: &ReconstructConfig,
     timings: &mut Vec<StageTiming>,
 ) -> Option<WarmStart> {
     let frame = (rig.camera.height, rig.camera.width);
-    let Inputs::Decoded(decoded) = inputs else {
+    let Source::Decoded(decoded) = inputs else {
         return None;
     };
     if frame.0 * frame.1 < COARSE_MIN_PIXELS || decoded.noise.dim() != frame {
@@ -58,7 +58,7 @@ pub(super) fn start(
     let binned = bin_decoded(decoded, COARSE_BIN);
     let binned_rig = rig.binned(COARSE_BIN);
     let coarse = super::reconstruct_inputs(
-        &Inputs::Decoded(&binned),
+        &Source::Decoded(&binned),
         &binned_rig,
         None,
         config,

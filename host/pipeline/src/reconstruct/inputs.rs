@@ -9,36 +9,42 @@ use ndarray::{Array2, ArrayView2, Zip};
 use rayon::prelude::*;
 use std::borrow::Cow;
 
-/// The full frame's LED images and noise of [`Inputs`].
+/// The full frame's LED images and noise of a [`Source`].
 type FullFrame<'a> = (Cow<'a, LedImages>, Option<Cow<'a, Array2<f32>>>);
 
-/// What a reconstruction reads: LED images with their noise, or a decoded capture whose usable
-/// images and noise ([`usable_led_images`], [`level_noise`]) are made only where a pass needs
-/// them (a warm window's region of interest, or the full frame).
-pub(super) enum Inputs<'a> {
-    /// LED images and their noise.
+/// What a reconstruction reads: a decoded capture, whose usable images and noise
+/// ([`usable_led_images`], [`level_noise`]) are made only where a pass needs them (a warm
+/// window's region of interest, or the full frame), or LED images with their noise.
+#[derive(Debug, Clone, Copy)]
+pub enum Source<'a> {
+    /// A decoded capture: the pixels the decoder flagged as saturated or under-exposed are left
+    /// out and photometric stereo weighs each LED image with its own noise. Use
+    /// [`super::ReconstructConfig::decoded_capture`] with it.
+    Decoded(&'a Decoded),
+    /// LED images (one per LED of the rig, as fractions of full scale) and, when known, the
+    /// per-pixel noise σ of one image.
     Images {
+        /// The LED images.
         images: &'a LedImages,
+        /// Per-pixel noise σ, when known.
         noise: Option<&'a Array2<f32>>,
     },
-    /// A decoded capture.
-    Decoded(&'a Decoded),
 }
 
-impl<'a> Inputs<'a> {
+impl<'a> Source<'a> {
     /// The number of LED images.
     pub(super) fn leds(&self) -> usize {
         match self {
-            Inputs::Images { images, .. } => images.images.len(),
-            Inputs::Decoded(decoded) => decoded.leds.images.len(),
+            Source::Images { images, .. } => images.images.len(),
+            Source::Decoded(decoded) => decoded.leds.images.len(),
         }
     }
 
     /// The full frame's LED images and noise (borrowed where they are given).
     pub(super) fn full(&self) -> FullFrame<'a> {
         match *self {
-            Inputs::Images { images, noise } => (Cow::Borrowed(images), noise.map(Cow::Borrowed)),
-            Inputs::Decoded(decoded) => (
+            Source::Images { images, noise } => (Cow::Borrowed(images), noise.map(Cow::Borrowed)),
+            Source::Decoded(decoded) => (
                 Cow::Owned(usable_led_images(decoded)),
                 Some(Cow::Owned(level_noise(decoded))),
             ),
@@ -49,7 +55,7 @@ impl<'a> Inputs<'a> {
     /// (the full frame's passes then say what is wrong).
     pub(super) fn region(&self, roi: &Roi) -> Option<(LedImages, Option<Array2<f32>>)> {
         match self {
-            Inputs::Images { images, noise } => {
+            Source::Images { images, noise } => {
                 let sizes = images
                     .images
                     .iter()
@@ -58,7 +64,7 @@ impl<'a> Inputs<'a> {
                 roi.fits(sizes)
                     .then(|| (roi.cut_images(images), noise.map(|n| roi.cut(n))))
             }
-            Inputs::Decoded(decoded) => {
+            Source::Decoded(decoded) => {
                 let flags = [decoded.saturated.dim(), decoded.underexposed.dim()];
                 let sizes = decoded.leds.images.iter().map(|i| i.dim());
                 let sizes = sizes.chain(flags).chain([decoded.noise.dim()]);

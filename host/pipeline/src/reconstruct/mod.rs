@@ -14,10 +14,10 @@
 //! around the offset that puts it back on the previous pass's depth in the later ones (the whole
 //! range again when the minimum lies at that bracket's edge).
 //!
-//! [`from_decoded`] is the one path from a decoded capture to a reconstruction: `meb
-//! reconstruct`, `meb demo` and the hardware-in-the-loop tests all call it, with the
-//! decoded-capture settings of [`ReconstructConfig::decoded_capture`]. `meb video` calls the
-//! same path with a [`WarmStart`] from the previous window ([`from_decoded_warm`]): the first
+//! [`reconstruct`] is the one path from LED images or a decoded capture ([`Source`]) to a
+//! reconstruction: `meb reconstruct`, `meb demo` and the hardware-in-the-loop tests call it with
+//! a decoded capture and the settings of [`ReconstructConfig::decoded_capture`]. `meb video` calls
+//! the same path with a [`WarmStart`] from the previous window ([`Request::warm`]): the first
 //! pass's light vectors come from the previous depth instead of z = 0, each part's offset is
 //! carried over in closed form (the median offset that puts the integrated depth on the previous
 //! one) and kept unless the misfit clearly prefers another in a bracket of a few mm (a t-test
@@ -30,12 +30,12 @@
 //! inside the previous depth's bounding box grown by [`ROI_MARGIN_PX`] (its region of interest,
 //! module `roi`; a decode's usable images are made for that region alone, module `inputs`) and
 //! pasted back into the full frame, or kept there for a caller that pastes only what it needs
-//! ([`from_decoded_extent`], [`Extent`]); an object that reaches the region's edge is
+//! ([`reconstruct_extent`], [`Extent`]); an object that reaches the region's edge is
 //! reconstructed on the full frame instead. A window of `meb video` with nothing to start
 //! from (the first) starts from its own reconstruction binned 2×2, itself started the same
 //! way while large enough ([`ReconstructConfig::coarse_start`], module `coarse`; a window
 //! whose warm start strayed is redone that way too), and a window decoded only around the
-//! object is reconstructed there and kept there ([`from_decoded_region`],
+//! object is reconstructed there and kept there ([`Request::region`],
 //! [`RegionReconstruction`]).
 //!
 //! Every result carries a verdict on whether its depth rests on what the LEDs measured (module
@@ -43,7 +43,6 @@
 //! offset search). The commands refuse an
 //! implausible result unless `--force`; a warm result found implausible is redone cold.
 
-use crate::demod::Decoded;
 use crate::integrate::{
     BilateralConfig, Confidence, IntegrateConfig, IntegrateError, Integration,
     IntegrationWorkspace, SurfaceEvidence, integrate_surface_with,
@@ -66,13 +65,12 @@ mod region;
 mod roi;
 mod support;
 pub use coarse::{COARSE_BIN, COARSE_MIN_PIXELS, bin_decoded};
-use inputs::Inputs;
-pub use inputs::{level_noise, level_noise_factor, usable_led_images};
+pub use inputs::{Source, level_noise, level_noise_factor, usable_led_images};
 pub use offset::{
     OFFSET_PREFERENCE_T, WARM_OFFSET_BRACKET_MM, WARM_OFFSET_GAIN, WARM_WIDE_BRACKET_MM,
 };
 use offset::{OffsetPrior, Unplaced, place_parts};
-pub use region::{Extent, RegionReconstruction, from_decoded_region};
+pub use region::{Extent, RegionReconstruction};
 pub use roi::ROI_MARGIN_PX;
 use roi::Roi;
 pub use support::{AbsoluteDepth, MIN_MEASURED_SHARE, Support};
@@ -309,19 +307,29 @@ impl Reconstruction {
     }
 }
 
-/// Reconstructs a surface from LED images taken with `rig`.
-pub fn reconstruct(
-    images: &LedImages,
-    rig: &Rig,
-    mask: Option<&Array2<bool>>,
-    noise: Option<&Array2<f32>>,
-    config: &ReconstructConfig,
-) -> Result<Reconstruction, ReconstructError> {
-    reconstruct_warm(images, rig, mask, noise, config, None)
+/// Where and from what a reconstruction starts, beside its [`ReconstructConfig`]; the default
+/// reconstructs the object the images show over the whole frame, from scratch.
+#[derive(Debug, Clone, Copy, Default)]
+pub struct Request<'a> {
+    /// The pixels to reconstruct; `None` finds the object in the images.
+    pub mask: Option<&'a Array2<bool>>,
+    /// The previous result to start from ([`WarmStart`]): `meb video` passes the previous
+    /// window's.
+    pub warm: Option<&'a WarmStart>,
+    /// The region of the camera's frame the source covers, when it covers only part of it (a
+    /// capture decoded with a region of interest, as `meb video` decodes around the object): the
+    /// rig's camera is cut to it, every pixel keeping its ray ([`meb_core::rig::Camera::cropped`]),
+    /// and the warm start (of the whole frame) with it. An object that reaches an edge of the
+    /// region that is not an edge of the frame may go on beyond it, so it is refused
+    /// ([`ReconstructError::Region`]). The mask, if any, is the region's.
+    pub region: Option<crate::demod::Roi>,
 }
 
-/// [`reconstruct`], started from `warm` when it is given and the near-field model is used
-/// ([`WarmStart`]): light vectors at the previous depth, each part's offset searched within
+/// Reconstructs a surface: photometric stereo on `source` with the lights of `rig`, the
+/// near-field loop and the depth offset search of `config`, and normal integration.
+///
+/// With [`Request::warm`] and the near-field model ([`WarmStart`]) it starts from the previous
+/// depth: light vectors at the previous depth, each part's offset searched within
 /// ±[`WARM_OFFSET_BRACKET_MM`] of the offset carried from it (kept unless the misfit clearly
 /// prefers another, [`OFFSET_PREFERENCE_T`], and then moved by the share [`WARM_OFFSET_GAIN`]
 /// of the way to it), integration warm-started with loose settings ([`pass_integration`]), and
@@ -330,24 +338,51 @@ pub fn reconstruct(
 /// (median) from the start, clearly preferred an offset at the edge of the wider bracket
 /// ([`WARM_WIDE_BRACKET_MM`]), covers pixels the start did not know, or failed, is redone cold
 /// ([`Start::Redone`]). The warm passes run in the start's region of interest (the box of its
-/// depth and `mask` grown by [`ROI_MARGIN_PX`]) unless the object reaches that region's edge.
-pub fn reconstruct_warm(
-    images: &LedImages,
+/// depth and the mask grown by [`ROI_MARGIN_PX`]) unless the object reaches that region's edge.
+///
+/// ```
+/// use meb_core::rig::Rig;
+/// use meb_core::types::LedImages;
+/// use meb_pipeline::reconstruct::{ReconstructConfig, ReconstructError, Request, Source, reconstruct};
+/// use ndarray::Array2;
+///
+/// // Four blank LED images of the thesis' out-of-plane rig: nothing to reconstruct.
+/// let rig = Rig::preset("thesis-out-of-plane").expect("a built-in rig");
+/// let blank = Array2::<f32>::zeros((rig.camera.height, rig.camera.width));
+/// let images = LedImages { images: vec![blank; 4] };
+/// let source = Source::Images { images: &images, noise: None };
+/// let result = reconstruct(source, &rig, &ReconstructConfig::default(), Request::default());
+/// assert!(result.is_err(), "an empty scene is refused, not reconstructed");
+/// ```
+pub fn reconstruct(
+    source: Source<'_>,
     rig: &Rig,
-    mask: Option<&Array2<bool>>,
-    noise: Option<&Array2<f32>>,
     config: &ReconstructConfig,
-    warm: Option<&WarmStart>,
+    request: Request<'_>,
 ) -> Result<Reconstruction, ReconstructError> {
-    reconstruct_inputs(
-        &Inputs::Images { images, noise },
-        rig,
-        mask,
-        config,
-        warm,
-        ColdPasses::All,
-    )
-    .map(|extent| extent.into_frame(&rig.camera.projection()))
+    reconstruct_extent(source, rig, config, request)
+        .map(|extent| extent.into_frame(&rig.camera.projection()))
+}
+
+/// [`reconstruct`], with a result that ran in a region of the frame kept there
+/// ([`Extent::Region`]): `meb video` pastes into the frame only what it writes.
+pub fn reconstruct_extent(
+    source: Source<'_>,
+    rig: &Rig,
+    config: &ReconstructConfig,
+    request: Request<'_>,
+) -> Result<Extent, ReconstructError> {
+    match request.region {
+        Some(region) => region::in_region(source, region, rig, config, request).map(Extent::Region),
+        None => reconstruct_inputs(
+            &source,
+            rig,
+            request.mask,
+            config,
+            request.warm,
+            ColdPasses::All,
+        ),
+    }
 }
 
 /// How many passes a cold reconstruction runs.
@@ -363,9 +398,9 @@ enum ColdPasses {
     UntilSettled,
 }
 
-/// [`reconstruct_warm`] of `inputs`, its cold passes run as `cold` says.
+/// [`reconstruct`] of `inputs` over the whole frame, its cold passes run as `cold` says.
 fn reconstruct_inputs(
-    inputs: &Inputs,
+    inputs: &Source,
     rig: &Rig,
     mask: Option<&Array2<bool>>,
     config: &ReconstructConfig,
@@ -497,7 +532,7 @@ fn reconstruct_inputs(
 #[allow(clippy::too_many_arguments)]
 fn warm_in_region(
     roi: &Roi,
-    inputs: &Inputs,
+    inputs: &Source,
     rig: &Rig,
     mask: Option<&Array2<bool>>,
     config: &ReconstructConfig,
@@ -769,56 +804,10 @@ fn median(values: &mut [f32]) -> f32 {
     *values.select_nth_unstable_by(middle, f32::total_cmp).1
 }
 
-/// Reconstructs a decoded capture taken with `rig`: the pixels the decoder flagged as
-/// saturated or under-exposed are left out ([`usable_led_images`]) and photometric stereo
-/// weighs the LED images with their own noise ([`level_noise`]). Use
-/// [`ReconstructConfig::decoded_capture`] unless a setting is deliberately changed.
-pub fn from_decoded(
-    decoded: &Decoded,
-    rig: &Rig,
-    mask: Option<&Array2<bool>>,
-    config: &ReconstructConfig,
-) -> Result<Reconstruction, ReconstructError> {
-    from_decoded_warm(decoded, rig, mask, config, None)
-}
-
-/// [`from_decoded`] started from `warm` ([`reconstruct_warm`]): the path of `meb video`, which
-/// passes the previous window's result; `None` is exactly [`from_decoded`]. A warm window's
-/// usable images and noise are made for its region of interest alone (the full frame's only if
-/// a pass needs them), with the same values.
-pub fn from_decoded_warm(
-    decoded: &Decoded,
-    rig: &Rig,
-    mask: Option<&Array2<bool>>,
-    config: &ReconstructConfig,
-    warm: Option<&WarmStart>,
-) -> Result<Reconstruction, ReconstructError> {
-    from_decoded_extent(decoded, rig, mask, config, warm)
-        .map(|extent| extent.into_frame(&rig.camera.projection()))
-}
-
-/// [`from_decoded_warm`] with a result that ran in a region of interest kept there
-/// ([`Extent::Region`]; `meb video` pastes only what it needs into the frame).
-pub fn from_decoded_extent(
-    decoded: &Decoded,
-    rig: &Rig,
-    mask: Option<&Array2<bool>>,
-    config: &ReconstructConfig,
-    warm: Option<&WarmStart>,
-) -> Result<Extent, ReconstructError> {
-    reconstruct_inputs(
-        &Inputs::Decoded(decoded),
-        rig,
-        mask,
-        config,
-        warm,
-        ColdPasses::All,
-    )
-}
-
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::demod::Decoded;
 
     /// A still sphere's window as `meb video` passes it, its cold reconstruction and the warm
     /// start that leaves.
@@ -850,8 +839,16 @@ mod tests {
         let images = LedImages { images };
         let noise = Array2::from_elem((180, 320), 1e-4);
         let config = ReconstructConfig::default();
-        let cold =
-            reconstruct_warm(&images, &rig, None, Some(&noise), &config, None).expect("cold");
+        let cold = reconstruct(
+            Source::Images {
+                images: &images,
+                noise: Some(&noise),
+            },
+            &rig,
+            &config,
+            Request::default(),
+        )
+        .expect("cold");
         StillSphere {
             warm: WarmStart::of(&cold),
             cold,
@@ -895,13 +892,17 @@ mod tests {
         )
         .expect("full frame");
         assert!(start.is_ok(), "{start:?}");
-        let region = reconstruct_warm(
-            &sphere.images,
+        let region = reconstruct(
+            Source::Images {
+                images: &sphere.images,
+                noise: Some(&sphere.noise),
+            },
             &sphere.rig,
-            None,
-            Some(&sphere.noise),
             &sphere.config,
-            Some(&sphere.warm),
+            Request {
+                warm: Some(&sphere.warm),
+                ..Request::default()
+            },
         )
         .expect("in the region");
         assert_warm_in_its_region(&region);
@@ -930,21 +931,27 @@ mod tests {
         decoded.noise = Array2::from_shape_fn(dim, |(r, c)| 1e-3 * (1.0 + ((r * c) % 7) as f32));
         decoded.saturated = Array2::from_shape_fn(dim, |(r, c)| (r, c) == (90, 160));
         decoded.underexposed = Array2::from_shape_fn(dim, |(r, c)| r == 100 && c % 9 == 0);
-        let from_region = from_decoded_warm(
-            &decoded,
+        let from_region = reconstruct(
+            Source::Decoded(&decoded),
             &sphere.rig,
-            None,
             &sphere.config,
-            Some(&sphere.warm),
+            Request {
+                warm: Some(&sphere.warm),
+                ..Request::default()
+            },
         )
         .expect("from the decode");
-        let from_full = reconstruct_warm(
-            &usable_led_images(&decoded),
+        let from_full = reconstruct(
+            Source::Images {
+                images: &usable_led_images(&decoded),
+                noise: Some(&level_noise(&decoded)),
+            },
             &sphere.rig,
-            None,
-            Some(&level_noise(&decoded)),
             &sphere.config,
-            Some(&sphere.warm),
+            Request {
+                warm: Some(&sphere.warm),
+                ..Request::default()
+            },
         )
         .expect("from the full frame's images");
         assert_warm_in_its_region(&from_region);
@@ -968,7 +975,7 @@ mod tests {
         middle[(90, 160)] = 0.0;
         let roi = Roi::around(&middle, None, 10).expect("a small region");
         let mut timings = Vec::new();
-        let inputs = Inputs::Images {
+        let inputs = Source::Images {
             images: &sphere.images,
             noise: Some(&sphere.noise),
         };

@@ -1,16 +1,17 @@
 //! Reconstructions of part of the camera's frame: `meb video` decodes a window only around the
-//! object ([`crate::video::focus`]) and reconstructs it there ([`from_decoded_region`]). The
+//! object ([`crate::video::focus`]) and reconstructs it there ([`super::Request::region`]). The
 //! result keeps the region's arrays; what a caller needs of the whole frame (the depth, and
 //! normals or albedo when they are saved) is pasted into it on request. Pasting every array
 //! (≈ 40 MB at 1280×720) took 1.9–2.3 ms of each window's reconstruction in `meb video`.
 
 use super::roi::Roi;
-use super::{ReconstructConfig, ReconstructError, Reconstruction, WarmStart, from_decoded_warm};
-use crate::demod::Decoded;
+use super::{
+    ReconstructConfig, ReconstructError, Reconstruction, Request, Source, WarmStart, reconstruct,
+};
 use meb_core::rig::{Projection, Rig};
 use ndarray::{Array2, Array3};
 
-/// A reconstruction on the camera cut to a region of its frame ([`from_decoded_region`]).
+/// A reconstruction on the camera cut to a region of its frame ([`super::Request::region`]).
 #[derive(Debug, Clone)]
 pub struct RegionReconstruction {
     roi: Roi,
@@ -72,7 +73,7 @@ impl RegionReconstruction {
 }
 
 /// A reconstruction of the camera's whole frame, or of the region of interest its warm passes
-/// ran in, kept there ([`super::from_decoded_extent`]). A warm window of `meb video` decoded
+/// ran in, kept there ([`super::reconstruct_extent`]). A warm window of `meb video` decoded
 /// over the whole frame (its first windows, and one in [`crate::video::FULL_FRAME_EVERY`])
 /// spent 11–12 ms of its reconstruction pasting every array of the region into the frame at
 /// 1280×720.
@@ -103,18 +104,15 @@ impl Extent {
     }
 }
 
-/// [`from_decoded_warm`] of a capture decoded only inside `region` of `rig`'s camera (the
-/// decoder's region of interest: `meb video` decodes around the object, [`crate::video::focus`]):
-/// reconstructed with the camera cut to the region ([`meb_core::rig::Camera::cropped`], every pixel
-/// keeps its ray) from the warm start (of the whole frame) cut to it. An object that reaches an
-/// edge of the region that is not an edge of the frame may go on beyond it, so its depth is
-/// refused ([`ReconstructError::Region`]).
-pub fn from_decoded_region(
-    decoded: &Decoded,
+/// [`super::reconstruct`] of a source covering only `region` of `rig`'s camera
+/// ([`super::Request::region`]): the camera and the warm start cut to the region, the object
+/// refused when it reaches an edge of the region inside the frame.
+pub(super) fn in_region(
+    source: Source<'_>,
     region: crate::demod::Roi,
     rig: &Rig,
     config: &ReconstructConfig,
-    warm: Option<&WarmStart>,
+    request: Request<'_>,
 ) -> Result<RegionReconstruction, ReconstructError> {
     let frame = (rig.camera.height, rig.camera.width);
     let Some(roi) = Roi::of_rect(region, frame) else {
@@ -124,13 +122,18 @@ pub fn from_decoded_region(
         )));
     };
     let region_rig = roi.cut_rig(rig);
-    let region_warm = warm
+    let region_warm = request
+        .warm
         .filter(|w| w.depth_mm.dim() == frame)
         .map(|w| WarmStart {
             depth_mm: roi.cut(&w.depth_mm),
         });
-    let reconstruction =
-        from_decoded_warm(decoded, &region_rig, None, config, region_warm.as_ref())?;
+    let region_request = Request {
+        warm: region_warm.as_ref(),
+        region: None,
+        ..request
+    };
+    let reconstruction = reconstruct(source, &region_rig, config, region_request)?;
     if roi.reached_edge(&reconstruction.photometric.object_mask) {
         return Err(ReconstructError::Region(format!(
             "the object reaches an edge of the decoded region {}x{}+{}+{} inside the frame and \
@@ -147,6 +150,7 @@ pub fn from_decoded_region(
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::demod::Decoded;
     use crate::reconstruct::tests::{
         StillSphere, largest_depth_difference, still_sphere, synthetic_decode,
     };
@@ -180,8 +184,18 @@ mod tests {
         };
         let (whole, cut, sphere) = sphere_decodes(rect);
         let warm = Some(&sphere.warm);
-        let region = from_decoded_region(&cut, rect, &sphere.rig, &sphere.config, warm)
-            .expect("the sphere lies inside the region");
+        let request = Request {
+            warm,
+            ..Request::default()
+        };
+        let region = in_region(
+            Source::Decoded(&cut),
+            rect,
+            &sphere.rig,
+            &sphere.config,
+            request,
+        )
+        .expect("the sphere lies inside the region");
         assert_eq!(region.region(), rect);
         let depth = &region.reconstruction.integration.depth.depth_mm;
         assert_eq!(depth.dim(), (140, 200));
@@ -201,15 +215,22 @@ mod tests {
         // Outside the region: nothing; inside: the region's own values.
         assert!(framed[(10, 10)].is_nan() && framed[(170, 300)].is_nan());
         assert_eq!(framed[(90, 160)].to_bits(), depth[(70, 100)].to_bits());
-        let from_whole =
-            crate::reconstruct::from_decoded_warm(&whole, &sphere.rig, None, &sphere.config, warm)
-                .expect("the whole frame");
+        let from_whole = reconstruct(
+            Source::Decoded(&whole),
+            &sphere.rig,
+            &sphere.config,
+            Request {
+                warm,
+                ..Request::default()
+            },
+        )
+        .expect("the whole frame");
         let worst = largest_depth_difference(&framed, &from_whole.integration.depth.depth_mm);
         assert!(worst < 1e-3, "region vs whole frame: {worst} mm");
     }
 
     /// A whole-frame decode's warm window runs in its region of interest and stays there
-    /// ([`Extent::Region`]); pasted into the frame it is what [`from_decoded_warm`] returns, bit
+    /// ([`Extent::Region`]); pasted into the frame it is what [`reconstruct`] returns, bit
     /// for bit, while a cold window is the whole frame's.
     #[test]
     fn a_warm_window_of_a_whole_decode_keeps_its_region() {
@@ -221,9 +242,16 @@ mod tests {
         };
         let (whole, _, sphere) = sphere_decodes(rect);
         let warm = Some(&sphere.warm);
-        let extent =
-            super::super::from_decoded_extent(&whole, &sphere.rig, None, &sphere.config, warm)
-                .expect("warm");
+        let extent = super::super::reconstruct_extent(
+            Source::Decoded(&whole),
+            &sphere.rig,
+            &sphere.config,
+            Request {
+                warm,
+                ..Request::default()
+            },
+        )
+        .expect("warm");
         let Extent::Region(region) = extent.clone() else {
             panic!("the warm window was not kept in its region");
         };
@@ -232,8 +260,16 @@ mod tests {
         let depth = &region.reconstruction.integration.depth.depth_mm;
         assert_eq!(depth.dim(), (r.height, r.width));
         let pasted = extent.into_frame(&sphere.rig.camera.projection());
-        let framed = from_decoded_warm(&whole, &sphere.rig, None, &sphere.config, warm)
-            .expect("warm, in the frame");
+        let framed = reconstruct(
+            Source::Decoded(&whole),
+            &sphere.rig,
+            &sphere.config,
+            Request {
+                warm,
+                ..Request::default()
+            },
+        )
+        .expect("warm, in the frame");
         let bits2 = |a: &Array2<f32>| a.mapv(f32::to_bits);
         assert_eq!(
             bits2(&pasted.integration.depth.depth_mm),
@@ -254,9 +290,13 @@ mod tests {
                 .iter()
                 .any(|t| t.stage == "full frame from the region, warm")
         );
-        let cold =
-            super::super::from_decoded_extent(&whole, &sphere.rig, None, &sphere.config, None)
-                .expect("cold");
+        let cold = super::super::reconstruct_extent(
+            Source::Decoded(&whole),
+            &sphere.rig,
+            &sphere.config,
+            Request::default(),
+        )
+        .expect("cold");
         assert!(
             matches!(cold, Extent::Frame(_)),
             "a cold window is the frame's"

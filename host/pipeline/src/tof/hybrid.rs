@@ -37,7 +37,7 @@ use super::rigid::{RigidCorrection, fit_rigid};
 use crate::integrate::IntegrateError;
 use crate::integrate::fusion::{Fusion, FusionConfig, PositionPrior, fuse_positions_and_normals};
 use crate::reconstruct::{
-    ReconstructConfig, ReconstructError, Reconstruction, StageTiming, reconstruct,
+    ReconstructConfig, ReconstructError, Reconstruction, Request, Source, StageTiming, reconstruct,
 };
 use meb_core::rig::Rig;
 use meb_core::types::LedImages;
@@ -351,8 +351,16 @@ pub fn reconstruct_objects(
             .into());
         };
         let moved = rig_at_depth(rig, z0);
-        let mut reconstruction = reconstruct(images, &moved, Some(&mask), noise, config)
-            .map_err(|source| HybridError::Reconstruct { object, source })?;
+        let mut reconstruction = reconstruct(
+            Source::Images { images, noise },
+            &moved,
+            config,
+            Request {
+                mask: Some(&mask),
+                ..Request::default()
+            },
+        )
+        .map_err(|source| HybridError::Reconstruct { object, source })?;
         reconstruction
             .integration
             .depth

@@ -5,7 +5,7 @@
 //! timing carry has settled ([`super::carry`]), a window is decoded only inside the box of the
 //! previous window's lit pixels grown by [`FOCUS_MARGIN_PX`] (the decoder's region of interest,
 //! [`crate::demod::DecodeConfig::roi`]) and reconstructed there
-//! ([`crate::reconstruct::from_decoded_region`]). A pixel is lit when its brightest LED image
+//! ([`crate::reconstruct::Request::region`]). A pixel is lit when its brightest LED image
 //! stands [`MaskConfig::snr_threshold`] level-noise σ above zero, specks smaller than
 //! [`MaskConfig::min_component_pixels`] left out: the brightness test of the automatic object
 //! mask ([`crate::photometric`]), so the lit pixels hold the object the reconstruction finds.
