@@ -1,5 +1,6 @@
 //! One module per `meb` subcommand: argument parsing and printing only.
 
+pub mod camera;
 pub mod carriers;
 pub mod common;
 pub mod decode;

@@ -6,7 +6,7 @@ use meb_cli::export::report::Summary;
 use meb_core::datasets::diligent::{ImageSet, load_diligent, load_image_set};
 use meb_core::metrics::compare_normals;
 use meb_core::timing::StageTiming;
-use meb_pipeline::integrate::{IntegrateConfig, integrate_normals};
+use meb_pipeline::integrate::{IntegrateConfig, SurfaceEvidence, integrate_surface};
 use meb_pipeline::photometric::{Lights, PhotometricConfig, estimate_normals};
 use std::path::PathBuf;
 use std::time::Instant;
@@ -29,9 +29,13 @@ pub struct PhotometricArgs {
     /// A DiLiGenT object folder instead of --images/--lights.
     #[arg(long)]
     pub diligent: Option<PathBuf>,
-    /// Grid pitch in mm per pixel for the depth output.
-    #[arg(long, default_value_t = 1.0)]
-    pub pitch: f64,
+    /// The camera for the depth output: --pitch (orthographic, mm per pixel; 1 when no camera is
+    /// given), --intrinsics with --distance, or --rig.
+    #[command(flatten)]
+    pub camera: super::camera::CameraArgs,
+    /// Integrator.
+    #[arg(long, value_enum, default_value = "auto")]
+    pub integrator: super::integrate::IntegratorArg,
     /// Output folder, replaced whole and atomically.
     #[arg(long)]
     pub out: PathBuf,
@@ -66,7 +70,17 @@ pub fn run(args: &PhotometricArgs) -> Result<()> {
     )?;
     let mut timings = vec![StageTiming::since("photometric stereo", start)];
     let start = Instant::now();
-    let integration = integrate_normals(&ps.field, args.pitch, &IntegrateConfig::default(), None)?;
+    let camera = args.camera.choose(ps.field.mask.dim(), Some(1.0))?;
+    let config = IntegrateConfig {
+        integrator: args.integrator.into(),
+        ..IntegrateConfig::default()
+    };
+    let evidence = SurfaceEvidence {
+        field: &ps.field,
+        planes: &[],
+        fill: None,
+    };
+    let integration = integrate_surface(&evidence, &camera.projection, &config, None)?;
     timings.push(StageTiming::since("integration", start));
     let angular = match (&set.normals_gt, &set.mask) {
         (Some(gt), Some(mask)) => Some(compare_normals(&ps.field.normals, gt, mask)?),
@@ -75,9 +89,10 @@ pub fn run(args: &PhotometricArgs) -> Result<()> {
     let summary = Summary {
         input: args.diligent.as_ref().map(|d| d.display().to_string()),
         leds: Some(set.lights.len()),
-        integrator: Some(super::common::integrator_name(
-            IntegrateConfig::default().integrator,
-        )),
+        integrator: Some(super::common::integrator_name(config.integrator)),
+        integrator_choice: super::integrate::integrator_choice(&integration),
+        camera: Some(camera.describe),
+        depth_convention: Some(camera.depth_convention),
         light_model: Some("distant (given light vectors)".into()),
         object_pixels: Some(ps.field.mask.iter().filter(|&&m| m).count()),
         kept_fraction: Some(integration.kept_fraction),

@@ -72,6 +72,16 @@ pub struct Summary {
     /// The ground-truth file.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub ground_truth: Option<String>,
+    /// The camera the normals were integrated through (orthographic pitch, or intrinsics and
+    /// distance), when the command was given one.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub camera: Option<String>,
+    /// What `depth.npy` holds and which of its scale and offset are assumed rather than measured.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub depth_convention: Option<String>,
+    /// Why the automatic integrator chose what it chose (the data it looked at).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub integrator_choice: Option<String>,
 }
 
 /// Depth accuracy against ground truth (see [`DepthErrors`]).
@@ -474,6 +484,9 @@ fn figure_rows(report: &Report) -> Vec<(String, String)> {
     text("integrator", &s.integrator);
     text("light model", &s.light_model);
     text("ground truth", &s.ground_truth);
+    text("camera", &s.camera);
+    text("depth.npy", &s.depth_convention);
+    text("integrator choice", &s.integrator_choice);
     let mut count = |label: &str, value: Option<usize>| {
         if let Some(v) = value {
             rows.push((label.into(), v.to_string()));

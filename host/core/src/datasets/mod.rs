@@ -1,8 +1,9 @@
 //! Readers for public reference data sets: MATLAB v5 arrays ([`mat`]) and the DiLiGenT
-//! photometric-stereo layout ([`diligent`]).
+//! photometric-stereo layout ([`diligent`]), normal maps with intrinsics ([`normal_maps`]).
 
 pub mod diligent;
 pub mod mat;
+pub mod normal_maps;
 
 use std::path::PathBuf;
 use thiserror::Error;

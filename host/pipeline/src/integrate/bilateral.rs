@@ -147,6 +147,54 @@ pub(crate) fn discontinuities(
         .collect()
 }
 
+/// Nodes within `radius` grid steps of a node where the bilateral weights are decisive: one of
+/// its one-sided weights (on an axis with both neighbours) is below `cut`, i.e. the surface
+/// continues on one side only. Elsewhere both sides agree and least squares is as good.
+pub(crate) fn near_discontinuities(
+    topology: &Topology,
+    x: &[f64],
+    slopes: &[(f64, f64)],
+    stiffness: Stiffness,
+    cut: f64,
+    radius: usize,
+) -> Vec<bool> {
+    let w = sigmoid_weights(topology, x, slopes, stiffness);
+    let mut near: Vec<bool> = topology
+        .neighbours
+        .iter()
+        .zip(&w)
+        .map(|(nb, w)| {
+            [(0, 2), (1, 3)]
+                .iter()
+                .any(|&(f, b)| nb[f] != NONE && nb[b] != NONE && (w[f] < cut || w[b] < cut))
+        })
+        .collect();
+    for _ in 0..radius {
+        let grown: Vec<bool> = topology
+            .neighbours
+            .iter()
+            .enumerate()
+            .map(|(k, nb)| near[k] || nb.iter().any(|&j| j != NONE && near[j as usize]))
+            .collect();
+        near = grown;
+    }
+    near
+}
+
+/// Removes both one-sided equations of every `cut` edge (right, down of each node, as
+/// [`discontinuities`] finds them) from `sides`: the edge keeps only the floor weight of
+/// [`side_equations`], so depth may jump across it.
+pub(crate) fn cut_sides(topology: &Topology, cut: &[[bool; 2]], sides: &mut [SideWeights]) {
+    for (k, (nb, edges)) in topology.neighbours.iter().zip(cut).enumerate() {
+        for d in 0..2 {
+            if edges[d] && nb[d] != NONE {
+                sides[k][d] = 0.0;
+                sides[nb[d] as usize][d + 2] = 0.0;
+            }
+        }
+    }
+}
+
 /// The two one-sided equations of an edge k→j (right or down): the forward equation of node k
 /// and the backward equation of node j, with their weights and slopes h·s along the edge.
 struct EdgeSides {

@@ -66,6 +66,12 @@ pub enum Integrator {
     LeastSquares,
     /// The thesis' Fast Marching integrator (W = z + λf).
     FastMarching,
+    /// Least squares with the depth discontinuities cut: bilateral reweighting finds the grid
+    /// edges across which both one-sided equations turn away (the surface jumps there), then
+    /// plain least squares is solved with those edges removed. Quadratic (least squares) where
+    /// the surface is continuous, discontinuity-preserving where it is not; the decision comes
+    /// from the normals alone ([`Integration::discontinuity_edges`]).
+    Auto,
 }
 
 /// Where depth zero is put (integration fixes depth only up to a constant per piece).
@@ -98,6 +104,26 @@ impl Default for BilateralConfig {
             stiffness: 2.0,
             max_iterations: 100,
             tolerance: 1e-4,
+        }
+    }
+}
+
+/// Settings of the automatic integrator ([`Integrator::Auto`]).
+#[derive(Debug, Clone, PartialEq, serde::Serialize, serde::Deserialize)]
+#[serde(default)]
+pub struct AutoConfig {
+    /// A pixel is near a discontinuity when one of its one-sided bilateral weights is below
+    /// this (the surface continues on one side only).
+    pub decisive_weight: f64,
+    /// Pixels within this many grid steps of such a pixel keep their bilateral weights.
+    pub radius: usize,
+}
+
+impl Default for AutoConfig {
+    fn default() -> Self {
+        Self {
+            decisive_weight: 0.05,
+            radius: 2,
         }
     }
 }
@@ -142,6 +168,9 @@ pub struct IntegrateConfig {
     pub max_iterations: usize,
     /// Bilateral integrator settings.
     pub bilateral: BilateralConfig,
+    /// Automatic integrator settings.
+    #[serde(default)]
+    pub auto: AutoConfig,
     /// Two-LED pixels and holes.
     pub coverage: CoverageConfig,
     /// Where depth zero is put.
@@ -159,6 +188,7 @@ impl Default for IntegrateConfig {
             tolerance: 1e-7,
             max_iterations: 5000,
             bilateral: BilateralConfig::default(),
+            auto: AutoConfig::default(),
             coverage: CoverageConfig::default(),
             anchor: DepthAnchor::Outline,
             filter: ArtefactFilter::default(),
@@ -185,6 +215,7 @@ impl IntegrateConfig {
         positive("tolerance", self.tolerance)?;
         positive("bilateral stiffness", self.bilateral.stiffness)?;
         positive("bilateral tolerance", self.bilateral.tolerance)?;
+        positive("auto decisive weight", self.auto.decisive_weight)?;
         positive("two-LED weight", self.coverage.two_led_weight)?;
         positive("fill weight", self.coverage.fill_weight)?;
         positive("coverage tolerance", self.coverage.tolerance)?;
@@ -289,6 +320,12 @@ pub struct Integration {
     pub confidence: Array2<Confidence>,
     /// Normals the integrator chose for two-LED and filled pixels (NaN elsewhere).
     pub completed_normals: Array3<f32>,
+    /// [`Integrator::Auto`]: the grid edges it found to be depth discontinuities and cut
+    /// (zero: the result is the plain least-squares one); `None` for the other integrators.
+    pub discontinuity_edges: Option<usize>,
+    /// [`Integrator::Auto`]: the pixels near discontinuities that kept their bilateral
+    /// weights (zero: plain least squares); `None` for the other integrators.
+    pub bilateral_pixels: Option<usize>,
 }
 
 /// What is known about the surface, for [`integrate_surface`].
@@ -647,6 +684,75 @@ mod tests {
         assert!(
             bilateral < 0.15 && ls > 5.0 * bilateral,
             "least squares {ls} px vs bilateral {bilateral} px"
+        );
+    }
+
+    /// The automatic integrator on the terrace of the test above cuts the wall (both sides
+    /// planar, as bilateral) and on a smooth hemisphere cuts nothing and gives the
+    /// least-squares depth.
+    #[test]
+    fn auto_cuts_a_step_and_leaves_a_smooth_surface_to_least_squares() {
+        let (rows, cols) = (40usize, 60usize);
+        let wall = 30;
+        let truth = Array2::from_shape_fn((rows, cols), |(_, c)| {
+            0.3 * c as f64 + if c > wall { 15.0 } else { 0.0 }
+        });
+        let normals = Array2::from_shape_fn((rows, cols), |(r, c)| {
+            if c == wall {
+                normal(5.0 + 0.5 * r as f64, 0.0)
+            } else {
+                normal(0.3, 0.0)
+            }
+        });
+        let mask = Array2::from_elem((rows, cols), true);
+        let config = |integrator| IntegrateConfig {
+            integrator,
+            filter: ArtefactFilter { max_jump_mm: None },
+            ..IntegrateConfig::default()
+        };
+        let out = integrate_normals(
+            &field_of(&normals, &mask),
+            1.0,
+            &config(Integrator::Auto),
+            None,
+        )
+        .unwrap();
+        let left = Array2::from_shape_fn((rows, cols), |(_, c)| c < wall);
+        let right = Array2::from_shape_fn((rows, cols), |(_, c)| c > wall);
+        let sides =
+            rmse(&out.depth.depth_mm, &truth, &left).max(rmse(&out.depth.depth_mm, &truth, &right));
+        let cut = out.discontinuity_edges.unwrap();
+        assert!(
+            sides < 0.15 && cut >= rows,
+            "side RMSE {sides} px, {cut} edges cut"
+        );
+
+        let radius = 25.0;
+        let (rows, cols) = (61usize, 61usize);
+        let centre = 30.0;
+        let height = |r: usize, c: usize| {
+            let (x, y) = (c as f64 - centre, centre - r as f64);
+            (radius * radius - x * x - y * y).sqrt()
+        };
+        let mask = Array2::from_shape_fn((rows, cols), |(r, c)| height(r, c) > 8.0);
+        let normals = Array2::from_shape_fn((rows, cols), |(r, c)| {
+            let (x, y) = (c as f64 - centre, centre - r as f64);
+            Vector3::new(x, y, height(r, c).max(0.0)).normalize()
+        });
+        let field = field_of(&normals, &mask);
+        let auto = integrate_normals(&field, 1.0, &config(Integrator::Auto), None).unwrap();
+        let ls = integrate_normals(&field, 1.0, &config(Integrator::LeastSquares), None).unwrap();
+        assert_eq!(auto.discontinuity_edges, Some(0));
+        assert_eq!(auto.bilateral_pixels, Some(0));
+        assert_eq!(ls.discontinuity_edges, None);
+        let truth = Array2::from_shape_fn((rows, cols), |(r, c)| height(r, c));
+        let (e_auto, e_ls) = (
+            rmse(&auto.depth.depth_mm, &truth, &mask),
+            rmse(&ls.depth.depth_mm, &truth, &mask),
+        );
+        assert!(
+            (e_auto - e_ls).abs() < 1e-3 * e_ls.max(1e-3),
+            "auto {e_auto} px, LS {e_ls} px"
         );
     }
 

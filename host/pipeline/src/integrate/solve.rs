@@ -213,13 +213,15 @@ pub(super) fn solve_window(
         .and_then(|d| warm_start(d, &topology, grid, problem.origin));
     let mut x = warm.clone().unwrap_or_else(|| vec![0.0; topology.len()]);
     profile.add("warm start", t);
-    let bilateral = config.integrator == Integrator::Bilateral;
+    // The automatic integrator reweights as the bilateral one does, then solves least squares
+    // with the discontinuities it found cut ([`cut_solve`]).
+    let bilateral = matches!(config.integrator, Integrator::Bilateral | Integrator::Auto);
     let stiffness = bilateral::Stiffness {
         units: grid.pixel_units(),
         k: config.bilateral.stiffness,
     };
     let passes_allowed = match config.integrator {
-        Integrator::Bilateral => config.bilateral.max_iterations,
+        Integrator::Bilateral | Integrator::Auto => config.bilateral.max_iterations,
         _ if planes.is_empty() => 1,
         _ => config.coverage.iterations,
     };
@@ -338,6 +340,60 @@ pub(super) fn solve_window(
             break;
         }
     }
+    let mut auto_cut = None;
+    let mut auto_near = 0;
+    if config.integrator == Integrator::Auto {
+        let t = Instant::now();
+        let cut =
+            bilateral::discontinuities(&topology, &x, &slopes, stiffness, DISCONTINUITY_WEIGHT);
+        let near = bilateral::near_discontinuities(
+            &topology,
+            &x,
+            &slopes,
+            stiffness,
+            config.auto.decisive_weight,
+            config.auto.radius,
+        );
+        let weighted = bilateral::bilateral(&topology, &x, &slopes, &confidence, stiffness);
+        let mut sides = bilateral::uniform(&confidence, &slopes, &estimated);
+        for ((side, w), &n) in sides.iter_mut().zip(weighted).zip(&near) {
+            if n {
+                *side = w;
+            }
+        }
+        bilateral::cut_sides(&topology, &cut, &mut sides);
+        auto_near = near.iter().filter(|&&n| n).count();
+        auto_cut = Some(cut);
+        let equations = bilateral::side_equations(&topology, &sides, &slopes, step);
+        let lap: &GridLaplacian = match laplacian.as_mut() {
+            Some(l) => {
+                topology.reweight_laplacian(l, &equations.weight);
+                l
+            }
+            None => laplacian.insert(topology.laplacian(&equations.weight)),
+        };
+        let b = equations.right_hand_side(&topology);
+        let multigrid = match hierarchy.as_mut() {
+            Some(m) => {
+                m.reweight(lap, least_squares::REGULARISATION);
+                m
+            }
+            None => hierarchy.insert(Multigrid::new(lap, least_squares::REGULARISATION)),
+        };
+        let solved = preconditioned_cg(
+            |u, v| lap.apply(u, v),
+            |r, z| multigrid.precondition(lap, r, z),
+            &b,
+            &mut x,
+            Stop::ResidualNorm(config.tolerance),
+            config.max_iterations,
+            &mut workspace.cg,
+        );
+        profile.solve_iterations.push(solved);
+        iterations += solved;
+        passes += 1;
+        profile.add("least squares with the discontinuities cut", t);
+    }
     let t = Instant::now();
     // Pieces, and parts: pieces further split where the bilateral integrator found a depth
     // discontinuity all the way across (their relative depth is unknown to the normals). The
@@ -347,13 +403,15 @@ pub(super) fn solve_window(
         || pieces_of_graph.unwrap_or_else(|| topology.components()),
         || {
             bilateral.then(|| {
-                let cut = bilateral::discontinuities(
-                    &topology,
-                    &x,
-                    &slopes,
-                    stiffness,
-                    DISCONTINUITY_WEIGHT,
-                );
+                let cut = auto_cut.clone().unwrap_or_else(|| {
+                    bilateral::discontinuities(
+                        &topology,
+                        &x,
+                        &slopes,
+                        stiffness,
+                        DISCONTINUITY_WEIGHT,
+                    )
+                });
                 let min_part = MIN_PART_PIXELS.max(topology.len() / 100);
                 absorb_small_parts(&topology, topology.components_without(&cut), min_part)
             })
@@ -422,6 +480,10 @@ pub(super) fn solve_window(
         part: Array2::from_elem(shape, u32::MAX),
         confidence: Array2::from_elem(shape, Confidence::None),
         completed_normals: Array3::from_elem((shape.0, shape.1, 3), f32::NAN),
+        discontinuity_edges: auto_cut
+            .as_ref()
+            .map(|cut| cut.iter().flatten().filter(|&&c| c).count()),
+        bilateral_pixels: auto_cut.as_ref().map(|_| auto_near),
     };
     if let DepthGrid::Perspective {
         distance_mm,
