@@ -7,6 +7,7 @@
 //! 3-D frames; [`tof`] turns time-of-flight histograms into ranges, masks and fused depth.
 //! Inputs and outputs are `meb-core`'s types; the simulator (`meb-sim`) is used by tests only.
 
+pub mod calibrate;
 pub mod demod;
 pub mod integrate;
 pub mod photometric;

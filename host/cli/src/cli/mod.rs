@@ -1,5 +1,6 @@
 //! One module per `meb` subcommand: argument parsing and printing only.
 
+pub mod calibrate;
 pub mod carriers;
 pub mod common;
 pub mod decode;
@@ -9,6 +10,7 @@ pub mod hybrid;
 pub mod integrate;
 pub mod photometric;
 pub mod reconstruct;
+pub mod rig;
 pub mod simulate;
 pub mod simulate_tof;
 pub mod tof;

@@ -14,7 +14,7 @@ use meb_core::rig::Rig;
 use meb_pipeline::demod::Decoded;
 use meb_pipeline::demod::output::read_decode_dir;
 use meb_pipeline::reconstruct::{
-    AbsoluteDepth, LightModel, ReconstructConfig, Reconstruction, from_decoded,
+    AbsoluteDepth, LightModel, ReconstructConfig, Reconstruction, check_decoded_rig, from_decoded,
 };
 use std::path::PathBuf;
 
@@ -106,6 +106,9 @@ pub fn run(args: &ReconstructArgs) -> Result<()> {
         return Ok(());
     }
     let reconstruction = from_decoded(&inputs.decoded, &inputs.rig, inputs.mask.as_ref(), &config)?;
+    let rig_check = check_decoded_rig(&inputs.decoded, &inputs.rig, &reconstruction);
+    let implausible = !reconstruction.support.verdict.is_plausible();
+    super::rig::enforce(&rig_check, &args.rig, args.force, implausible)?;
     super::common::check_support(&reconstruction, args.force)?;
     let field = &reconstruction.photometric.field;
     let depth = &reconstruction.integration.depth;
@@ -123,7 +126,10 @@ pub fn run(args: &ReconstructArgs) -> Result<()> {
         angular_errors.as_ref(),
         Some(reconstruction.confidence()),
         &reconstruction.timings,
-        summary(args, &inputs, &config, &reconstruction),
+        Summary {
+            rig_check: serde_json::to_value(&rig_check).ok(),
+            ..summary(args, &inputs, &config, &reconstruction)
+        },
         super::common::mesh_extensions(&args.mesh),
     )?;
     let out = super::common::commit(folder)?;

@@ -72,6 +72,10 @@ pub struct Summary {
     /// The ground-truth file.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub ground_truth: Option<String>,
+    /// How well the rig explains the capture (`meb reconstruct`'s rig check: misfit, per-LED
+    /// residuals and apparent intensities, verdict; docs/formats/report-json.md).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub rig_check: Option<serde_json::Value>,
 }
 
 /// Depth accuracy against ground truth (see [`DepthErrors`]).

@@ -63,6 +63,7 @@ mod coarse;
 mod inputs;
 mod offset;
 mod region;
+pub mod rig_check;
 mod roi;
 mod support;
 pub use coarse::{COARSE_BIN, COARSE_MIN_PIXELS, bin_decoded};
@@ -812,6 +813,24 @@ pub fn from_decoded_extent(
         config,
         warm,
         ColdPasses::All,
+    )
+}
+
+/// The rig check ([`rig_check`]) of `reconstruction`, a reconstruction of `decoded` with
+/// `rig`: the usable LED images and level noise the reconstruction read, at its depth, over its
+/// measured pixels.
+pub fn check_decoded_rig(
+    decoded: &Decoded,
+    rig: &Rig,
+    reconstruction: &Reconstruction,
+) -> rig_check::RigCheck {
+    rig_check::check_rig(
+        &usable_led_images(decoded),
+        Some(&level_noise(decoded)),
+        &reconstruction.photometric.noise_gains,
+        rig,
+        &reconstruction.integration.depth.depth_mm,
+        &reconstruction.photometric.field.mask,
     )
 }
 
