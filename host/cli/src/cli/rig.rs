@@ -123,8 +123,8 @@ fn print_table(check: &RigCheck) {
     }
 }
 
-/// Reports the rig check of a reconstruction on stderr and refuses an inconsistent rig
-/// unless `force`. A doubtful rig is refused too when the reconstruction is `implausible`
+/// Reports a doubtful or inconsistent rig on stderr and refuses an inconsistent one unless
+/// `force`. A doubtful rig is refused too when the reconstruction is `implausible`
 /// anyway: a rig that fits only roughly is the likelier cause of, e.g., a part that could not
 /// be placed in depth (a nominal rig 35 mm off per LED on the blobby shape: misfit 2.35 times
 /// the noise's, and the offset search ran to its edge).
@@ -139,7 +139,9 @@ pub fn enforce(check: &RigCheck, rig_name: &str, force: bool, implausible: bool)
         ),
         _ if refused => eprintln!("warning: kept despite the rig check (--force): {line}"),
         RigFit::Doubtful | RigFit::Inconsistent => eprintln!("warning: {line}"),
-        RigFit::Consistent | RigFit::Unjudged => eprintln!("rig check: {line}"),
+        // A consistent rig is recorded in report.json only: a refusal that follows for
+        // another reason stays one line.
+        RigFit::Consistent | RigFit::Unjudged => {}
     }
     Ok(())
 }
