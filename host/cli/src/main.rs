@@ -22,6 +22,8 @@ enum Command {
     Integrate(cli::integrate::IntegrateArgs),
     /// Photometric stereo on an image set with known lights (or a DiLiGenT folder).
     Photometric(cli::photometric::PhotometricArgs),
+    /// Calibrate a rig from its own captures (`meb calibrate lights` with a matte sphere).
+    Calibrate(cli::calibrate::CalibrateArgs),
     /// Print the MEB-FDMA chip table, its spectrum and its IEEE 1789 flicker class.
     Carriers(cli::carriers::CarriersArgs),
     /// Demodulate a capture into one image per LED (led1.npy…, previews, noise, decode.json).
@@ -32,6 +34,8 @@ enum Command {
     Simulate(Box<cli::simulate::SimulateArgs>),
     /// Reconstruct normals, depth and a mesh from a capture or a `meb decode` folder.
     Reconstruct(Box<cli::reconstruct::ReconstructArgs>),
+    /// Check a rig against a capture (`meb rig check`).
+    Rig(cli::rig::RigArgs),
     /// Time of flight: range maps from SPAD histograms, ToF → camera calibration, object masks.
     Tof(cli::tof::TofArgs),
     /// Make a 3-D video from a long or live capture: a 3-D frame per window of frames.
@@ -47,11 +51,13 @@ fn main() -> ExitCode {
         Command::Demo(args) => cli::demo::run(&args),
         Command::Integrate(args) => cli::integrate::run(&args),
         Command::Photometric(args) => cli::photometric::run(&args),
+        Command::Calibrate(args) => cli::calibrate::run(&args),
         Command::Carriers(args) => cli::carriers::run(&args),
         Command::Decode(args) => cli::decode::run(&args),
         Command::Device(args) => cli::device::run(&args),
         Command::Simulate(args) => cli::simulate::run(&args),
         Command::Reconstruct(args) => cli::reconstruct::run(&args),
+        Command::Rig(args) => cli::rig::run(&args),
         Command::Tof(args) => cli::tof::run(&args),
         Command::Video(args) => cli::video::run(&args),
     };

@@ -9,6 +9,7 @@
 
 #![deny(missing_docs)]
 
+pub mod calibrate;
 pub mod demod;
 pub mod integrate;
 pub mod photometric;

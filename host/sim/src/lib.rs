@@ -24,6 +24,7 @@ pub mod geometry;
 pub mod lighting;
 pub mod mesh;
 pub mod output;
+pub mod rig_error;
 pub mod scene;
 pub mod sensor;
 pub mod tof;

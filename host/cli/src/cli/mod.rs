@@ -1,5 +1,6 @@
 //! One module per `meb` subcommand: argument parsing and printing only.
 
+pub mod calibrate;
 pub mod camera;
 pub mod carriers;
 pub mod common;
@@ -11,6 +12,7 @@ pub mod integrate;
 pub mod parse;
 pub mod photometric;
 pub mod reconstruct;
+pub mod rig;
 pub mod simulate;
 pub mod simulate_tof;
 pub mod tof;

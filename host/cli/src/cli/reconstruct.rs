@@ -14,7 +14,8 @@ use meb_core::rig::Rig;
 use meb_pipeline::demod::Decoded;
 use meb_pipeline::demod::output::read_decode_dir;
 use meb_pipeline::reconstruct::{
-    AbsoluteDepth, LightModel, ReconstructConfig, Reconstruction, Request, Source, reconstruct,
+    AbsoluteDepth, LightModel, ReconstructConfig, Reconstruction, Request, Source,
+    check_decoded_rig, reconstruct,
 };
 use std::path::PathBuf;
 
@@ -114,6 +115,9 @@ pub fn run(args: &ReconstructArgs) -> Result<()> {
             ..Request::default()
         },
     )?;
+    let rig_check = check_decoded_rig(&inputs.decoded, &inputs.rig, &reconstruction);
+    let implausible = !reconstruction.support.verdict.is_plausible();
+    super::rig::enforce(&rig_check, &args.rig, args.force, implausible)?;
     super::common::check_support(&reconstruction, args.force)?;
     let field = &reconstruction.photometric.field;
     let depth = &reconstruction.integration.depth;
@@ -131,7 +135,10 @@ pub fn run(args: &ReconstructArgs) -> Result<()> {
         angular_errors.as_ref(),
         Some(reconstruction.confidence()),
         &reconstruction.timings,
-        summary(args, &inputs, &config, &reconstruction),
+        Summary {
+            rig_check: serde_json::to_value(&rig_check).ok(),
+            ..summary(args, &inputs, &config, &reconstruction)
+        },
         super::common::mesh_extensions(&args.mesh),
     )?;
     let out = super::common::commit(folder)?;

@@ -7,6 +7,7 @@ use meb_core::rig::Rig;
 use meb_sim::dataset::{DatasetConfig, write_dataset};
 use meb_sim::exposure::expose_without_clipping;
 use meb_sim::output::{OutputOptions, VideoFormat, write_capture};
+use meb_sim::rig_error::RigError;
 use meb_sim::tof::thesis_hybrid_scene;
 use meb_sim::{
     GroundPlane, NoiseModel, Scene, SceneObject, Shape, SimConfig, SimulatedCapture, Spin,
@@ -205,6 +206,18 @@ struct CaptureArgs {
     /// for `meb video --ground-truth`).
     #[arg(long)]
     truth_every: Option<usize>,
+    /// Also write rig-nominal.toml: the rig with every LED moved this many mm in a random
+    /// direction, as a rough measurement would give (the capture is rendered with rig.toml,
+    /// the truth; hand the nominal rig to `meb reconstruct` or `meb calibrate lights`).
+    #[arg(long, value_name = "MM")]
+    perturb_leds_mm: Option<f64>,
+    /// Also write rig-nominal.toml with every LED's intensity multiplied by a random factor
+    /// in [1 − F, 1 + F] (with --perturb-leds-mm, both).
+    #[arg(long, value_name = "F")]
+    perturb_intensity: Option<f64>,
+    /// Seed of the nominal rig's errors (default: --seed).
+    #[arg(long)]
+    perturb_seed: Option<u64>,
 }
 
 #[derive(Args)]
@@ -307,6 +320,16 @@ fn run_capture(args: &CaptureArgs) -> Result<()> {
     } else {
         config
     };
+    let nominal = (args.perturb_leds_mm.is_some() || args.perturb_intensity.is_some())
+        .then(|| {
+            RigError {
+                position_mm: args.perturb_leds_mm.unwrap_or(0.0),
+                intensity: args.perturb_intensity.unwrap_or(0.0),
+                seed: args.perturb_seed.unwrap_or(args.seed),
+            }
+            .apply(&rig)
+        })
+        .transpose()?;
     let started = Instant::now();
     let mut capture = SimulatedCapture::new(rig, scene.clone(), config)?;
     if let Some(path) = &args.timeline {
@@ -328,6 +351,11 @@ fn run_capture(args: &CaptureArgs) -> Result<()> {
         bar.set_position(done as u64)
     })?;
     bar.finish_and_clear();
+    if let Some(nominal) = &nominal {
+        let path = folder.path().join("rig-nominal.toml");
+        std::fs::write(&path, nominal.to_toml_string())
+            .with_context(|| format!("cannot write {}", path.display()))?;
+    }
     let tof_ranges = if args.tof {
         let settings = super::simulate_tof::TofSettings {
             scene: &scene,

@@ -82,6 +82,10 @@ pub struct Summary {
     /// Why the automatic integrator chose what it chose (the data it looked at).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub integrator_choice: Option<String>,
+    /// How well the rig explains the capture (`meb reconstruct`'s rig check: misfit, per-LED
+    /// residuals and apparent intensities, verdict; docs/formats/report-json.md).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub rig_check: Option<serde_json::Value>,
 }
 
 /// Depth accuracy against ground truth (see [`DepthErrors`]).

@@ -18,6 +18,7 @@ mod reconstruct_cli;
 mod reconstruct_targets;
 mod reference_data;
 mod report_page;
+mod rig_calibration;
 mod simulate_cli;
 mod tof_calibration;
 mod tof_cli;

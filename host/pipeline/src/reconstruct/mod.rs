@@ -43,6 +43,7 @@
 //! offset search). The commands refuse an
 //! implausible result unless `--force`; a warm result found implausible is redone cold.
 
+use crate::demod::Decoded;
 use crate::integrate::{
     BilateralConfig, Confidence, IntegrateConfig, IntegrateError, Integration,
     IntegrationWorkspace, SurfaceEvidence, integrate_surface_with,
@@ -62,6 +63,7 @@ mod coarse;
 mod inputs;
 mod offset;
 mod region;
+pub mod rig_check;
 mod roi;
 mod support;
 pub use coarse::{COARSE_BIN, COARSE_MIN_PIXELS, bin_decoded};
@@ -804,10 +806,27 @@ fn median(values: &mut [f32]) -> f32 {
     *values.select_nth_unstable_by(middle, f32::total_cmp).1
 }
 
+/// The rig check ([`rig_check`]) of `reconstruction`, a reconstruction of `decoded` with
+/// `rig`: the usable LED images and level noise the reconstruction read, at its depth, over its
+/// measured pixels.
+pub fn check_decoded_rig(
+    decoded: &Decoded,
+    rig: &Rig,
+    reconstruction: &Reconstruction,
+) -> rig_check::RigCheck {
+    rig_check::check_rig(
+        &usable_led_images(decoded),
+        Some(&level_noise(decoded)),
+        &reconstruction.photometric.noise_gains,
+        rig,
+        &reconstruction.integration.depth.depth_mm,
+        &reconstruction.photometric.field.mask,
+    )
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::demod::Decoded;
 
     /// A still sphere's window as `meb video` passes it, its cold reconstruction and the warm
     /// start that leaves.

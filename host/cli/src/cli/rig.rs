@@ -1,0 +1,154 @@
+//! `meb rig check`: how consistent a rig is with a capture (the rig check every
+//! reconstruction runs, [`meb_pipeline::reconstruct::rig_check`]), and the refusal of an
+//! inconsistent rig that `meb reconstruct` shares.
+
+use super::decode::{DecodeOptions, check_folder_verdict, decode_capture};
+use anyhow::{Context, Result, bail, ensure};
+use clap::{Args, Subcommand};
+use meb_core::rig::Rig;
+use meb_pipeline::demod::Decoded;
+use meb_pipeline::demod::output::read_decode_dir;
+use meb_pipeline::reconstruct::rig_check::{RigCheck, RigFit};
+use meb_pipeline::reconstruct::{
+    ReconstructConfig, Request, Source, check_decoded_rig, reconstruct,
+};
+use std::path::PathBuf;
+
+/// Arguments of `meb rig`.
+#[derive(Args)]
+pub struct RigArgs {
+    #[command(subcommand)]
+    command: RigCommand,
+}
+
+#[derive(Subcommand)]
+enum RigCommand {
+    /// How well a rig explains a capture: the Lambertian fit's residuals per LED over the
+    /// reconstructed surface, each LED's apparent intensity, and a verdict (exit status 1
+    /// when the rig does not fit).
+    Check(CheckArgs),
+}
+
+/// Arguments of `meb rig check`.
+#[derive(Args)]
+struct CheckArgs {
+    /// A capture (decoded first) or a `meb decode` output folder.
+    input: PathBuf,
+    /// Rig: a TOML file or a preset.
+    #[arg(long)]
+    rig: String,
+    /// Decoder settings (only used when INPUT is a capture).
+    #[command(flatten)]
+    decode: DecodeOptions,
+}
+
+/// Runs `meb rig`.
+pub fn run(args: &RigArgs) -> Result<()> {
+    match &args.command {
+        RigCommand::Check(check) => run_check(check),
+    }
+}
+
+fn run_check(args: &CheckArgs) -> Result<()> {
+    let rig = Rig::load(&args.rig).with_context(|| format!("cannot load rig {}", args.rig))?;
+    let decoded = read_capture(&args.input, &rig, &args.decode)?;
+    let reconstruction = reconstruct(
+        Source::Decoded(&decoded),
+        &rig,
+        &ReconstructConfig::decoded_capture(),
+        Request::default(),
+    )
+    .with_context(|| {
+        format!(
+            "rig {} could not reconstruct {} at all, so it cannot be checked (is it the rig of \
+             this capture, with the LEDs in their order?)",
+            args.rig,
+            args.input.display()
+        )
+    })?;
+    let check = check_decoded_rig(&decoded, &rig, &reconstruction);
+    print_table(&check);
+    println!("{}", check.describe(&args.rig));
+    match check.fit {
+        RigFit::Consistent => println!("verdict: consistent"),
+        RigFit::Doubtful => println!("verdict: doubtful (reported, not refused)"),
+        RigFit::Unjudged => bail!(
+            "{} (light the object with every LED, or use a larger object)",
+            check.describe(&args.rig)
+        ),
+        RigFit::Inconsistent => bail!("verdict: inconsistent; try: {}", check.advice()),
+    }
+    Ok(())
+}
+
+/// Decodes `input` (or reads its decode folder) for `rig`, checking that the LED count and
+/// image size agree.
+fn read_capture(input: &std::path::Path, rig: &Rig, options: &DecodeOptions) -> Result<Decoded> {
+    let decoded = if input.join("decode.json").is_file() {
+        let decoded = read_decode_dir(input)?;
+        check_folder_verdict(&decoded.report, input, false)?;
+        decoded
+    } else {
+        decode_capture(input, options, rig.leds.len(), false)?
+    };
+    ensure!(
+        decoded.leds.images.len() == rig.leds.len(),
+        "the rig has {} LEDs but {} has {} LED images",
+        rig.leds.len(),
+        input.display(),
+        decoded.leds.images.len()
+    );
+    let shape = decoded
+        .leds
+        .shape()
+        .context("the capture holds no LED image")?;
+    ensure!(
+        shape == (rig.camera.height, rig.camera.width),
+        "the rig's camera is {}x{} but the images are {}x{}",
+        rig.camera.width,
+        rig.camera.height,
+        shape.1,
+        shape.0
+    );
+    Ok(decoded)
+}
+
+/// Prints the per-LED figures of `check`.
+fn print_table(check: &RigCheck) {
+    if check.leds.is_empty() {
+        return;
+    }
+    println!("LED  apparent intensity  median |residual|  median residual (σ)");
+    for led in &check.leds {
+        println!(
+            "{:>3}  {:>18.4}  {:>16.2} %  {:>19.2}",
+            led.led,
+            led.gain,
+            100.0 * led.residual,
+            led.residual_sigmas
+        );
+    }
+}
+
+/// Reports a doubtful or inconsistent rig on stderr and refuses an inconsistent one unless
+/// `force`. A doubtful rig is refused too when the reconstruction is `implausible`
+/// anyway: a rig that fits only roughly is the likelier cause of, e.g., a part that could not
+/// be placed in depth (a nominal rig 35 mm off per LED on the blobby shape: misfit 2.35 times
+/// the noise's, and the offset search ran to its edge).
+pub fn enforce(check: &RigCheck, rig_name: &str, force: bool, implausible: bool) -> Result<()> {
+    let line = check.describe(rig_name);
+    let refused =
+        check.fit == RigFit::Inconsistent || (check.fit == RigFit::Doubtful && implausible);
+    match check.fit {
+        _ if refused && !force => bail!(
+            "{line} (try: {}; --force writes the reconstruction anyway)",
+            check.advice()
+        ),
+        _ if refused => eprintln!("warning: kept despite the rig check (--force): {line}"),
+        RigFit::Doubtful | RigFit::Inconsistent => eprintln!("warning: {line}"),
+        // A consistent rig is recorded in report.json only: a refusal that follows for
+        // another reason stays one line.
+        RigFit::Consistent | RigFit::Unjudged => {}
+    }
+    Ok(())
+}
