@@ -13,6 +13,7 @@ use meb_core::metrics::{AngularErrors, DepthErrors};
 use meb_core::rig::Rig;
 use meb_pipeline::demod::Decoded;
 use meb_pipeline::demod::output::read_decode_dir;
+use meb_pipeline::photometric::highlights::HighlightShares;
 use meb_pipeline::reconstruct::{
     AbsoluteDepth, LightModel, ReconstructConfig, Reconstruction, from_decoded,
 };
@@ -113,18 +114,21 @@ pub fn run(args: &ReconstructArgs) -> Result<()> {
         Some(t) => compare(t, field, &depth.depth_mm)?,
         None => (None, None),
     };
-    super::common::write_outputs(
+    meb_cli::export::report::write_report(
         folder.path(),
-        "meb reconstruct",
-        source_text(args, &inputs),
-        field,
-        depth,
-        depth_errors.as_ref(),
-        angular_errors.as_ref(),
-        Some(reconstruction.confidence()),
-        &reconstruction.timings,
-        summary(args, &inputs, &config, &reconstruction),
-        super::common::mesh_extensions(&args.mesh),
+        &meb_cli::export::report::ReportInputs {
+            title: "meb reconstruct".to_string(),
+            source: source_text(args, &inputs),
+            normals: field,
+            depth,
+            depth_errors: depth_errors.as_ref(),
+            angular_errors: angular_errors.as_ref(),
+            confidence: Some(reconstruction.confidence()),
+            highlights: Some(&reconstruction.photometric.highlights),
+            timings: &reconstruction.timings,
+            summary: summary(args, &inputs, &config, &reconstruction),
+            mesh_formats: super::common::mesh_extensions(&args.mesh),
+        },
     )?;
     let out = super::common::commit(folder)?;
     print_summary(
@@ -235,6 +239,7 @@ fn summary(
         input: Some(args.input.display().to_string()),
         rig: Some(args.rig.clone()),
         ground_truth: args.ground_truth.as_ref().map(|p| p.display().to_string()),
+        highlights: Some(HighlightShares::of(&reconstruction.photometric)),
         ..super::common::reconstruction_summary(&inputs.decoded, config, reconstruction)
     }
 }
