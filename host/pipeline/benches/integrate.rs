@@ -195,6 +195,7 @@ impl WindowResult {
                     mask: mask.clone(),
                 },
                 lit_count: Array2::zeros(mask.dim()),
+                highlights: Array2::zeros(mask.dim()),
                 object_mask: mask,
                 planes,
                 fill: read_npy(dir.join("fill.npy"))?,

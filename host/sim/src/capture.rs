@@ -17,6 +17,7 @@
 use super::SimulateError;
 use super::geometry::SurfaceMap;
 use super::lighting;
+use super::material::Material;
 use super::scene::Scene;
 use super::sensor::{NoiseModel, ToneCurve, quantise};
 use super::waveform::{CarrierWaveform, LedWaveform};
@@ -60,6 +61,8 @@ pub struct SimConfig {
     pub chip_rates_hz: Option<Vec<f64>>,
     /// Seed of the phases and the noise.
     pub seed: u64,
+    /// The objects' material (matte unless set; the ground plane is always matte).
+    pub material: Material,
 }
 
 impl Default for SimConfig {
@@ -81,6 +84,7 @@ impl Default for SimConfig {
             phases_chips: None,
             chip_rates_hz: None,
             seed: 0,
+            material: Material::MATTE,
         }
     }
 }
@@ -124,6 +128,8 @@ pub struct TruthInfo {
     pub seed: u64,
     /// Whether the geometry moves between frames.
     pub moving: bool,
+    /// The objects' material.
+    pub material: Material,
 }
 
 /// Ground truth of a capture at one instant.
@@ -250,6 +256,7 @@ impl SimulatedCapture {
             gain,
             seed: config.seed,
             moving: scene.is_moving(),
+            material: config.material,
         };
         let mut capture = Self {
             rig,
@@ -414,7 +421,7 @@ impl SimulatedCapture {
     /// Surface and shading at time `t_s`.
     fn shade(&self, t_s: f64) -> (SurfaceMap, Shading) {
         let map = SurfaceMap::render(&self.scene, &self.rig.camera, t_s);
-        let leds = lighting::led_images(&map, &self.rig, self.info.gain);
+        let leds = lighting::led_images_of(&map, &self.rig, self.info.gain, &self.config.material);
         let background = lighting::background_image(&map, self.info.background_irradiance);
         (map, Shading { leds, background })
     }
@@ -449,6 +456,9 @@ fn validate(config: &SimConfig, scene: &Scene) -> Result<(), SimulateError> {
     };
     if config.frames == 0 {
         return bad("frames", "must be at least 1");
+    }
+    if let Some(problem) = config.material.problem() {
+        return bad("gloss/roughness", &problem);
     }
     if !(config.exposure > 0.0 && config.exposure <= 1.0) {
         return bad(

@@ -22,6 +22,7 @@ pub mod dataset;
 pub mod exposure;
 pub mod geometry;
 pub mod lighting;
+pub mod material;
 pub mod mesh;
 pub mod output;
 pub mod rig_error;
@@ -31,6 +32,7 @@ pub mod tof;
 pub mod waveform;
 
 pub use capture::{GroundTruth, SimConfig, SimulatedCapture, TruthInfo};
+pub use material::Material;
 pub use meb_core::mesh::TriMesh;
 pub use scene::{GroundPlane, Scene, SceneObject, Shape, Spin};
 pub use sensor::{NoiseModel, ToneCurve};

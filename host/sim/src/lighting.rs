@@ -1,4 +1,4 @@
-//! Near-field Lambertian shading with attached and cast shadows, and the background light.
+//! Near-field shading with attached and cast shadows, and the background light.
 //!
 //! Per pixel with visible surface point X, normal n and albedo ρ, LED i contributes
 //! (docs/maths/photometric-stereo.md#light-vectors with the exact per-point light vector of
@@ -12,7 +12,8 @@
 //! V_i ∈ {0, 1} the cast shadow, found by marching from X towards the LED over the depth map
 //! (a height-field shadow test: the object is taken to be solid behind its visible surface along
 //! every camera ray, so a point of the segment is occluded when the surface seen at its pixel is
-//! nearer the camera). These A_i are the `led_true` images: the value a pixel reads with only
+//! nearer the camera). Objects of a glossy [`Material`] add a specular lobe to the Lambertian
+//! term ([`super::material`]). These A_i are the `led_true` images: the value a pixel reads with only
 //! LED i constantly on, no background, no noise.
 //!
 //! Background (unmodulated room light, thesis Eq. 4.3 `SNR = 10·log10(P_signal/P_noise)`, both
@@ -23,6 +24,7 @@
 //! `E_bg = P_signal · 10^(−SNR/10)`.
 
 use super::geometry::SurfaceMap;
+use super::material::Material;
 use meb_core::rig::{Camera, Rig};
 use nalgebra::Vector3;
 use ndarray::Array2;
@@ -67,8 +69,19 @@ pub fn background_power(rig: &Rig, gain: f64, snr_db: f64) -> f64 {
     signal_power(rig, gain) * 10f64.powf(-snr_db / 10.0)
 }
 
-/// Per-LED on-level images A_i (module docs), fractions of full scale.
+/// Per-LED on-level images A_i (module docs) of matte objects, fractions of full scale.
 pub fn led_images(map: &SurfaceMap, rig: &Rig, gain: f64) -> Vec<Array2<f32>> {
+    led_images_of(map, rig, gain, &Material::MATTE)
+}
+
+/// Per-LED on-level images A_i of objects of `material` ([`super::material`]; the ground plane
+/// stays matte), fractions of full scale.
+pub fn led_images_of(
+    map: &SurfaceMap,
+    rig: &Rig,
+    gain: f64,
+    material: &Material,
+) -> Vec<Array2<f32>> {
     let camera = &rig.camera;
     let field = HeightField::new(map, camera);
     rig.leds
@@ -90,7 +103,11 @@ pub fn led_images(map: &SurfaceMap, rig: &Rig, gain: f64) -> Vec<Array2<f32>> {
                     if field.occluded(row as f64, col as f64, &x, &led.position()) {
                         return 0.0; // cast shadow
                     }
-                    (gain * map.albedo[i] * shade) as f32
+                    if material.is_matte() || !map.is_object[i] {
+                        return (gain * map.albedo[i] * shade) as f32;
+                    }
+                    let view = camera.ray(row as f64, col as f64).towards_camera();
+                    (gain * material.shade(map.albedo[i], &map.normals[i], &l, &view)) as f32
                 })
                 .collect();
             Array2::from_shape_vec((map.height, map.width), values)

@@ -87,6 +87,7 @@ pub fn write_outputs(
             depth_errors,
             angular_errors,
             confidence,
+            highlights: None,
             timings,
             summary,
             mesh_formats,

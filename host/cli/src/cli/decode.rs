@@ -154,6 +154,9 @@ pub fn decode_capture(
         None => anyhow::Error::new(e).context(format!("cannot decode {}", input.display())),
     })?;
     warn_if_overridden(&decoded.report);
+    if let Some(clipping) = &decoded.report.clipping {
+        eprintln!("note: {}", clipping.message);
+    }
     Ok(decoded)
 }
 

@@ -13,6 +13,7 @@ use meb_core::metrics::{AngularErrors, DepthErrors};
 use meb_core::rig::Rig;
 use meb_pipeline::demod::Decoded;
 use meb_pipeline::demod::output::read_decode_dir;
+use meb_pipeline::photometric::highlights::HighlightShares;
 use meb_pipeline::reconstruct::{
     AbsoluteDepth, LightModel, ReconstructConfig, Reconstruction, Request, Source,
     check_decoded_rig, reconstruct,
@@ -125,21 +126,24 @@ pub fn run(args: &ReconstructArgs) -> Result<()> {
         Some(t) => compare(t, field, &depth.depth_mm)?,
         None => (None, None),
     };
-    super::common::write_outputs(
+    meb_cli::export::report::write_report(
         folder.path(),
-        "meb reconstruct",
-        source_text(args, &inputs),
-        field,
-        depth,
-        depth_errors.as_ref(),
-        angular_errors.as_ref(),
-        Some(reconstruction.confidence()),
-        &reconstruction.timings,
-        Summary {
-            rig_check: serde_json::to_value(&rig_check).ok(),
-            ..summary(args, &inputs, &config, &reconstruction)
+        &meb_cli::export::report::ReportInputs {
+            title: "meb reconstruct".to_string(),
+            source: source_text(args, &inputs),
+            normals: field,
+            depth,
+            depth_errors: depth_errors.as_ref(),
+            angular_errors: angular_errors.as_ref(),
+            confidence: Some(reconstruction.confidence()),
+            highlights: Some(&reconstruction.photometric.highlights),
+            timings: &reconstruction.timings,
+            summary: Summary {
+                rig_check: serde_json::to_value(&rig_check).ok(),
+                ..summary(args, &inputs, &config, &reconstruction)
+            },
+            mesh_formats: super::common::mesh_extensions(&args.mesh),
         },
-        super::common::mesh_extensions(&args.mesh),
     )?;
     let out = super::common::commit(folder)?;
     print_summary(
@@ -250,6 +254,7 @@ fn summary(
         input: Some(args.input.display().to_string()),
         rig: Some(args.rig.clone()),
         ground_truth: args.ground_truth.as_ref().map(|p| p.display().to_string()),
+        highlights: Some(HighlightShares::of(&reconstruction.photometric)),
         ..super::common::reconstruction_summary(&inputs.decoded, config, reconstruction)
     }
 }

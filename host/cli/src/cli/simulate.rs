@@ -165,6 +165,13 @@ struct CaptureArgs {
     /// otherwise saturate).
     #[arg(long)]
     peak: Option<f64>,
+    /// Weight of a glossy coat over the objects' Lambertian base, in [0, 1] (a GGX lobe mixed
+    /// as Blender mixes a Glossy BSDF into a Diffuse one; 0 = matte).
+    #[arg(long, default_value_t = 0.0)]
+    gloss: f64,
+    /// Roughness of the glossy coat in (0, 1] (α = roughness²).
+    #[arg(long, default_value_t = 0.25)]
+    roughness: f64,
     /// Lower the gain, as an auto-exposed camera would, until the brightest pixel of the first
     /// frame with every LED on stays below 90 % of full scale (faces lit by several LEDs at
     /// once, e.g. `--scene cube --corner`, clip at the default gain and hide LEDs from the
@@ -307,6 +314,7 @@ fn run_capture(args: &CaptureArgs) -> Result<()> {
         phases_chips: args.phases.clone(),
         chip_rates_hz: args.chip_rate.clone(),
         seed: args.seed,
+        material: meb_sim::Material::glossy(args.gloss, args.roughness),
     };
     if args.truth_frame >= args.frames.max(1) {
         bail!(

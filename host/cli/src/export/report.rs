@@ -15,6 +15,7 @@ use meb_core::metrics::{AngularErrors, DepthErrors};
 use meb_core::timing::StageTiming;
 pub use meb_core::types::ConfidenceCounts;
 use meb_core::types::{Confidence, DepthMap, NormalField};
+use meb_pipeline::photometric::highlights::HighlightShares;
 use ndarray::Array2;
 use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
@@ -86,6 +87,9 @@ pub struct Summary {
     /// residuals and apparent intensities, verdict; docs/formats/report-json.md).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub rig_check: Option<serde_json::Value>,
+    /// Solved pixels with LEDs rejected as highlights (`highlights.npy`).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub highlights: Option<HighlightShares>,
 }
 
 /// Depth accuracy against ground truth (see [`DepthErrors`]).
@@ -202,6 +206,9 @@ pub struct ReportInputs<'a> {
     pub angular_errors: Option<&'a AngularErrors>,
     /// How each pixel's depth is known (written as `confidence.npy`, one byte a pixel).
     pub confidence: Option<&'a Array2<Confidence>>,
+    /// LEDs rejected as highlights per pixel (bit i = LED i + 1; written as `highlights.npy`,
+    /// uint16).
+    pub highlights: Option<&'a Array2<u16>>,
     /// Per-stage timing.
     pub timings: &'a [StageTiming],
     /// Settings and counts for the report.
@@ -251,6 +258,9 @@ pub fn write_report(dir: &Path, inputs: &ReportInputs) -> Result<WrittenReport, 
             write_npy(&dir.join("depth.npy"), &inputs.depth.depth_mm)?;
             if let Some(confidence) = inputs.confidence {
                 write_npy(&dir.join("confidence.npy"), &confidence.mapv(|k| k as u8))?;
+            }
+            if let Some(highlights) = inputs.highlights {
+                write_npy(&dir.join("highlights.npy"), highlights)?;
             }
             Ok(())
         },
@@ -358,6 +368,15 @@ fn previews(inputs: &ReportInputs, mask: &ndarray::Array2<bool>) -> Vec<Preview>
             || confidence_image(confidence),
         ));
     }
+    if let Some(highlights) = inputs.highlights {
+        draws.push(grid(
+            "highlights rejected (grey none; LED 1 red, 2 green, 3 blue, 4 yellow, 5+ magenta; \
+             white several)"
+                .into(),
+            "highlights.png",
+            move || highlight_image(highlights, mask),
+        ));
+    }
     if let Some(e) = inputs.depth_errors {
         let limit = (3.0 * e.rmse_mm as f32).max(1e-3);
         draws.push(grid(
@@ -387,6 +406,32 @@ fn previews(inputs: &ReportInputs, mask: &ndarray::Array2<bool>) -> Vec<Preview>
         }));
     }
     draws.into_par_iter().map(|draw| draw()).collect()
+}
+
+/// The colour of each pixel of `highlights.png`: black off the surface, grey where no LED was
+/// rejected, one colour per rejected LED (LED 1 red, 2 green, 3 blue, 4 yellow, 5 and above
+/// magenta), white where several were.
+fn highlight_image(highlights: &Array2<u16>, surface: &Array2<bool>) -> RgbImage {
+    let (rows, cols) = highlights.dim();
+    RgbImage::from_fn(cols as u32, rows as u32, |c, r| {
+        let p = (r as usize, c as usize);
+        let bits = highlights[p];
+        image::Rgb(if bits.count_ones() > 1 {
+            [255, 255, 255]
+        } else if bits != 0 {
+            match bits.trailing_zeros() {
+                0 => [230, 40, 40],
+                1 => [40, 200, 60],
+                2 => [60, 110, 255],
+                3 => [240, 210, 0],
+                _ => [220, 60, 220],
+            }
+        } else if surface.get(p).copied().unwrap_or(false) {
+            [90, 90, 90]
+        } else {
+            [0, 0, 0]
+        })
+    })
 }
 
 /// Per-stage totals: "integration (pass 2)" counts towards "integration".
@@ -515,6 +560,21 @@ fn figure_rows(report: &Report) -> Vec<(String, String)> {
     }
     if let Some(a) = &s.absolute_depth {
         rows.push(("distance from the camera".into(), a.clone()));
+    }
+    if let Some(h) = &s.highlights {
+        rows.push((
+            "solved pixels with a highlight rejected".into(),
+            format!(
+                "{} px ({:.1} %; per LED {})",
+                h.pixels_with_highlight,
+                100.0 * h.share,
+                h.per_led
+                    .iter()
+                    .map(|n| n.to_string())
+                    .collect::<Vec<_>>()
+                    .join(" / ")
+            ),
+        ));
     }
     for problem in &s.implausible {
         rows.push(("implausible, kept by --force".into(), problem.clone()));

@@ -11,6 +11,7 @@ mod decode_start;
 mod decode_sweep;
 mod demo_end_to_end;
 mod device_cli;
+mod glossy_surfaces;
 mod integrate_diligent;
 mod noise_free;
 mod output_folders;

@@ -36,6 +36,7 @@ pub(crate) fn decoded(levels: Array2<f32>, noise: Array2<f32>) -> Decoded {
             median_noise: 0.0,
             saturated_pixels: 0,
             underexposed_pixels: 0,
+            clipping: None,
             per_led: vec![],
             verdict: Default::default(),
         },

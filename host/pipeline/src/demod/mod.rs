@@ -58,6 +58,7 @@
 //! The thesis estimator reports the power of DFT bin 2^N instead.
 
 mod basis;
+pub mod clipping;
 pub mod config;
 mod error;
 pub mod fit;
@@ -880,6 +881,7 @@ fn finish(
         median_noise,
         saturated_pixels: stats.saturated_pixels,
         underexposed_pixels: stats.underexposed_pixels,
+        clipping: clipping::ClippingAdvice::of(&images, &noise, &saturated, &underexposed),
         per_led,
         verdict: state
             .verdict

@@ -77,6 +77,9 @@ pub struct DecodeReport {
     pub saturated_pixels: usize,
     /// Number of under-exposed pixels.
     pub underexposed_pixels: usize,
+    /// When pixels clip: how many, and how far the exposure may come down.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub clipping: Option<super::clipping::ClippingAdvice>,
     /// Per-LED results.
     pub per_led: Vec<LedReport>,
     /// Whether the decode can be trusted, what looks wrong and what to try.

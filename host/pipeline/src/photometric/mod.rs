@@ -9,6 +9,7 @@
 //! depth estimate ([`lights`]). Unless a mask is supplied the object is found from the albedo and
 //! the per-pixel signal-to-noise ratio, with its holes ([`mask`]).
 
+pub mod highlights;
 pub mod lights;
 pub mod mask;
 pub mod noise;
@@ -36,6 +37,11 @@ pub struct PhotometricConfig {
     /// Relative model error ε added to each LED's noise in the consistency test (light-vector
     /// and gain errors of a few percent).
     pub model_error: f32,
+    /// With a noise map and four or more lit LEDs: a lit LED that reads above the prediction of
+    /// the others counts as a highlight when its half vector lies within this angle (degrees)
+    /// of their normal ([`highlights`]).
+    #[serde(default = "default_highlight_max_deg")]
+    pub highlight_max_deg: f32,
     /// Fewest lit LEDs a pixel needs for a normal (3 for a unique solution).
     pub min_lit_leds: usize,
     /// Automatic object mask settings (used when no mask is given).
@@ -49,10 +55,16 @@ impl Default for PhotometricConfig {
             shadow_sigmas: 3.0,
             consistency_sigmas: 3.7,
             model_error: 0.03,
+            highlight_max_deg: default_highlight_max_deg(),
             min_lit_leds: 3,
             mask: MaskConfig::default(),
         }
     }
+}
+
+/// The default [`PhotometricConfig::highlight_max_deg`] ([`highlights`]).
+fn default_highlight_max_deg() -> f32 {
+    30.0
 }
 
 /// Errors of photometric stereo.

@@ -43,8 +43,8 @@ pub(crate) enum Solution {
     /// Lit by two LEDs: the normal is on a circle (across, towards and least albedo-scaled
     /// normal of [`meb_core::types::NormalPlane`]).
     TwoLeds(Vector3<f64>, Vector3<f64>, Vector3<f64>),
-    /// Normal, albedo and LEDs used.
-    Solved(Vector3<f64>, f64, u8),
+    /// Normal, albedo, LEDs used and LEDs rejected as highlights (bit i = LED i).
+    Solved(Vector3<f64>, f64, u8, u16),
 }
 
 impl Solution {

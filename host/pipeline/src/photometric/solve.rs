@@ -12,8 +12,11 @@
 //!    solved again.
 //! 4. With four or more lit LEDs and a noise map the Lambertian fit must be consistent:
 //!    χ² = Σ r_i²/(σ_i² + (ε·A_i)²) of the residuals r = A − L·G against the χ² quantile of
-//!    `consistency_sigmas` (Wilson–Hilferty), ε the `model_error`. A failing pixel loses the one
-//!    LED that reads most below its prediction from the others (a partial shadow only darkens).
+//!    `consistency_sigmas` (Wilson–Hilferty), ε the `model_error`. A failing pixel loses a
+//!    highlight — the LED reading most above its prediction from the others whose half vector
+//!    lies near their normal — and is tested again while four or more LEDs remain
+//!    ([`super::highlights`]); without one, it loses the LED that reads most below its
+//!    prediction (a partial shadow only darkens).
 //!
 //! A pixel left with three or more LEDs gets a normal and an albedo; one left with exactly two
 //! gets the circle its normal lies on ([`NormalPlane`]), which the integrator closes with the
@@ -38,6 +41,10 @@ pub struct PhotometricResult {
     pub field: NormalField,
     /// LEDs used per pixel: ≥ 3 where solved, 2 for two-LED pixels, 0 or 1 elsewhere.
     pub lit_count: Array2<u8>,
+    /// LEDs rejected as highlights per solved pixel of the object (bit i = LED i + 1; 0 where
+    /// none was, and outside the solved pixels): readings the Lambertian model could not
+    /// explain with the others ([`super::highlights`]).
+    pub highlights: Array2<u16>,
     /// The object: solved and two-LED pixels (inside the given mask, if any) and its holes.
     pub object_mask: Array2<bool>,
     /// Pixels of the object lit by exactly two LEDs.
@@ -129,9 +136,9 @@ impl PixelSolver {
     /// the camera) and level noise `sigma`.
     pub fn solve(&self, a: &[f64], l: &[Vector3<f64>], v: &Vector3<f64>, sigma: f64) -> Solution {
         match self.fit(a, l, v, sigma) {
-            Fit::Solved { g, lit } => {
+            Fit::Solved { g, lit, highlights } => {
                 let rho = g.norm();
-                Solution::Solved(g / rho, rho, lit)
+                Solution::Solved(g / rho, rho, lit, highlights)
             }
             Fit::Other(solution) => solution,
         }
@@ -157,8 +164,10 @@ impl PixelSolver {
             }
         }
         let min_lit = self.config.min_lit_leds.max(3);
-        let mut dropped_inconsistent = false;
-        for _ in 0..4 {
+        let mut dropped_shadow = false;
+        let mut highlights = 0u16;
+        // Each pass drops at least one LED, so at most one pass per LED plus the last.
+        for _ in 0..=a.len() {
             let lit = bits.count_ones() as usize;
             if lit == 2 {
                 return Fit::Other(two_led_plane(a, l, bits));
@@ -190,7 +199,7 @@ impl PixelSolver {
                 bits = refined;
                 continue;
             }
-            if statistical && lit >= 4 && !dropped_inconsistent {
+            if statistical && lit >= 4 && !dropped_shadow {
                 let variance = |i: usize| {
                     sigma_of(i).powi(2) + (f64::from(self.config.model_error) * a[i]).powi(2)
                 };
@@ -199,26 +208,72 @@ impl PixelSolver {
                     .sum();
                 // Every lit LED has a gain (its σ was read above), so lit − 3 < gains + 1.
                 if chi2 > self.chi2_limit[lit - 3] {
-                    // The LED reading furthest below its prediction from the others.
-                    let darkest = members(bits)
-                        .filter_map(|i| {
-                            let others = bits & !(1 << i);
-                            let inv = self.inverse(l, others)?;
-                            let predicted = (inv * self.weighted_sum(a, l, others)).dot(&l[i]);
-                            let deficit = (predicted - a[i]) / variance(i).sqrt();
-                            (deficit > 0.0).then_some((deficit, i))
-                        })
-                        .max_by(|x, y| x.0.total_cmp(&y.0));
-                    if let Some((_, i)) = darkest {
-                        dropped_inconsistent = true;
-                        bits &= !(1 << i);
-                        continue;
+                    match self.outlier(a, l, v, bits, &variance) {
+                        Some(Outlier::Highlight(i)) => {
+                            highlights |= 1u16.checked_shl(i as u32).unwrap_or(0);
+                            bits &= !(1 << i);
+                            continue;
+                        }
+                        Some(Outlier::Shadow(i)) => {
+                            dropped_shadow = true;
+                            bits &= !(1 << i);
+                            continue;
+                        }
+                        None => {}
                     }
                 }
             }
-            return Fit::Solved { g, lit: lit as u8 };
+            return Fit::Solved {
+                g,
+                lit: lit as u8,
+                highlights,
+            };
         }
         Fit::Other(Solution::Failed(Outcome::Contradictory))
+    }
+
+    /// The LED an inconsistent fit over `bits` blames (step 4 of the module docs): each lit LED
+    /// is predicted from the others. Of those reading above their prediction, the one whose
+    /// half vector h_i = (l̂_i + v)/|l̂_i + v| lies nearest the others' normal, within
+    /// `highlight_max_deg`, is a highlight; without one, the LED reading most below its
+    /// prediction is a shadow.
+    fn outlier(
+        &self,
+        a: &[f64],
+        l: &[Vector3<f64>],
+        v: &Vector3<f64>,
+        bits: usize,
+        variance: &dyn Fn(usize) -> f64,
+    ) -> Option<Outlier> {
+        let cos_max = f64::from(self.config.highlight_max_deg).to_radians().cos();
+        let (mut highlight, mut shadow): (Option<(f64, usize)>, Option<(f64, usize)>) =
+            (None, None);
+        for i in members(bits) {
+            let others = bits & !(1 << i);
+            let Some(inv) = self.inverse(l, others) else {
+                continue;
+            };
+            let g = inv * self.weighted_sum(a, l, others);
+            let deviation = (a[i] - g.dot(&l[i])) / variance(i).sqrt();
+            if deviation < 0.0 {
+                if shadow.is_none_or(|(d, _)| -deviation > d) {
+                    shadow = Some((-deviation, i));
+                }
+                continue;
+            }
+            let (g_norm, half) = (g.norm(), l[i].normalize() + v);
+            let half_norm = half.norm();
+            if g_norm <= 0.0 || half_norm <= 0.0 {
+                continue;
+            }
+            let cos = g.dot(&half) / (g_norm * half_norm);
+            if cos >= cos_max && highlight.is_none_or(|(c, _)| cos > c) {
+                highlight = Some((cos, i));
+            }
+        }
+        highlight
+            .map(|(_, i)| Outlier::Highlight(i))
+            .or(shadow.map(|(_, i)| Outlier::Shadow(i)))
     }
 
     /// Σ_{i∈bits} w_i A_i L_i, the right-hand side of the normal equations.
@@ -237,7 +292,7 @@ impl PixelSolver {
     /// Relative misfit Σ w‖A − L·G‖² and energy Σ w‖A‖² of one pixel over its lit LEDs
     /// (zero for pixels that are not solved from four or more).
     fn misfit(&self, a: &[f64], l: &[Vector3<f64>], v: &Vector3<f64>, sigma: f64) -> (f64, f64) {
-        let Fit::Solved { g, lit } = self.fit(a, l, v, sigma) else {
+        let Fit::Solved { g, lit, .. } = self.fit(a, l, v, sigma) else {
             return (0.0, 0.0);
         };
         if lit < 4 {
@@ -255,11 +310,24 @@ impl PixelSolver {
     }
 }
 
-/// What [`PixelSolver::fit`] found: G = ρn of a pixel solved from `lit` LEDs, or the final
-/// outcome of any other pixel.
+/// What [`PixelSolver::fit`] found: G = ρn of a pixel solved from `lit` LEDs with the LEDs
+/// rejected as highlights (bit i = LED i, LEDs 1–16), or the final outcome of any other pixel.
 enum Fit {
-    Solved { g: Vector3<f64>, lit: u8 },
+    Solved {
+        g: Vector3<f64>,
+        lit: u8,
+        highlights: u16,
+    },
     Other(Solution),
+}
+
+/// The LED a pixel's inconsistent Lambertian fit blames (step 4 of the module docs).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+enum Outlier {
+    /// Reads above the others' prediction, near the mirror direction of their normal.
+    Highlight(usize),
+    /// Reads below the others' prediction (a partial shadow).
+    Shadow(usize),
 }
 
 /// Indices of the set bits.
@@ -354,6 +422,8 @@ struct Solved {
     albedo: Array2<f32>,
     lit_count: Array2<u8>,
     outcome: Array2<Outcome>,
+    /// LEDs rejected as highlights (bit i = LED i) of solved pixels.
+    highlights: Array2<u16>,
     /// The circles of every two-LED pixel, in row-major order.
     planes: Vec<NormalPlane>,
 }
@@ -443,14 +513,16 @@ fn solve_all(
         albedo: Array2::from_elem(shape, f32::NAN),
         lit_count: Array2::zeros(shape),
         outcome: Array2::from_elem(shape, Outcome::Outside),
+        highlights: Array2::zeros(shape),
         planes: Vec::new(),
     };
     // Freshly allocated arrays are contiguous in row-major order.
-    let (Some(n_all), Some(rho_all), Some(lit_all), Some(outcome_all)) = (
+    let (Some(n_all), Some(rho_all), Some(lit_all), Some(outcome_all), Some(highlight_all)) = (
         out.normals.as_slice_mut(),
         out.albedo.as_slice_mut(),
         out.lit_count.as_slice_mut(),
         out.outcome.as_slice_mut(),
+        out.highlights.as_slice_mut(),
     ) else {
         unreachable!("new arrays are in standard layout")
     };
@@ -460,58 +532,62 @@ fn solve_all(
         .zip(rho_all.par_chunks_mut(band))
         .zip(lit_all.par_chunks_mut(band))
         .zip(outcome_all.par_chunks_mut(band))
+        .zip(highlight_all.par_chunks_mut(band))
         .enumerate()
-        .map(|(chunk, (((n_out, rho_out), lit_out), outcome_out))| {
-            let mut planes = Vec::new();
-            let mut values = vec![0.0f64; k];
-            let mut l = vec![Vector3::zeros(); k];
-            for dr in 0..rho_out.len() / cols {
-                let r = chunk * ROWS_PER_TASK + dr;
-                let image_rows: Vec<_> = images.images.iter().map(|im| im.row(r)).collect();
-                let mask_row = mask.map(|m| m.row(r));
-                let noise_row = noise.map(|n| n.row(r));
-                for c in 0..cols {
-                    let p = dr * cols + c;
-                    if mask_row.is_some_and(|m| !m[c]) {
-                        continue;
-                    }
-                    for (v, im) in values.iter_mut().zip(&image_rows) {
-                        *v = f64::from(im[c]);
-                    }
-                    let sigma = noise_row.map_or(0.0, |n| f64::from(n[c]));
-                    // Most of the frame is background: decide it before computing lights.
-                    if let Some(outcome) = solver.decided_without_lights(&values, sigma) {
-                        outcome_out[p] = outcome;
-                        continue;
-                    }
-                    // One ray per pixel gives both its light vectors and its view vector.
-                    let ray = lights.ray(r, c);
-                    lights.at_point(&ray.at(lights.depth_at(r, c)), &mut l);
-                    let solution = solver.solve(&values, &l, &ray.towards_camera(), sigma);
-                    match solution {
-                        Solution::Solved(n, rho, used) => {
-                            for j in 0..3 {
-                                n_out[3 * p + j] = n[j] as f32;
+        .map(
+            |(chunk, ((((n_out, rho_out), lit_out), outcome_out), highlight_out))| {
+                let mut planes = Vec::new();
+                let mut values = vec![0.0f64; k];
+                let mut l = vec![Vector3::zeros(); k];
+                for dr in 0..rho_out.len() / cols {
+                    let r = chunk * ROWS_PER_TASK + dr;
+                    let image_rows: Vec<_> = images.images.iter().map(|im| im.row(r)).collect();
+                    let mask_row = mask.map(|m| m.row(r));
+                    let noise_row = noise.map(|n| n.row(r));
+                    for c in 0..cols {
+                        let p = dr * cols + c;
+                        if mask_row.is_some_and(|m| !m[c]) {
+                            continue;
+                        }
+                        for (v, im) in values.iter_mut().zip(&image_rows) {
+                            *v = f64::from(im[c]);
+                        }
+                        let sigma = noise_row.map_or(0.0, |n| f64::from(n[c]));
+                        // Most of the frame is background: decide it before computing lights.
+                        if let Some(outcome) = solver.decided_without_lights(&values, sigma) {
+                            outcome_out[p] = outcome;
+                            continue;
+                        }
+                        // One ray per pixel gives both its light vectors and its view vector.
+                        let ray = lights.ray(r, c);
+                        lights.at_point(&ray.at(lights.depth_at(r, c)), &mut l);
+                        let solution = solver.solve(&values, &l, &ray.towards_camera(), sigma);
+                        match solution {
+                            Solution::Solved(n, rho, used, rejected) => {
+                                for j in 0..3 {
+                                    n_out[3 * p + j] = n[j] as f32;
+                                }
+                                rho_out[p] = rho as f32;
+                                lit_out[p] = used;
+                                highlight_out[p] = rejected;
                             }
-                            rho_out[p] = rho as f32;
-                            lit_out[p] = used;
+                            Solution::TwoLeds(across, towards, least_albedo) => {
+                                lit_out[p] = 2;
+                                planes.push(NormalPlane {
+                                    pixel: (r, c),
+                                    across,
+                                    towards,
+                                    least_albedo,
+                                });
+                            }
+                            Solution::Failed(_) => {}
                         }
-                        Solution::TwoLeds(across, towards, least_albedo) => {
-                            lit_out[p] = 2;
-                            planes.push(NormalPlane {
-                                pixel: (r, c),
-                                across,
-                                towards,
-                                least_albedo,
-                            });
-                        }
-                        Solution::Failed(_) => {}
+                        outcome_out[p] = solution.outcome();
                     }
-                    outcome_out[p] = solution.outcome();
                 }
-            }
-            planes
-        })
+                planes
+            },
+        )
         .collect();
     out.planes = planes.into_iter().flatten().collect();
     out
@@ -535,6 +611,7 @@ fn assemble(
             valid[(r, c)] = true;
             return;
         }
+        solved.highlights[(r, c)] = 0;
         if !inside {
             solved.lit_count[(r, c)] = 0;
         }
@@ -553,6 +630,7 @@ fn assemble(
             mask: valid,
         },
         lit_count: solved.lit_count,
+        highlights: solved.highlights,
         object_mask: region.object,
         planes,
         fill: region.fill,
@@ -833,6 +911,95 @@ mod tests {
         assert_eq!(res.lit_count[(1, 1)], 4);
     }
 
+    /// Out-of-plane light directions (the thesis' out-of-plane rig seen from the origin).
+    fn out_of_plane() -> Vec<Vector3<f64>> {
+        [
+            [-270.0, 420.0, 100.0],
+            [-140.0, 420.0, 350.0],
+            [140.0, 420.0, 350.0],
+            [270.0, 420.0, 100.0],
+        ]
+        .iter()
+        .map(|p| Vector3::new(p[0], p[1], p[2]).normalize())
+        .collect()
+    }
+
+    /// A highlight added to the LED whose half vector is nearest the normal is rejected and
+    /// the three others give the normal; the same excess on a pixel facing away from that
+    /// LED's mirror direction is not called a highlight; a matte pixel rejects nothing.
+    /// Normals drawn at random (fixed seed) where all four LEDs light the pixel.
+    #[test]
+    fn a_highlight_is_rejected_and_the_rest_give_the_normal() {
+        use rand::{RngExt, SeedableRng};
+        use rand_chacha::ChaCha8Rng;
+        let l = out_of_plane();
+        let solver = PixelSolver::new(
+            &Lights::Distant(l.clone()),
+            &PhotometricConfig::default(),
+            vec![1.0; 4],
+            true,
+        );
+        let v = Vector3::z();
+        let sigma = 0.002;
+        let mut rng = ChaCha8Rng::seed_from_u64(57);
+        let (mut highlights, mut matte, mut far) = (0, 0, 0);
+        for _ in 0..400 {
+            let k = rng.random_range(0..4);
+            let h = (l[k] + v).normalize();
+            // A normal within 12° of LED k's half vector.
+            let tilt = rng.random_range(0.0f64..12.0).to_radians();
+            let axis = h
+                .cross(&Vector3::new(rng.random_range(-1.0..1.0), 1.0, 0.3))
+                .normalize();
+            let n = nalgebra::Rotation3::new(axis * tilt) * h;
+            let a: Vec<f64> = l.iter().map(|li| 0.5 * n.dot(li)).collect();
+            if a.iter().any(|&x| x < 0.05) {
+                continue;
+            }
+            let Solution::Solved(m, _, 4, 0) = solver.solve(&a, &l, &v, sigma) else {
+                panic!("matte pixel {n:?} not solved from four LEDs with no highlight");
+            };
+            assert!((m - n).norm() < 1e-6);
+            matte += 1;
+            let mut glossy = a.clone();
+            glossy[k] += rng.random_range(0.1..0.6);
+            match solver.solve(&glossy, &l, &v, sigma) {
+                Solution::Solved(m, _, 3, bits) => {
+                    assert_eq!(bits, 1 << k, "LED {k} rejected for {n:?}");
+                    assert!((m - n).norm() < 1e-6);
+                    highlights += 1;
+                }
+                other => panic!("{other:?} for a highlight of LED {k} on {n:?}"),
+            }
+        }
+        // The same excess far (> 40°) from the LED's mirror direction is a model failure the
+        // highlight rule must not explain away.
+        for _ in 0..400 {
+            let n = Vector3::new(
+                rng.random_range(-0.5..0.5),
+                rng.random_range(-0.5..0.5),
+                1.0,
+            )
+            .normalize();
+            let a: Vec<f64> = l.iter().map(|li| 0.5 * n.dot(li)).collect();
+            let k = rng.random_range(0..4);
+            let h = (l[k] + v).normalize();
+            if a.iter().any(|&x| x < 0.05) || n.dot(&h) > 40f64.to_radians().cos() {
+                continue;
+            }
+            let mut bright = a.clone();
+            bright[k] += 0.2;
+            if let Solution::Solved(_, _, _, bits) = solver.solve(&bright, &l, &v, sigma) {
+                assert_eq!(bits & (1 << k), 0, "LED {k} called a highlight on {n:?}");
+            }
+            far += 1;
+        }
+        assert!(
+            highlights > 200 && matte == highlights && far > 100,
+            "{highlights} {far}"
+        );
+    }
+
     /// A noisy LED image in shadow is below its own 3σ (σ scaled by the LED's noise gain), so
     /// it is not counted as lit even where it exceeds 3σ of the level noise.
     #[test]
@@ -849,7 +1016,10 @@ mod tests {
         assert_eq!(a[3], 0.0);
         a[3] = 0.005; // 5σ of the level noise, 1.7σ of LED 4's own noise
         let outcome = solver.solve(&a, &l, &Vector3::z(), 0.001);
-        assert!(matches!(outcome, Solution::Solved(_, _, 3)), "{outcome:?}");
+        assert!(
+            matches!(outcome, Solution::Solved(_, _, 3, 0)),
+            "{outcome:?}"
+        );
     }
 
     /// Light vectors computed at a depth `WARM_LIGHTS_MOVED_MM` off the surface (a warm start's
@@ -887,7 +1057,7 @@ mod tests {
             for dz in [-WARM_LIGHTS_MOVED_MM, WARM_LIGHTS_MOVED_MM] {
                 lights.at_point(&ray.at(z + dz), &mut stale);
                 // Near grazing the stale vectors may drop an LED: only four-LED solves count.
-                let Solution::Solved(m, _, 4) =
+                let Solution::Solved(m, _, 4, _) =
                     solver.solve(&a, &stale, &ray.towards_camera(), 0.0)
                 else {
                     continue;

@@ -48,6 +48,7 @@ use crate::integrate::{
     BilateralConfig, Confidence, IntegrateConfig, IntegrateError, Integration,
     IntegrationWorkspace, SurfaceEvidence, integrate_surface_with,
 };
+use crate::photometric::highlights::HighlightShares;
 use crate::photometric::{
     Lights, PhotometricConfig, PhotometricError, PhotometricResult, estimate_normals,
 };
@@ -704,7 +705,8 @@ fn passes(
     let (photometric, integration) = previous
         .ok_or_else(|| ReconstructError::Rig("no reconstruction pass was run".to_string()))?;
     let unplaced: Vec<Unplaced> = unplaced.into_values().collect();
-    let support = support::judge(&integration, &unplaced, scanned);
+    let mut support = support::judge(&integration, &unplaced, scanned);
+    support.verdict = HighlightShares::of(&photometric).judge(support.verdict);
     let start = verdict.and_then(|passes| {
         let Some(warm) = warm else {
             return Ok(Start::Cold);
