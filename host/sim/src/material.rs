@@ -168,7 +168,10 @@ mod tests {
         let n = Vector3::z();
         let mut rng = ChaCha8Rng::seed_from_u64(57);
         for _ in 0..5 {
-            let v = unit(rng.random_range(0.0..1.2), rng.random_range(0.0..6.28));
+            let v = unit(
+                rng.random_range(0.0..1.2),
+                rng.random_range(0.0..std::f64::consts::TAU),
+            );
             let samples = 200_000;
             let mut sum = 0.0;
             for _ in 0..samples {

@@ -236,14 +236,14 @@ pub fn fit_lights(nominal: &Rig, captures: &[SphereCapture]) -> Result<LightFit,
         let position_se_mm = [se(4 * i), se(4 * i + 1), se(4 * i + 2)];
         let intensity_se = se(4 * i + 3);
         let worst = position_se_mm.iter().copied().fold(0.0, f64::max);
-        if !(worst <= MAX_POSITION_SE_MM) {
+        if worst.is_nan() || worst > MAX_POSITION_SE_MM {
             undetermined.push(format!(
                 "LED {}'s position (standard error {worst:.1} mm): add sphere placements \
                  spread across the field of view and in depth, each lit by this LED",
                 i + 1
             ));
         }
-        if !(intensity_se <= MAX_INTENSITY_SE) {
+        if intensity_se.is_nan() || intensity_se > MAX_INTENSITY_SE {
             undetermined.push(format!(
                 "LED {}'s intensity (standard error {:.2} %): add a placement where this \
                  LED lights most of the sphere",
@@ -467,13 +467,11 @@ impl Model<'_> {
         let p = theta.len();
         let columns: Vec<DVector<f64>> = (0..p)
             .map(|j| {
-                let h = if j < 4 * self.layout.leds && j % 4 != 3 {
-                    0.01
-                } else if self.layout.height(1).is_some_and(|first| j >= first) {
-                    0.01
-                } else {
-                    1e-5
-                };
+                // Positions and sphere heights in mm step by 0.01 mm; intensities and
+                // scales (relative) by 10⁻⁵.
+                let position = j < 4 * self.layout.leds && j % 4 != 3;
+                let height = self.layout.height(1).is_some_and(|first| j >= first);
+                let h = if position || height { 0.01 } else { 1e-5 };
                 let (mut plus, mut minus) = (theta.clone(), theta.clone());
                 plus[j] += h;
                 minus[j] -= h;

@@ -246,8 +246,9 @@ impl PixelSolver {
         variance: &dyn Fn(usize) -> f64,
     ) -> Option<Outlier> {
         let cos_max = f64::from(self.config.highlight_max_deg).to_radians().cos();
-        let (mut highlight, mut shadow): (Option<(f64, usize)>, Option<(f64, usize)>) =
-            (None, None);
+        // The strongest candidate of each kind: (its score, the LED).
+        let mut highlight: Option<(f64, usize)> = None;
+        let mut shadow: Option<(f64, usize)> = None;
         for i in members(bits) {
             let others = bits & !(1 << i);
             let Some(inv) = self.inverse(l, others) else {

@@ -224,7 +224,7 @@ pub fn check_rig(
         })
         .collect();
     let ratio = misfit / noise_misfit.max(MODEL_FLOOR);
-    let fit = if !(ratio <= MAX_MISFIT_RATIO) {
+    let fit = if ratio.is_nan() || ratio > MAX_MISFIT_RATIO {
         RigFit::Inconsistent
     } else if ratio > DOUBTFUL_MISFIT_RATIO {
         RigFit::Doubtful
@@ -240,14 +240,11 @@ pub fn check_rig(
         worst_led: None,
         fit,
     };
-    let by = |key: fn(&LedCheck) -> f64| {
-        check
-            .leds
-            .iter()
-            .max_by(|a, b| key(a).total_cmp(&key(b)))
-            .map(|l| l.led)
-    };
-    check.worst_led = by(|l| l.gain.ln().abs());
+    check.worst_led = check
+        .leds
+        .iter()
+        .max_by(|a, b| a.gain.ln().abs().total_cmp(&b.gain.ln().abs()))
+        .map(|l| l.led);
     check
 }
 
