@@ -16,6 +16,7 @@
 use super::SimulateError;
 use super::geometry::SurfaceMap;
 use super::lighting;
+use super::room::RoomEffects;
 use super::scene::Scene;
 use super::sensor::{NoiseModel, ToneCurve, quantise};
 use super::waveform::{CarrierWaveform, LedWaveform};
@@ -59,6 +60,9 @@ pub struct SimConfig {
     pub chip_rates_hz: Option<Vec<f64>>,
     /// Seed of the phases and the noise.
     pub seed: u64,
+    /// Real-room effects: a flickering lamp, a gain drift, dropped or repeated frames (off by
+    /// default, [`RoomEffects`]).
+    pub room: RoomEffects,
 }
 
 impl Default for SimConfig {
@@ -80,6 +84,7 @@ impl Default for SimConfig {
             phases_chips: None,
             chip_rates_hz: None,
             seed: 0,
+            room: RoomEffects::default(),
         }
     }
 }
@@ -343,7 +348,7 @@ impl SimulatedCapture {
     /// curve and quantisation (the docs/maths/demodulation.md#the-received-signal value r_j without
     /// its noise term).
     pub fn light_image(&self, index: usize) -> Array2<f32> {
-        let t = self.frame_time(index);
+        let t = self.frame_time(self.config.room.camera_frame(index));
         let shading = self.shading_at(t);
         let (w, h) = (self.format.width, self.format.height);
         Array2::from_shape_fn((h, w), |(row, col)| {
@@ -352,13 +357,31 @@ impl SimulatedCapture {
             for (image, weight) in shading.leds.iter().zip(&weights) {
                 v += weight * image[[row, col]];
             }
-            v
+            self.room_light(index, t, row, col, f64::from(v)) as f32
         })
+    }
+
+    /// Light `v` of written frame `index` (camera time `t`) at (`row`, `col`) with the room's
+    /// lamp added and the camera's gain drift applied ([`super::room`]).
+    fn room_light(&self, index: usize, t: f64, row: usize, col: usize, v: f64) -> f64 {
+        let room = &self.config.room;
+        if room.is_off() {
+            return v;
+        }
+        let mut v = v;
+        if let Some(lamp) = &room.lamp {
+            let t0 = t + row as f64 * self.config.line_time_s;
+            let duration = self.config.exposure / self.rig.camera.fps;
+            v += lamp.level
+                * lamp.amplitude(col, self.format.width)
+                * lamp.window_mean(t0, duration);
+        }
+        v * room.gain(index, self.config.frames)
     }
 
     /// Renders frame `index` (any index, in any order).
     pub fn render_frame(&self, index: usize) -> Frame {
-        let t = self.frame_time(index);
+        let t = self.frame_time(self.config.room.camera_frame(index));
         let shading = self.shading_at(t);
         let (w, h) = (self.format.width, self.format.height);
         let leds = shading.leds.len();
@@ -375,7 +398,7 @@ impl SimulatedCapture {
                         for (image, weight) in shading.leds.iter().zip(&weights) {
                             v += weight * image[[row, col]];
                         }
-                        let mut v = f64::from(v);
+                        let mut v = self.room_light(index, t, row, col, f64::from(v));
                         if !self.config.noise.is_noiseless() {
                             v = self.config.noise.apply(v, &mut rng);
                         }
@@ -448,6 +471,9 @@ fn validate(config: &SimConfig, scene: &Scene) -> Result<(), SimulateError> {
     };
     if config.frames == 0 {
         return bad("frames", "must be at least 1");
+    }
+    if let Err((field, reason)) = config.room.validate() {
+        return bad(field, reason);
     }
     if !(config.exposure > 0.0 && config.exposure <= 1.0) {
         return bad(

@@ -20,6 +20,7 @@ pub mod geometry;
 pub mod lighting;
 pub mod mesh;
 pub mod output;
+pub mod room;
 pub mod scene;
 pub mod sensor;
 pub mod tof;
@@ -27,6 +28,7 @@ pub mod waveform;
 
 pub use capture::{GroundTruth, SimConfig, SimulatedCapture, TruthInfo};
 pub use meb_core::mesh::TriMesh;
+pub use room::{LampWaveform, RoomEffects, RoomLamp};
 pub use scene::{GroundPlane, Scene, SceneObject, Shape, Spin};
 pub use sensor::{NoiseModel, ToneCurve};
 pub use waveform::{CarrierWaveform, LedWaveform};

@@ -9,6 +9,7 @@ pub mod hybrid;
 pub mod integrate;
 pub mod photometric;
 pub mod reconstruct;
+pub mod room_args;
 pub mod simulate;
 pub mod simulate_tof;
 pub mod tof;
