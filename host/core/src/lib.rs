@@ -9,7 +9,8 @@
 //! * [`metrics`]: accuracy against ground truth; [`mesh`]: triangle meshes and their raster.
 //! * [`datasets`]: readers for public reference data (MATLAB arrays, DiLiGenT).
 //! * [`flicker`]: what the carriers do to the eye (IEEE 1789); [`led_waveform`]: the light an
-//!   LED emits over time, shared by the simulator and the virtual luminaire.
+//!   LED emits over time, shared by the simulator and the virtual luminaire; [`mains`]: where
+//!   room-light flicker on 50/60 Hz mains falls among the carriers' lines.
 //!
 //! Nothing here decodes, reconstructs or simulates: those are `meb-pipeline` and `meb-sim`,
 //! which both depend on this crate and never on each other.
@@ -23,6 +24,7 @@ pub mod io;
 #[cfg(any(test, feature = "testing"))]
 pub mod layouts;
 pub mod led_waveform;
+pub mod mains;
 pub mod memory;
 pub mod mesh;
 pub mod metrics;

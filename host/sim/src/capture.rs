@@ -18,6 +18,7 @@ use super::SimulateError;
 use super::geometry::SurfaceMap;
 use super::lighting;
 use super::material::Material;
+use super::room::RoomEffects;
 use super::scene::Scene;
 use super::sensor::{NoiseModel, ToneCurve, quantise};
 use super::waveform::{CarrierWaveform, LedWaveform};
@@ -63,6 +64,9 @@ pub struct SimConfig {
     pub seed: u64,
     /// The objects' material (matte unless set; the ground plane is always matte).
     pub material: Material,
+    /// Real-room effects: a flickering lamp, a gain drift, dropped or repeated frames (off by
+    /// default, [`RoomEffects`]).
+    pub room: RoomEffects,
 }
 
 impl Default for SimConfig {
@@ -85,6 +89,7 @@ impl Default for SimConfig {
             chip_rates_hz: None,
             seed: 0,
             material: Material::MATTE,
+            room: RoomEffects::default(),
         }
     }
 }
@@ -351,7 +356,7 @@ impl SimulatedCapture {
     /// noise, tone curve and quantisation (the docs/maths/demodulation.md#the-received-signal value
     /// r_j without its noise term).
     pub fn light_image(&self, index: usize) -> Array2<f32> {
-        let t = self.frame_time(index);
+        let t = self.frame_time(self.config.room.camera_frame(index));
         let shading = self.shading_at(t);
         let (w, h) = (self.format.width, self.format.height);
         Array2::from_shape_fn((h, w), |(row, col)| {
@@ -360,13 +365,31 @@ impl SimulatedCapture {
             for (image, weight) in shading.leds.iter().zip(&weights) {
                 v += weight * image[[row, col]];
             }
-            v
+            self.room_light(index, t, row, col, f64::from(v)) as f32
         })
+    }
+
+    /// Light `v` of written frame `index` (camera time `t`) at (`row`, `col`) with the room's
+    /// lamp added and the camera's gain drift applied ([`super::room`]).
+    fn room_light(&self, index: usize, t: f64, row: usize, col: usize, v: f64) -> f64 {
+        let room = &self.config.room;
+        if room.is_off() {
+            return v;
+        }
+        let mut v = v;
+        if let Some(lamp) = &room.lamp {
+            let t0 = t + row as f64 * self.config.line_time_s;
+            let duration = self.config.exposure / self.rig.camera.fps;
+            v += lamp.level
+                * lamp.amplitude(col, self.format.width)
+                * lamp.window_mean(t0, duration);
+        }
+        v * room.gain(index, self.config.frames)
     }
 
     /// Renders frame `index` (any index, in any order).
     pub fn render_frame(&self, index: usize) -> Frame {
-        let t = self.frame_time(index);
+        let t = self.frame_time(self.config.room.camera_frame(index));
         let shading = self.shading_at(t);
         let (w, h) = (self.format.width, self.format.height);
         let leds = shading.leds.len();
@@ -383,7 +406,7 @@ impl SimulatedCapture {
                         for (image, weight) in shading.leds.iter().zip(&weights) {
                             v += weight * image[[row, col]];
                         }
-                        let mut v = f64::from(v);
+                        let mut v = self.room_light(index, t, row, col, f64::from(v));
                         if !self.config.noise.is_noiseless() {
                             v = self.config.noise.apply(v, &mut rng);
                         }
@@ -459,6 +482,9 @@ fn validate(config: &SimConfig, scene: &Scene) -> Result<(), SimulateError> {
     }
     if let Some(problem) = config.material.problem() {
         return bad("gloss/roughness", &problem);
+    }
+    if let Err((field, reason)) = config.room.validate() {
+        return bad(field, reason);
     }
     if !(config.exposure > 0.0 && config.exposure <= 1.0) {
         return bad(

@@ -3,6 +3,7 @@
 use anyhow::{Context, Result};
 use clap::Args;
 use meb_core::flicker::{self, LedFlicker};
+use meb_core::mains;
 use protocol::carriers::ChipTable;
 use serde::Serialize;
 
@@ -16,9 +17,78 @@ pub struct CarriersArgs {
     /// its IEEE 1789 flicker-risk class.
     #[arg(long)]
     rate: Option<f64>,
+    /// Camera frame rate in Hz (default: the chip rate): with --rate, adds where room-light
+    /// flicker on 50 and 60 Hz mains falls among the carriers' lines, and chip rates that keep
+    /// it clear.
+    #[arg(long, requires = "rate")]
+    fps: Option<f64>,
     /// Print JSON instead of a table.
     #[arg(long)]
     json: bool,
+}
+
+/// Frames of the decoding window the mains check assumes (the decoder's usual window).
+const MAINS_WINDOW_FRAMES: usize = 128;
+/// Chip rates within this fraction of the frame rate are suggested (the decoder's default
+/// rate search).
+const MAINS_SEARCH: f64 = 0.06;
+
+/// Where mains flicker falls at this chip rate and camera rate.
+#[derive(Serialize)]
+struct MainsReport {
+    fps: f64,
+    window_frames: usize,
+    clashes: Vec<mains::Clash>,
+    clear_chip_rates_hz: Vec<f64>,
+}
+
+/// The mains-flicker section: clashes at `rate` on a camera at `fps`, and clear chip rates.
+fn mains_report(leds: u8, rate: f64, fps: f64) -> MainsReport {
+    MainsReport {
+        fps,
+        window_frames: MAINS_WINDOW_FRAMES,
+        clashes: mains::clashes(leds, rate, fps, MAINS_WINDOW_FRAMES),
+        clear_chip_rates_hz: mains::clear_chip_rates(
+            leds,
+            fps,
+            MAINS_WINDOW_FRAMES,
+            MAINS_SEARCH,
+            5,
+        ),
+    }
+}
+
+/// Prints the mains-flicker section.
+fn print_mains(report: &MainsReport, rate: f64) {
+    println!(
+        "
+Room-light flicker (100 Hz family: 50 Hz mains, 120 Hz: 60 Hz mains) at {rate} Hz chip          rate, camera {} fps, {}-frame windows:",
+        report.fps, report.window_frames
+    );
+    if report.clashes.is_empty() {
+        println!("  clear: no flicker harmonic falls on a carrier line; the decoder models it");
+    }
+    for c in &report.clashes {
+        println!(
+            "  {:.0} Hz family harmonic {} ({:.4} cycles/frame) falls on LED {}'s line ({:.4}):              that LED's gain is unreliable under such a lamp",
+            c.family_hz, c.harmonic, c.flicker_cycles_per_frame, c.led, c.line_cycles_per_frame
+        );
+    }
+    if !report.clashes.is_empty() {
+        let rates: Vec<String> = report
+            .clear_chip_rates_hz
+            .iter()
+            .map(|r| format!("{r:.1} Hz"))
+            .collect();
+        println!(
+            "  chip rates that keep both families clear: {}",
+            if rates.is_empty() {
+                "none within 6 % of the frame rate".to_string()
+            } else {
+                rates.join(", ")
+            }
+        );
+    }
 }
 
 #[derive(Serialize)]
@@ -30,6 +100,8 @@ struct CarriersReport {
     rate_hz: Option<f64>,
     #[serde(skip_serializing_if = "Option::is_none")]
     flicker: Option<Vec<LedFlicker>>,
+    #[serde(skip_serializing_if = "Option::is_none")]
+    mains: Option<MainsReport>,
 }
 
 /// Spectrum lines up to this frequency are listed (the flicker-sensitive band).
@@ -46,12 +118,21 @@ pub fn run(args: &CarriersArgs) -> Result<()> {
     let flicker = args
         .rate
         .map(|rate| flicker::analyse(&table, rate, REPORT_BELOW_HZ));
+    if let Some(fps) = args.fps
+        && !(fps.is_finite() && fps > 0.0)
+    {
+        anyhow::bail!("--fps must be a positive number of Hz, got {fps}");
+    }
+    let mains = args
+        .rate
+        .map(|rate| mains_report(args.leds, rate, args.fps.unwrap_or(rate)));
     let report = CarriersReport {
         leds: args.leds,
         chips: table.chips(),
         masks: table.masks().to_vec(),
         rate_hz: args.rate,
         flicker,
+        mains,
     };
     if args.json {
         println!("{}", serde_json::to_string(&report)?);
@@ -98,6 +179,9 @@ pub fn run(args: &CarriersArgs) -> Result<()> {
                 }
             );
         }
+    }
+    if let (Some(rate), Some(mains)) = (report.rate_hz, &report.mains) {
+        print_mains(mains, rate);
     }
     Ok(())
 }

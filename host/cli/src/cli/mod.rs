@@ -13,6 +13,7 @@ pub mod parse;
 pub mod photometric;
 pub mod reconstruct;
 pub mod rig;
+pub mod room_args;
 pub mod simulate;
 pub mod simulate_tof;
 pub mod tof;

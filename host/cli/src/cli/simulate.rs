@@ -187,6 +187,9 @@ struct CaptureArgs {
     /// Seed of the phases, the noise and blobby shapes.
     #[arg(long, default_value_t = 0)]
     seed: u64,
+    /// Real-room effects.
+    #[command(flatten)]
+    room: super::room_args::RoomArgs,
     /// Light the scene with a luminaire timeline recorded by `meb device emulate --timeline`
     /// (replaces --phases/--chip-rate: the capture shows exactly what that luminaire emits).
     #[arg(long, conflicts_with_all = ["phases", "chip_rate"])]
@@ -315,6 +318,7 @@ fn run_capture(args: &CaptureArgs) -> Result<()> {
         chip_rates_hz: args.chip_rate.clone(),
         seed: args.seed,
         material: meb_sim::Material::glossy(args.gloss, args.roughness),
+        room: args.room.effects()?,
     };
     if args.truth_frame >= args.frames.max(1) {
         bail!(
