@@ -110,6 +110,9 @@ pub struct LedOutput {
     pub channel: u8,
     /// Port and pin, for documentation and logs.
     pub pin: &'static str,
+    /// The pin's alternate function number for this timer channel (GPIOx_AFRL/AFRH; AF2 is
+    /// TIM3–TIM5 on the F411). The firmware's pin driver selects it from the same table.
+    pub af: u8,
 }
 
 /// LED i (0-based) is driven by `LED_OUTPUTS[i]`.
@@ -125,7 +128,12 @@ pub const LED_OUTPUTS: [LedOutput; MAX_LEDS] = [
 ];
 
 const fn led(bank: Bank, channel: u8, pin: &'static str) -> LedOutput {
-    LedOutput { bank, channel, pin }
+    LedOutput {
+        bank,
+        channel,
+        pin,
+        af: 2,
+    }
 }
 
 /// Pins the LED table must never use: USB (PA11/PA12), SWD (PA13/PA14), the board LED (PC13),
