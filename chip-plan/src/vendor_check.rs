@@ -583,3 +583,48 @@ fn vendor_dma_request_map_of_the_chip_triggers() {
         }
     }
 }
+
+/// PA0 is also the Black Pill's KEY button: whatever the pin table says, the timer channel the
+/// vendor wires to PA0 must play nothing unless the user configures all 8 LEDs.
+#[test]
+fn pa0_is_driven_only_with_eight_leds() {
+    use protocol::carriers::{ChipTable, MAX_LEDS};
+
+    use crate::plan::{ChipEngine, FrameMemory, Mode};
+    use crate::register_model::Chip;
+    use crate::register_model::LogEntry;
+    use crate::register_model::timer::TimerId;
+
+    let (timer, channel) = ["TIM3", "TIM5"]
+        .into_iter()
+        .find_map(|t| {
+            let pin = peripheral(t).pins.iter().find(|p| p.pin == "PA0")?;
+            let channel: usize = pin.signal.strip_prefix("CH")?.parse().ok()?;
+            Some((t, channel))
+        })
+        .expect("PA0 is a PWM bank's channel");
+    let timer = if timer == "TIM3" {
+        TimerId::Tim3
+    } else {
+        TimerId::Tim5
+    };
+    let frames = FrameMemory {
+        tim3: 0x2000_4000,
+        tim5: 0x2000_8000,
+    };
+    for leds in 1..=MAX_LEDS as u8 {
+        let mut chip = Chip::new();
+        let mut engine = ChipEngine::new(&mut chip, 96_000_000, frames, Mode::Dma).unwrap();
+        let table = ChipTable::new(leds).unwrap();
+        engine
+            .load(&mut chip, &table, &[1000; MAX_LEDS], 4_000_000)
+            .unwrap();
+        engine.start(&mut chip).unwrap();
+        chip.run_until(chip.now + 2 * table.chips() as u64 * 24_000);
+        let driven = chip.log.iter().any(|entry| {
+            matches!(entry, LogEntry::Outputs { timer: t, outputs, .. }
+                if *t == timer && outputs.levels[channel - 1] != Some(0))
+        });
+        assert_eq!(driven, leds == 8, "N = {leds}: PA0 driven = {driven}");
+    }
+}
