@@ -5,6 +5,7 @@
 //! * [`wire`]: header, request/response command table and payload types.
 //! * [`framing`]: COBS + CRC-32 framing, the streaming [`framing::FrameReader`].
 //! * [`record`]: the persisted configuration record (flash and emulator file).
+//! * [`flash`]: how long a save can stall the board; the watchdog and host waits derived from it.
 //! * [`luminaire`]: the hardware-free state machine and [`luminaire::Endpoint`] that both the
 //!   firmware and `meb device emulate` run.
 //! * [`timing`]: the chip timer and brightness PWM arithmetic.
@@ -19,6 +20,7 @@
 pub mod carriers;
 pub mod checksum;
 pub mod config;
+pub mod flash;
 pub mod framing;
 pub mod luminaire;
 pub mod record;
