@@ -1,5 +1,6 @@
 //! The contract between the meb luminaire firmware and the host.
 //!
+//! * [`bringup`]: the wiring check without instruments (`meb device blink`).
 //! * [`carriers`]: MEB-FDMA chip tables (SPEC §2).
 //! * [`config`]: the luminaire configuration and its validation.
 //! * [`wire`]: header, request/response command table and payload types.
@@ -17,6 +18,7 @@
 #![forbid(unsafe_code)]
 #![deny(missing_docs)]
 
+pub mod bringup;
 pub mod carriers;
 pub mod checksum;
 pub mod config;
