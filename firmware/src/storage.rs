@@ -17,7 +17,10 @@ use protocol::config::LuminaireConfig;
 use protocol::luminaire::RestoredConfig;
 use protocol::record::{MAX_RECORD_LEN, decode_record, encode_record};
 
-const _: () = assert!(ITEM_BUFFER > MAX_RECORD_LEN, "the item buffer holds a record");
+const _: () = assert!(
+    ITEM_BUFFER > MAX_RECORD_LEN,
+    "the item buffer holds a record"
+);
 use sequential_storage::cache::{Cache, Uncached};
 use sequential_storage::map::{MapConfig, MapStorage};
 
