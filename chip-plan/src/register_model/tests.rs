@@ -742,3 +742,116 @@ fn firmware_readme_wiring_is_the_pin_table() {
         assert!(readme.contains(&cell), "firmware/README.md lacks `{cell}`");
     }
 }
+
+/// A halt leaves TIM2's interrupt disabled in the NVIC, whichever mode played.
+#[test]
+fn halt_disables_the_chip_interrupt_in_the_nvic() {
+    use crate::regs::nvic;
+    for mode in [Mode::ChipInterrupt, Mode::Dma] {
+        let mut chip = Chip::new();
+        let mut engine = ChipEngine::new(&mut chip, CLOCK, FRAMES, mode).unwrap();
+        let table = ChipTable::new(4).unwrap();
+        engine
+            .load(&mut chip, &table, &[1000; MAX_LEDS], 960_000)
+            .unwrap();
+        engine.start(&mut chip).unwrap();
+        let enabled = chip.peek(nvic::ISER0) & (1 << nvic::TIM2_IRQ) != 0;
+        assert_eq!(
+            enabled,
+            mode == Mode::ChipInterrupt,
+            "{mode:?} while playing"
+        );
+        chip.run_until(chip.now + 3 * chip_ticks(960_000));
+        engine.stop(&mut chip).unwrap();
+        assert_eq!(
+            chip.peek(nvic::ISER0) & (1 << nvic::TIM2_IRQ),
+            0,
+            "{mode:?}"
+        );
+    }
+}
+
+/// A stream that stopped without a transfer error (EN cleared, TEIF clear) is a fault too.
+#[test]
+fn a_stream_that_stopped_by_itself_is_reported() {
+    for bank in [Bank::Tim3, Bank::Tim5] {
+        let (mut chip, mut engine, _) = playing(8, 3);
+        assert_eq!(engine.poll_fault(&mut chip), None, "healthy");
+        let stream = bank.stream();
+        let cr = chip.peek(stream.cr());
+        chip.write(stream.cr(), cr & !dma::CR_EN);
+        chip.run_until(chip.now + 100);
+        assert_eq!(chip.peek(stream.isr()) & stream.flags(dma::TEIF), 0);
+        assert_eq!(
+            engine.poll_fault(&mut chip),
+            Some(OutputFault::DmaTransferError),
+            "{bank:?}"
+        );
+        assert!(!engine.is_running());
+    }
+}
+
+/// The engine's accessors say what it was given and what it plays.
+#[test]
+fn engine_reports_its_clock_load_and_running_state() {
+    let mut chip = Chip::new();
+    let mut engine = ChipEngine::new(&mut chip, CLOCK, FRAMES, Mode::Dma).unwrap();
+    assert_eq!(engine.clock_hz(), CLOCK);
+    assert_eq!(engine.loaded(), None);
+    assert!(!engine.is_running());
+    let table = ChipTable::new(5).unwrap();
+    let loaded = engine
+        .load(&mut chip, &table, &[1000; MAX_LEDS], 960_000)
+        .unwrap();
+    assert_eq!(engine.loaded(), Some(loaded));
+    assert_eq!(loaded.chips, 64);
+    assert_eq!(loaded.bank_chips, [32, 64]);
+    assert!(!engine.is_running());
+    engine.start(&mut chip).unwrap();
+    assert!(engine.is_running());
+    engine.stop(&mut chip).unwrap();
+    assert!(!engine.is_running());
+}
+
+/// Loading writes each bank's compare values at its own width and nothing outside its buffer,
+/// whatever the memory held before.
+#[test]
+fn frames_are_written_at_their_width_inside_their_buffers() {
+    let mut chip = Chip::new();
+    let mut engine = ChipEngine::new(&mut chip, CLOCK, FRAMES, Mode::Dma).unwrap();
+    let guard = |bank: Bank| FRAMES.of(bank) + bank.frame_buffer_bytes();
+    for bank in [Bank::Tim3, Bank::Tim5] {
+        for offset in (0..bank.frame_buffer_bytes() + 16).step_by(4) {
+            chip.write(FRAMES.of(bank) + offset, 0xDEAD_BEEF);
+        }
+    }
+    let table = ChipTable::new(8).unwrap();
+    let brightness = [1000, 800, 650, 500, 350, 200, 100, 1];
+    let loaded = engine
+        .load(&mut chip, &table, &brightness, 960_000)
+        .unwrap();
+    for bank in [Bank::Tim3, Bank::Tim5] {
+        assert_eq!(
+            chip.peek(guard(bank)),
+            0xDEAD_BEEF,
+            "{bank:?}: past the buffer"
+        );
+        for chip_index in 0..usize::from(loaded.chips_of(bank)) {
+            let expected = super::check::expected_levels(&table, &brightness, bank, chip_index);
+            for (slot, level) in expected.iter().enumerate() {
+                let addr = FRAMES.value(bank, chip_index, slot);
+                let word = chip.peek(addr & !3);
+                let value = if bank.item_bytes() == 2 {
+                    (word >> (8 * (addr & 3))) & 0xFFFF
+                } else {
+                    word
+                };
+                assert_eq!(
+                    Some(value),
+                    *level,
+                    "{bank:?} chip {chip_index} slot {slot}"
+                );
+            }
+        }
+    }
+}
