@@ -27,7 +27,7 @@ pub mod rcc {
     /// AHB1ENR.DMA1EN.
     pub const DMA1EN: u32 = 1 << 21;
     /// TIM2 bit in APB1ENR (TIM2EN) and APB1RSTR (TIM2RST).
-    pub const TIM2: u32 = 1 << 0;
+    pub const TIM2: u32 = 1; // bit 0
     /// TIM3 bit in APB1ENR and APB1RSTR.
     pub const TIM3: u32 = 1 << 1;
     /// TIM4 bit (the embassy time driver's timer: never touched by the plan).
@@ -72,7 +72,7 @@ pub mod tim {
     pub const BLOCK: u32 = 0x400;
 
     /// CR1.CEN: counter enable.
-    pub const CR1_CEN: u32 = 1 << 0;
+    pub const CR1_CEN: u32 = 1; // bit 0
     /// CR1.UDIS: update disable.
     pub const CR1_UDIS: u32 = 1 << 1;
     /// CR1.URS: only counter overflow raises UIF / update requests.
@@ -100,7 +100,7 @@ pub mod tim {
     /// SMCR.TS field mask.
     pub const SMCR_TS_MASK: u32 = 0b111 << SMCR_TS_SHIFT;
     /// DIER.UIE: update interrupt enable.
-    pub const DIER_UIE: u32 = 1 << 0;
+    pub const DIER_UIE: u32 = 1; // bit 0
     /// DIER.UDE: update DMA request enable.
     pub const DIER_UDE: u32 = 1 << 8;
     /// DIER.CC1DE..CC4DE: capture/compare DMA request enables (bits 9–12).
@@ -108,11 +108,11 @@ pub mod tim {
     /// DIER.TDE: trigger DMA request enable.
     pub const DIER_TDE: u32 = 1 << 14;
     /// SR.UIF: update interrupt flag.
-    pub const SR_UIF: u32 = 1 << 0;
+    pub const SR_UIF: u32 = 1; // bit 0
     /// SR.TIF: trigger interrupt flag.
     pub const SR_TIF: u32 = 1 << 6;
     /// EGR.UG: re-initialise the counter and generate an update event.
-    pub const EGR_UG: u32 = 1 << 0;
+    pub const EGR_UG: u32 = 1; // bit 0
     /// CCMRx output compare mode = 110 (PWM mode 1: active while CNT < CCR), per channel slot.
     pub const OCM_PWM1: u32 = 0b110;
     /// CCMRx.OCxM position within a channel's byte.
@@ -124,7 +124,7 @@ pub mod tim {
     /// Distance in bits between two channels' fields in CCER.
     pub const CCER_CHANNEL_STRIDE: u32 = 4;
     /// CCER.CCxE (output enable) within a channel's nibble.
-    pub const CCE: u32 = 1 << 0;
+    pub const CCE: u32 = 1; // bit 0
     /// CCER.CCxP (output polarity: active low) within a channel's nibble.
     pub const CCP: u32 = 1 << 1;
     /// DCR.DBL field position (burst length − 1, 5 bits); DBA is bits 0–4.
@@ -197,7 +197,7 @@ pub mod dma {
     pub const FCR: u32 = 0x14;
 
     /// SxCR.EN: stream enable (cleared by hardware at a transfer error or end of transfer).
-    pub const CR_EN: u32 = 1 << 0;
+    pub const CR_EN: u32 = 1; // bit 0
     /// SxCR.TEIE: transfer error interrupt enable.
     pub const CR_TEIE: u32 = 1 << 2;
     /// SxCR.DIR = 01: memory to peripheral.
@@ -228,7 +228,7 @@ pub mod dma {
     pub const FCR_DMDIS: u32 = 1 << 2;
 
     /// FEIFx: FIFO error flag (per-stream flag bit, before shifting).
-    pub const FEIF: u32 = 1 << 0;
+    pub const FEIF: u32 = 1; // bit 0
     /// DMEIFx: direct mode error flag.
     pub const DMEIF: u32 = 1 << 2;
     /// TEIFx: transfer error flag.
