@@ -478,6 +478,10 @@ fn vendor_dma_offsets_fields_and_values() {
     assert!(cr("chsel").1 >= 3, "CHSEL holds channels 0–7");
     let fcr = field_of(d, &[("st", 0), ("fcr", 0)], "dmdis", 0);
     assert_eq!(dma::FCR_DMDIS, 1 << fcr.0);
+    let every_flag = ["feif", "dmeif", "teif", "htif", "tcif"]
+        .iter()
+        .fold(0, |m, f| m | 1 << field_of(d, &[("isr", 0)], f, 0).0);
+    assert_eq!(dma::ALL_FLAGS, every_flag, "a stream's five event flags");
     let shifts: Vec<u32> = (0..4)
         .map(|i| field_of(d, &[("isr", 0)], "feif", i).0)
         .collect();
