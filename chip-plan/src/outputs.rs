@@ -263,6 +263,21 @@ mod tests {
     }
 
     #[test]
+    fn outputs_trigger_inputs_are_wired_to_tim2() {
+        // The register model's copy of RM0383's internal trigger table (the vendor metadata
+        // does not describe the ITR connections).
+        use crate::register_model::itr_source;
+        use crate::register_model::timer::TimerId;
+        for (bank, id) in [(Bank::Tim3, TimerId::Tim3), (Bank::Tim5, TimerId::Tim5)] {
+            assert_eq!(
+                itr_source(id, bank.tim2_trigger()),
+                Some(TimerId::Tim2),
+                "{bank:?}"
+            );
+        }
+    }
+
+    #[test]
     fn outputs_channel_pins() {
         assert!(channel_pin_is(Bank::Tim3, 1, "PA6"));
         assert!(channel_pin_is(Bank::Tim5, 1, "PA0"));
