@@ -855,3 +855,49 @@ fn frames_are_written_at_their_width_inside_their_buffers() {
         }
     }
 }
+
+/// For any requested timeout the watchdog setting reaches it at the fastest LSI with the
+/// smallest divider that can and, for that divider, the smallest reload; past the longest
+/// timeout the IWDG has, the longest.
+#[test]
+fn watchdog_setting_is_the_smallest_that_reaches_the_timeout() {
+    use crate::plan::WatchdogSetting;
+    let fastest = crate::regs::iwdg::LSI_HZ.2;
+    let longest = WatchdogSetting {
+        prescaler_code: 6,
+        reload: 0xFFF,
+    };
+    // Every 7 ms, and at each divider's longest timeout (4096 reloads) and 1 ms past it.
+    let edges = (0..=6u32).flat_map(|code| {
+        let t = (4096u64 * (4 << code) * 1000 / u64::from(fastest)) as u32;
+        [t, t + 1]
+    });
+    for t in (1..=longest.timeout_ms(fastest) as u32)
+        .step_by(7)
+        .chain(edges)
+    {
+        let s = watchdog_setting(t);
+        if u64::from(t) > longest.timeout_ms(fastest) {
+            assert_eq!(s, longest, "{t} ms");
+            continue;
+        }
+        assert!(s.prescaler_code <= 6 && s.reload <= 0xFFF, "{t} ms: {s:?}");
+        assert!(s.timeout_ms(fastest) >= u64::from(t), "{t} ms: {s:?}");
+        if s.reload > 0 {
+            let shorter = WatchdogSetting {
+                reload: s.reload - 1,
+                ..s
+            };
+            assert!(shorter.timeout_ms(fastest) < u64::from(t), "{t} ms: {s:?}");
+        }
+        if s.prescaler_code > 0 {
+            let finer = WatchdogSetting {
+                prescaler_code: s.prescaler_code - 1,
+                reload: 0xFFF,
+            };
+            assert!(finer.timeout_ms(fastest) < u64::from(t), "{t} ms: {s:?}");
+        }
+    }
+    assert_eq!(watchdog_setting(100_000), longest);
+    assert_eq!(watchdog_setting(u32::MAX / 1000), longest);
+}
