@@ -10,6 +10,9 @@
 //!   [`plan::ChipEngine`] that sequences them with the frame buffers.
 //! * `register_model` (tests only): TIM2, TIM3, TIM5 and DMA1 modelled from RM0383's
 //!   descriptions, executing the plans; `cargo test register_model` runs it.
+//! * `vendor_check` (tests only): every address, field and value of [`regs`] and the pin and
+//!   DMA tables of [`outputs`] against ST's register descriptions as stm32-metapac ships them;
+//!   `cargo test vendor` runs it.
 //!
 //! `no_std`, no unsafe code, nothing of embassy: the firmware supplies a [`step::Bus`] that
 //! reads and writes the addresses, the tests supply the model.
@@ -24,3 +27,5 @@ pub mod step;
 
 #[cfg(test)]
 mod register_model;
+#[cfg(test)]
+mod vendor_check;

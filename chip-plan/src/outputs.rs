@@ -110,6 +110,9 @@ pub struct LedOutput {
     pub channel: u8,
     /// Port and pin, for documentation and logs.
     pub pin: &'static str,
+    /// The pin's alternate function number for this timer channel (GPIOx_AFRL/AFRH; AF2 is
+    /// TIM3–TIM5 on the F411). The firmware's pin driver selects it from the same table.
+    pub af: u8,
 }
 
 /// LED i (0-based) is driven by `LED_OUTPUTS[i]`.
@@ -125,7 +128,12 @@ pub const LED_OUTPUTS: [LedOutput; MAX_LEDS] = [
 ];
 
 const fn led(bank: Bank, channel: u8, pin: &'static str) -> LedOutput {
-    LedOutput { bank, channel, pin }
+    LedOutput {
+        bank,
+        channel,
+        pin,
+        af: 2,
+    }
 }
 
 /// Pins the LED table must never use: USB (PA11/PA12), SWD (PA13/PA14), the board LED (PC13),
@@ -191,6 +199,20 @@ const _: () = assert!(
     "pin table check must reject the USB pins"
 );
 
+/// Whether [`LED_OUTPUTS`] puts `pin` on `bank`'s channel `channel` (for the board code's
+/// compile-time check that it hands each timer channel the pin this table names).
+pub const fn channel_pin_is(bank: Bank, channel: u8, pin: &str) -> bool {
+    let mut i = 0;
+    while i < LED_OUTPUTS.len() {
+        let out = LED_OUTPUTS[i];
+        if same_bank(out.bank, bank) && out.channel == channel {
+            return str_eq(out.pin, pin);
+        }
+        i += 1;
+    }
+    false
+}
+
 /// For each channel slot (CCR1..CCR4) of `bank`, the 0-based LED it plays.
 pub const fn slots_of(bank: Bank) -> [Option<u8>; SLOTS] {
     let mut slots = [None; SLOTS];
@@ -203,4 +225,74 @@ pub const fn slots_of(bank: Bank) -> [Option<u8>; SLOTS] {
         i += 1;
     }
     slots
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn outputs_frame_buffers_hold_every_chip_of_each_bank() {
+        // TIM3: 32 chips × 4 half-words; TIM5: 512 chips × 4 words.
+        assert_eq!(Bank::Tim3.frame_buffer_bytes(), 256);
+        assert_eq!(Bank::Tim5.frame_buffer_bytes(), 8192);
+        assert_eq!(Bank::Tim3.max_chips(), 32);
+        assert_eq!(Bank::Tim5.max_chips(), 512);
+    }
+
+    #[test]
+    fn outputs_pin_table_check_rejects_each_kind_of_mistake() {
+        assert!(pin_table_is_valid(&LED_OUTPUTS));
+        let bad: [&[LedOutput]; 6] = [
+            &[led(Bank::Tim3, 0, "PA6")],
+            &[led(Bank::Tim3, 5, "PA6")],
+            &[led(Bank::Tim3, 1, "PA6"), led(Bank::Tim3, 1, "PA7")],
+            &[led(Bank::Tim3, 1, "PA6"), led(Bank::Tim5, 1, "PA6")],
+            &[led(Bank::Tim5, 1, "PA13")],
+            &[led(Bank::Tim3, 1, "PA6"), led(Bank::Tim3, 2, "PA6")],
+        ];
+        for table in bad {
+            assert!(!pin_table_is_valid(table), "{table:?}");
+        }
+        // The same channel number on the two banks, and pins of equal length, are fine.
+        assert!(pin_table_is_valid(&[
+            led(Bank::Tim3, 1, "PA6"),
+            led(Bank::Tim5, 1, "PA0")
+        ]));
+        assert!(str_eq("PA6", "PA6") && !str_eq("PA6", "PA7") && !str_eq("PA6", "PA60"));
+    }
+
+    #[test]
+    fn outputs_trigger_inputs_are_wired_to_tim2() {
+        // The register model's copy of RM0383's internal trigger table (the vendor metadata
+        // does not describe the ITR connections).
+        use crate::register_model::itr_source;
+        use crate::register_model::timer::TimerId;
+        for (bank, id) in [(Bank::Tim3, TimerId::Tim3), (Bank::Tim5, TimerId::Tim5)] {
+            assert_eq!(
+                itr_source(id, bank.tim2_trigger()),
+                Some(TimerId::Tim2),
+                "{bank:?}"
+            );
+        }
+    }
+
+    #[test]
+    fn outputs_channel_pins() {
+        assert!(channel_pin_is(Bank::Tim3, 1, "PA6"));
+        assert!(channel_pin_is(Bank::Tim5, 1, "PA0"));
+        assert!(!channel_pin_is(Bank::Tim5, 1, "PA1"));
+        assert!(!channel_pin_is(Bank::Tim3, 5, "PA6"));
+    }
+
+    #[test]
+    fn outputs_slots_follow_the_pin_table() {
+        assert_eq!(slots_of(Bank::Tim3), [Some(0), Some(1), Some(2), Some(3)]);
+        assert_eq!(slots_of(Bank::Tim5), [Some(7), Some(4), Some(5), Some(6)]);
+        for bank in BANKS {
+            assert_eq!(bank.timer(), if bank == Bank::Tim3 { TIM3 } else { TIM5 });
+        }
+        assert_eq!(Bank::Tim3.item_bytes(), 2);
+        assert_eq!(Bank::Tim5.item_bytes(), 4);
+    }
 }

@@ -491,10 +491,10 @@ impl ChipEngine {
     }
 }
 
-/// Longest time the CPU may go without feeding the watchdog: a 128 KiB sector erase stalls it
-/// for up to 2 s (F411 datasheet, t_ERASE128KB max at ×32 parallelism), plus the feeding period
-/// ([`WATCHDOG_FEED_MS`]) and margin.
-pub const WATCHDOG_MIN_TIMEOUT_MS: u32 = 4_000;
+/// Shortest watchdog timeout: the stall budget of a save (`protocol::flash::STALL_BUDGET_MS`:
+/// the worst x8 sector erase and the record's programming, plus 50 %) plus one feeding period
+/// ([`WATCHDOG_FEED_MS`]).
+pub const WATCHDOG_MIN_TIMEOUT_MS: u32 = protocol::flash::STALL_BUDGET_MS + WATCHDOG_FEED_MS;
 /// How often the firmware feeds the watchdog.
 pub const WATCHDOG_FEED_MS: u32 = 500;
 

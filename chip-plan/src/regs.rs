@@ -5,11 +5,13 @@
 //! the NVIC set/clear-enable registers come from the Cortex-M4 programming manual PM0214
 //! (section 4.3).
 //!
-//! Every value here was checked against stm32-metapac 21 (`chips/stm32f411ce/pac.rs` for the base
-//! addresses, `peripherals/timer_v1.rs`, `dma_v2.rs`, `rcc_f4.rs`, `iwdg_v1.rs`, `dbgmcu_f4.rs`
-//! for offsets and field positions) and its DMA request table (TIM3_TRIG on DMA1 stream 4
-//! channel 5, TIM5_TRIG on DMA1 stream 1 channel 6). Addresses are plain `u32`s: the plan is data,
-//! and the host model decodes the same numbers the board writes.
+//! `cargo test vendor` checks every value here against the STM32F411CE metadata of stm32-metapac
+//! (the register descriptions generated from ST's SVD files that embassy-stm32 builds on, at the
+//! version `Cargo.lock` pins): base addresses, register offsets, field positions and widths,
+//! enumerated values, RCC enable and reset bits, interrupt numbers, the LED pins' alternate
+//! functions and the DMA request map; the NVIC registers are checked against the `cortex-m`
+//! crate. Addresses are plain `u32`s: the plan is data, and the host model decodes the same
+//! numbers the board writes.
 
 /// SRAM of the F411: 128 KiB from 0x2000_0000 (RM0383 section 2.3, memory map).
 pub const SRAM: core::ops::Range<u32> = 0x2000_0000..0x2002_0000;
@@ -25,7 +27,7 @@ pub mod rcc {
     /// AHB1ENR.DMA1EN.
     pub const DMA1EN: u32 = 1 << 21;
     /// TIM2 bit in APB1ENR (TIM2EN) and APB1RSTR (TIM2RST).
-    pub const TIM2: u32 = 1 << 0;
+    pub const TIM2: u32 = 1; // bit 0
     /// TIM3 bit in APB1ENR and APB1RSTR.
     pub const TIM3: u32 = 1 << 1;
     /// TIM4 bit (the embassy time driver's timer: never touched by the plan).
@@ -70,15 +72,23 @@ pub mod tim {
     pub const BLOCK: u32 = 0x400;
 
     /// CR1.CEN: counter enable.
-    pub const CR1_CEN: u32 = 1 << 0;
+    pub const CR1_CEN: u32 = 1; // bit 0
     /// CR1.UDIS: update disable.
     pub const CR1_UDIS: u32 = 1 << 1;
     /// CR1.URS: only counter overflow raises UIF / update requests.
     pub const CR1_URS: u32 = 1 << 2;
+    /// CR1.OPM: one-pulse mode, the counter stops (CEN cleared) at the next update event.
+    pub const CR1_OPM: u32 = 1 << 3;
+    /// CR1.DIR (bit 4) and CR1.CMS (bits 5–6): down-counting and centre-aligned modes.
+    pub const CR1_DIR_CMS_MASK: u32 = 0b111 << 4;
+    /// CR1.CKD (bits 8–9): clock division for the digital filters and dead-time.
+    pub const CR1_CKD_MASK: u32 = 0b11 << 8;
     /// CR1.ARPE: TIMx_ARR is buffered (preloaded).
     pub const CR1_ARPE: u32 = 1 << 7;
     /// CR2.MMS field position (master mode selection, 3 bits).
     pub const CR2_MMS_SHIFT: u32 = 4;
+    /// CR2.MMS field mask.
+    pub const CR2_MMS_MASK: u32 = 0b111 << CR2_MMS_SHIFT;
     /// CR2.MMS = 010: the update event is TRGO.
     pub const CR2_MMS_UPDATE: u32 = 0b010 << CR2_MMS_SHIFT;
     /// SMCR.SMS field mask (slave mode selection).
@@ -87,8 +97,10 @@ pub mod tim {
     pub const SMCR_SMS_RESET: u32 = 0b100;
     /// SMCR.TS field position (trigger selection, 3 bits; 000–011 = ITR0–ITR3).
     pub const SMCR_TS_SHIFT: u32 = 4;
+    /// SMCR.TS field mask.
+    pub const SMCR_TS_MASK: u32 = 0b111 << SMCR_TS_SHIFT;
     /// DIER.UIE: update interrupt enable.
-    pub const DIER_UIE: u32 = 1 << 0;
+    pub const DIER_UIE: u32 = 1; // bit 0
     /// DIER.UDE: update DMA request enable.
     pub const DIER_UDE: u32 = 1 << 8;
     /// DIER.CC1DE..CC4DE: capture/compare DMA request enables (bits 9–12).
@@ -96,19 +108,23 @@ pub mod tim {
     /// DIER.TDE: trigger DMA request enable.
     pub const DIER_TDE: u32 = 1 << 14;
     /// SR.UIF: update interrupt flag.
-    pub const SR_UIF: u32 = 1 << 0;
+    pub const SR_UIF: u32 = 1; // bit 0
     /// SR.TIF: trigger interrupt flag.
     pub const SR_TIF: u32 = 1 << 6;
     /// EGR.UG: re-initialise the counter and generate an update event.
-    pub const EGR_UG: u32 = 1 << 0;
+    pub const EGR_UG: u32 = 1; // bit 0
     /// CCMRx output compare mode = 110 (PWM mode 1: active while CNT < CCR), per channel slot.
     pub const OCM_PWM1: u32 = 0b110;
     /// CCMRx.OCxM position within a channel's byte.
     pub const OCM_SHIFT: u32 = 4;
     /// CCMRx.OCxPE (preload enable) within a channel's byte.
     pub const OCPE: u32 = 1 << 3;
+    /// Distance in bits between the two channels' fields of one CCMRx register.
+    pub const CCMR_CHANNEL_STRIDE: u32 = 8;
+    /// Distance in bits between two channels' fields in CCER.
+    pub const CCER_CHANNEL_STRIDE: u32 = 4;
     /// CCER.CCxE (output enable) within a channel's nibble.
-    pub const CCE: u32 = 1 << 0;
+    pub const CCE: u32 = 1; // bit 0
     /// CCER.CCxP (output polarity: active low) within a channel's nibble.
     pub const CCP: u32 = 1 << 1;
     /// DCR.DBL field position (burst length − 1, 5 bits); DBA is bits 0–4.
@@ -117,12 +133,13 @@ pub mod tim {
     /// CCMR1/CCMR2 value with both of its channels in PWM mode 1 with preload.
     pub const fn ccmr_pwm1_preload_pair() -> u32 {
         let one = (OCM_PWM1 << OCM_SHIFT) | OCPE;
-        one | (one << 8)
+        one | (one << CCMR_CHANNEL_STRIDE)
     }
 
     /// CCER value with channels 1–4 enabled, active high.
     pub const fn ccer_all_enabled() -> u32 {
-        CCE | (CCE << 4) | (CCE << 8) | (CCE << 12)
+        let s = CCER_CHANNEL_STRIDE;
+        CCE | (CCE << s) | (CCE << (2 * s)) | (CCE << (3 * s))
     }
 
     /// DCR value for a burst of `transfers` registers starting at offset `first` (a multiple
@@ -180,7 +197,7 @@ pub mod dma {
     pub const FCR: u32 = 0x14;
 
     /// SxCR.EN: stream enable (cleared by hardware at a transfer error or end of transfer).
-    pub const CR_EN: u32 = 1 << 0;
+    pub const CR_EN: u32 = 1; // bit 0
     /// SxCR.TEIE: transfer error interrupt enable.
     pub const CR_TEIE: u32 = 1 << 2;
     /// SxCR.DIR = 01: memory to peripheral.
@@ -197,8 +214,10 @@ pub mod dma {
     pub const CR_PSIZE_SHIFT: u32 = 11;
     /// SxCR.MSIZE position.
     pub const CR_MSIZE_SHIFT: u32 = 13;
+    /// SxCR.PL position (priority level, 2 bits).
+    pub const CR_PL_SHIFT: u32 = 16;
     /// SxCR.PL = 11: very high priority.
-    pub const CR_PL_VERY_HIGH: u32 = 0b11 << 16;
+    pub const CR_PL_VERY_HIGH: u32 = 0b11 << CR_PL_SHIFT;
     /// SxCR.DBM: double-buffer mode.
     pub const CR_DBM: u32 = 1 << 18;
     /// SxCR.PBURST/MBURST field mask (bits 21–24).
@@ -209,7 +228,7 @@ pub mod dma {
     pub const FCR_DMDIS: u32 = 1 << 2;
 
     /// FEIFx: FIFO error flag (per-stream flag bit, before shifting).
-    pub const FEIF: u32 = 1 << 0;
+    pub const FEIF: u32 = 1; // bit 0
     /// DMEIFx: direct mode error flag.
     pub const DMEIF: u32 = 1 << 2;
     /// TEIFx: transfer error flag.
@@ -220,6 +239,8 @@ pub mod dma {
     pub const TCIF: u32 = 1 << 5;
     /// Every event flag of one stream.
     pub const ALL_FLAGS: u32 = FEIF | DMEIF | TEIF | HTIF | TCIF;
+    /// Bit position of the flags of streams 0–3 (4–7) in LISR/LIFCR (HISR/HIFCR).
+    pub const FLAG_SHIFTS: [u32; 4] = [0, 6, 16, 22];
 
     /// SxCR.PSIZE/MSIZE code of a data item of `bytes` bytes (1, 2 or 4).
     pub const fn size_code(bytes: u32) -> u32 {
@@ -277,8 +298,7 @@ impl DmaStream {
     /// `flags` (per-stream flag bits such as [`dma::TEIF`]) moved to this stream's position in
     /// its ISR/IFCR: streams 0/4 at bit 0, 1/5 at 6, 2/6 at 16, 3/7 at 22.
     pub const fn flags(self, flags: u32) -> u32 {
-        let shift = [0, 6, 16, 22][(self.number % 4) as usize];
-        flags << shift
+        flags << dma::FLAG_SHIFTS[(self.number % 4) as usize]
     }
 }
 

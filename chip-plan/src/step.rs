@@ -173,3 +173,158 @@ pub fn run<B: Bus + ?Sized>(steps: &[Step], bus: &mut B) -> Result<(), StepError
     }
     first_error.map_or(Ok(()), Err)
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// Word and half-word memory that logs every access in order.
+    #[derive(Default)]
+    struct Memory {
+        words: std::collections::BTreeMap<u32, u32>,
+        log: std::vec::Vec<(&'static str, u32, u32)>,
+        /// Reads of this address return the value with these bits set, `sticky` times.
+        sticky: Option<(u32, u32, u32)>,
+    }
+
+    impl Bus for Memory {
+        fn read(&mut self, addr: u32) -> u32 {
+            let mut value = self.words.get(&addr).copied().unwrap_or(0);
+            if let Some((at, bits, left)) = self.sticky
+                && at == addr
+                && left > 0
+            {
+                value |= bits;
+                self.sticky = Some((at, bits, left - 1));
+            }
+            self.log.push(("read", addr, value));
+            value
+        }
+        fn write(&mut self, addr: u32, value: u32) {
+            self.log.push(("write", addr, value));
+            self.words.insert(addr, value);
+        }
+        fn read16(&mut self, addr: u32) -> u16 {
+            let word = self.words.get(&(addr & !3)).copied().unwrap_or(0);
+            let value = (word >> (8 * (addr & 2))) as u16;
+            self.log.push(("read16", addr, u32::from(value)));
+            value
+        }
+        fn write16(&mut self, addr: u32, value: u16) {
+            self.log.push(("write16", addr, u32::from(value)));
+        }
+        fn fence(&mut self) {
+            self.log.push(("fence", 0, 0));
+        }
+    }
+
+    #[test]
+    fn read_modify_write_steps_keep_the_other_bits() {
+        let mut bus = Memory::default();
+        bus.words.insert(0x10, 0b1010);
+        let steps = [
+            Step::SetBits {
+                addr: 0x10,
+                bits: 0b0101,
+            },
+            Step::ClearBits {
+                addr: 0x10,
+                bits: 0b0011,
+            },
+            Step::Write {
+                addr: 0x20,
+                value: 7,
+            },
+            Step::Fence,
+        ];
+        assert_eq!(run(&steps, &mut bus), Ok(()));
+        assert_eq!(bus.words[&0x10], 0b1100);
+        assert_eq!(bus.words[&0x20], 7);
+        assert_eq!(bus.log.last(), Some(&("fence", 0, 0)));
+    }
+
+    #[test]
+    fn wait_clear_polls_until_clear_or_gives_up_and_goes_on() {
+        // Clears after 3 reads: 4 polls suffice.
+        let mut bus = Memory {
+            sticky: Some((0x30, 1, 3)),
+            ..Memory::default()
+        };
+        let wait = |polls| Step::WaitClear {
+            addr: 0x30,
+            mask: 1,
+            polls,
+        };
+        assert_eq!(run(&[wait(4)], &mut bus), Ok(()));
+        assert_eq!(bus.log.len(), 4);
+        // Never clears within 5 polls: an error, and the later steps still run.
+        let mut bus = Memory {
+            sticky: Some((0x30, 1, 100)),
+            ..Memory::default()
+        };
+        let steps = [
+            wait(5),
+            Step::Write {
+                addr: 0x40,
+                value: 1,
+            },
+            wait(2),
+        ];
+        assert_eq!(
+            run(&steps, &mut bus),
+            Err(StepError::StillSet {
+                addr: 0x30,
+                mask: 1
+            })
+        );
+        assert_eq!(bus.log.iter().filter(|e| e.0 == "read").count(), 7);
+        assert_eq!(bus.words[&0x40], 1);
+        // Bits outside the mask do not count; 0 polls still reads once.
+        let mut bus = Memory::default();
+        bus.words.insert(0x30, 0b10);
+        assert_eq!(run(&[wait(0)], &mut bus), Ok(()));
+        assert_eq!(bus.log.len(), 1);
+    }
+
+    #[test]
+    fn copy_reads_at_the_item_width() {
+        let mut bus = Memory::default();
+        bus.words.insert(0x100, 0x0002_0001);
+        let steps = [
+            Step::Copy {
+                src: 0x102,
+                dst: 0x200,
+                bytes: 2,
+            },
+            Step::Copy {
+                src: 0x100,
+                dst: 0x204,
+                bytes: 4,
+            },
+        ];
+        assert_eq!(run(&steps, &mut bus), Ok(()));
+        assert_eq!(bus.words[&0x200], 2);
+        assert_eq!(bus.words[&0x204], 0x0002_0001);
+        assert_eq!(bus.log[0].0, "read16");
+        assert_eq!(bus.log[2].0, "read");
+    }
+
+    #[test]
+    fn plans_hold_their_steps_in_order() {
+        let mut plan = Plan::default();
+        assert!(plan.steps().is_empty());
+        plan.write(1, 2);
+        let mut other = Plan::new();
+        other.push(Step::Fence);
+        other.write(3, 4);
+        plan.extend(&other);
+        assert_eq!(
+            plan.steps(),
+            [
+                Step::Write { addr: 1, value: 2 },
+                Step::Fence,
+                Step::Write { addr: 3, value: 4 }
+            ]
+        );
+    }
+}

@@ -12,7 +12,7 @@
 
 use core::cell::RefCell;
 
-use chip_plan::outputs::{Bank, TIM3_MAX_CHIPS};
+use chip_plan::outputs::{Bank, TIM3_MAX_CHIPS, channel_pin_is};
 use chip_plan::plan::{
     ChipEngine, ChipError, ChipInterrupt, ChipInterruptSlot, FrameMemory, Loaded, Mode,
     WATCHDOG_FEED, WATCHDOG_MIN_TIMEOUT_MS, watchdog_plan, watchdog_setting,
@@ -117,6 +117,20 @@ mod chip_interrupt {
         };
     }
 }
+
+// `install` hands TIM3's channels 1–4 PA6, PA7, PB0, PB1 and TIM5's PA0, PA1, PA2, PA3 (embassy's
+// pin types enforce that each pin has that channel); the plan's pin table must say the same.
+const _: () = assert!(
+    channel_pin_is(Bank::Tim3, 1, "PA6")
+        && channel_pin_is(Bank::Tim3, 2, "PA7")
+        && channel_pin_is(Bank::Tim3, 3, "PB0")
+        && channel_pin_is(Bank::Tim3, 4, "PB1")
+        && channel_pin_is(Bank::Tim5, 1, "PA0")
+        && channel_pin_is(Bank::Tim5, 2, "PA1")
+        && channel_pin_is(Bank::Tim5, 3, "PA2")
+        && channel_pin_is(Bank::Tim5, 4, "PA3"),
+    "the pins install() hands the timers differ from chip_plan::outputs::LED_OUTPUTS"
+);
 
 /// The LED pins, in the order of `chip_plan::outputs::LED_OUTPUTS`.
 pub struct LedPins {

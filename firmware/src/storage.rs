@@ -7,7 +7,8 @@
 //! load: a missing record boots the factory defaults ([`RestoredConfig::Missing`]), an unreadable
 //! or invalid one the defaults as well, reported as [`RestoredConfig::Corrupt`] in `GetStatus`.
 //!
-//! A save that erases stalls the CPU for ~1–2 s (single-bank flash); the carriers keep playing
+//! A save that erases stalls the CPU for 2 s typically, 4 s at most (single-bank flash, x8
+//! erase parallelism: `protocol::flash`); the carriers keep playing
 //! from DMA meanwhile (see [`crate::chips`]), and the state machine has already answered
 //! `SaveConfig` with `Deferred`: the outcome shows up in `GetStatus.save`.
 
@@ -15,6 +16,11 @@ use embassy_stm32::flash::{Async, Flash};
 use protocol::config::LuminaireConfig;
 use protocol::luminaire::RestoredConfig;
 use protocol::record::{MAX_RECORD_LEN, decode_record, encode_record};
+
+const _: () = assert!(
+    ITEM_BUFFER > MAX_RECORD_LEN,
+    "the item buffer holds a record"
+);
 use sequential_storage::cache::{Cache, Uncached};
 use sequential_storage::map::{MapConfig, MapStorage};
 
@@ -22,8 +28,9 @@ use crate::board::CONFIG_FLASH;
 
 /// The map key of the configuration record.
 const CONFIG_KEY: u8 = 0;
-/// Scratch for one map item: key, record, padding to the flash word.
-const ITEM_BUFFER: usize = MAX_RECORD_LEN + 32;
+/// Scratch for one map item: key, record, padding to the flash word (the size
+/// `protocol::flash` budgets a save's programming time for).
+const ITEM_BUFFER: usize = protocol::flash::SAVE_ITEM_BYTES;
 
 type ConfigMap = MapStorage<u8, Flash<'static, Async>, Cache<Uncached, Uncached, Uncached, u8>>;
 

@@ -33,6 +33,12 @@ pub fn request_source(stream: usize, channel: u32) -> Option<RequestSource> {
     }
 }
 
+/// SxCR bits outside the model: the interrupt enables DMEIE, TEIE, HTIE, TCIE (bits 1–4; the
+/// model has no DMA interrupts), PFCTRL (5), PINCOS (15), CT (19).
+const CR_UNMODELLED: u32 = 0b1_1111 << 1 | 1 << 15 | 1 << 19;
+/// SxFCR.FEIE: FIFO error interrupt enable.
+const FCR_FEIE: u32 = 1 << 7;
+
 /// One stream's registers and internal state.
 #[derive(Debug, Clone)]
 pub struct Stream {
@@ -116,6 +122,8 @@ impl Stream {
             Some("a reserved data size")
         } else if self.cr & (dma::CR_DBM | dma::CR_BURST_MASK | dma::CR_PINC) != 0 {
             Some("double buffering, bursts or peripheral increment")
+        } else if self.cr & CR_UNMODELLED != 0 || self.fcr & FCR_FEIE != 0 {
+            Some("stream interrupts, the peripheral as flow controller, PINCOS or CT")
         } else {
             None
         }

@@ -146,7 +146,7 @@ const TIMERS: [(TimerId, u32); 3] = [
 
 /// RM0383 table 54 (TIMx internal trigger connection): the timer behind ITR0..ITR3 of `slave`,
 /// among the modelled ones (TIM1, TIM4 and TIM8 are not modelled: never a trigger).
-fn itr_source(slave: TimerId, itr: u32) -> Option<TimerId> {
+pub(crate) fn itr_source(slave: TimerId, itr: u32) -> Option<TimerId> {
     match (slave, itr) {
         (TimerId::Tim2, 2) => Some(TimerId::Tim3),
         (TimerId::Tim3, 1) => Some(TimerId::Tim2),

@@ -2,7 +2,7 @@
 //! chip engine can reach: the up-counting time base with prescaler and auto-reload ("Time-base
 //! unit", "Counter modes"), the update event and its preloaded registers (ARR with ARPE, PSC
 //! always, CCRx with OCxPE), UG and URS/UDIS, the master mode TRGO (TIMx_CR2.MMS: 000 reset/UG,
-//! 010 update), the slave reset mode on an internal trigger (TIMx_SMCR.SMS = 100, "Slave mode:
+//! 010 update), one-pulse mode (CR1.OPM), the slave reset mode on an internal trigger (TIMx_SMCR.SMS = 100, "Slave mode:
 //! Reset mode") with its trigger flag and trigger DMA request (TIMx_DIER.TDE), the DMA burst
 //! through TIMx_DCR/TIMx_DMAR with its internal index ("DMA burst mode"), output compare in PWM
 //! mode 1 ("PWM mode") and the channel enables (TIMx_CCER).
@@ -191,6 +191,10 @@ impl Timer {
     /// Whether an overflow changes anything beyond UIF: a preloaded value waits for it, or an
     /// update is routed somewhere (TRGO, interrupt, DMA).
     pub fn overflow_matters(&self) -> bool {
+        if self.cr1 & tim::CR1_OPM != 0 {
+            // The overflow stops the counter.
+            return true;
+        }
         let waiting_ccr =
             (0..4).any(|c| self.preload_enabled(c) && self.ccr[c] != self.ccr_active[c]);
         let waiting = self.psc != self.psc_active || self.arr != self.arr_active || waiting_ccr;
@@ -205,7 +209,12 @@ impl Timer {
         self.cnt = 0;
         self.psc_cnt = 0;
         self.synced = now;
-        self.update_event(UpdateSource::Overflow, violations)
+        let outcome = self.update_event(UpdateSource::Overflow, violations);
+        // One-pulse mode: the counter stops at the update event (RM0383 "One-pulse mode").
+        if self.cr1 & tim::CR1_OPM != 0 {
+            self.cr1 &= !tim::CR1_CEN;
+        }
+        outcome
     }
 
     /// The update event (RM0383 13.3.2): shadow registers loaded, UIF, TRGO.
@@ -351,16 +360,56 @@ impl Timer {
         let mut burst = None;
         match offset {
             tim::CR1 => {
-                if value & (0b111 << 4) != 0 {
+                if value & tim::CR1_DIR_CMS_MASK != 0 {
                     violations.push(format!(
                         "{:?}: down or centre-aligned counting is not modelled",
                         self.id
                     ));
                 }
+                if value & tim::CR1_CKD_MASK != 0 {
+                    violations.push(format!(
+                        "{:?}: clock division (CKD) is not modelled",
+                        self.id
+                    ));
+                }
                 self.cr1 = value & 0x3FF;
             }
-            tim::CR2 => self.cr2 = value & 0xF8,
-            tim::SMCR => self.smcr = value & 0xFFF7,
+            tim::CR2 => {
+                let mms = value & tim::CR2_MMS_MASK;
+                if mms != 0 && mms != tim::CR2_MMS_UPDATE {
+                    violations.push(format!(
+                        "{:?}: master mode {:03b} is not modelled",
+                        self.id,
+                        mms >> tim::CR2_MMS_SHIFT
+                    ));
+                }
+                if value & !tim::CR2_MMS_MASK != 0 {
+                    violations.push(format!(
+                        "{:?}: CR2 bits {:#x} (CCDS, TI1S) are not modelled",
+                        self.id,
+                        value & !tim::CR2_MMS_MASK
+                    ));
+                }
+                self.cr2 = value & 0xF8;
+            }
+            tim::SMCR => {
+                let known = tim::SMCR_SMS_MASK | tim::SMCR_TS_MASK;
+                if value & !known != 0 {
+                    violations.push(format!(
+                        "{:?}: SMCR bits {:#x} (MSM, external trigger) are not modelled",
+                        self.id,
+                        value & !known
+                    ));
+                }
+                let ts = (value & tim::SMCR_TS_MASK) >> tim::SMCR_TS_SHIFT;
+                if value & tim::SMCR_SMS_MASK != 0 && ts > 3 {
+                    violations.push(format!(
+                        "{:?}: trigger input {ts:03b} (TI1/TI2/ETR) is not modelled",
+                        self.id
+                    ));
+                }
+                self.smcr = value & 0xFFF7;
+            }
             tim::DIER => {
                 if value & tim::DIER_CCDE_MASK != 0 {
                     violations.push(format!(
@@ -370,6 +419,17 @@ impl Timer {
                 }
                 if self.id != TimerId::Tim2 && value & tim::DIER_UIE != 0 {
                     violations.push(format!("{:?}: only TIM2's interrupt is modelled", self.id));
+                }
+                let other_interrupts = value
+                    & 0x5F5F
+                    & !(tim::DIER_UIE | tim::DIER_UDE)
+                    & !(tim::DIER_CCDE_MASK | tim::DIER_TDE);
+                if other_interrupts != 0 {
+                    violations.push(format!(
+                        "{:?}: compare and trigger interrupts ({other_interrupts:#x}) are not \
+                         modelled",
+                        self.id
+                    ));
                 }
                 self.dier = value & 0x5F5F;
             }
@@ -394,9 +454,24 @@ impl Timer {
                 if value & 0b11 != 0 || (value >> 8) & 0b11 != 0 {
                     violations.push(format!("{:?}: input capture is not modelled", self.id));
                 }
+                // OCxFE (bit 2) and OCxCE (bit 7) of either channel.
+                if value & 0x8484 != 0 {
+                    violations.push(format!(
+                        "{:?}: output compare fast or clear enable is not modelled",
+                        self.id
+                    ));
+                }
                 self.ccmr[i] = value & 0xFFFF;
             }
-            tim::CCER => self.ccer = value & 0xBBBB,
+            tim::CCER => {
+                if value & 0x8888 != 0 {
+                    violations.push(format!(
+                        "{:?}: CCxNP must stay 0 for an output channel",
+                        self.id
+                    ));
+                }
+                self.ccer = value & 0xBBBB;
+            }
             tim::CNT => self.cnt = value & self.width_mask,
             tim::PSC => self.psc = value & 0xFFFF,
             tim::ARR => {

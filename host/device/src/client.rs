@@ -10,8 +10,8 @@
 //! `protocol::framing`).
 //!
 //! A save may stall the luminaire: erasing a 128 KiB flash sector stops the Black Pill's CPU
-//! (and its USB) for up to 2 s. Requests around a save therefore keep retransmitting for at
-//! least [`Timeouts::stall`] before giving up.
+//! (and its USB) for up to 4 s. Requests around a save therefore keep retransmitting for at
+//! least [`Timeouts::stall`] before giving up (`protocol::flash` derives both waits).
 
 use std::path::Path;
 use std::time::{Duration, Instant};
@@ -37,7 +37,7 @@ pub struct Timeouts {
     /// Longest wait for a deferred save to complete.
     pub save: Duration,
     /// Longest the luminaire may go silent around a save (a flash sector erase stalls its CPU
-    /// for up to 2 s): requests during a save retransmit at least this long.
+    /// for up to 4 s): requests during a save retransmit at least this long.
     pub stall: Duration,
 }
 
@@ -46,8 +46,8 @@ impl Default for Timeouts {
         Self {
             reply: Duration::from_millis(500),
             attempts: 3,
-            save: Duration::from_secs(5),
-            stall: Duration::from_secs(3),
+            save: Duration::from_millis(u64::from(protocol::flash::HOST_SAVE_TIMEOUT_MS)),
+            stall: Duration::from_millis(u64::from(protocol::flash::HOST_STALL_MS)),
         }
     }
 }

@@ -36,7 +36,7 @@ pub struct EmulatorOptions {
     /// File the light timeline is written to after every change.
     pub timeline: Option<PathBuf>,
     /// How long serving pauses on every save, like the board whose CPU stalls while a flash
-    /// sector is erased (up to 2 s); zero by default.
+    /// sector is erased (up to 4 s); zero by default.
     pub save_stall: Duration,
 }
 

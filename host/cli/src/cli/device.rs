@@ -55,6 +55,9 @@ enum DeviceAction {
         #[arg(long, default_value_t = 5)]
         seconds: u8,
     },
+    /// Wiring check without instruments: each LED alone for 1 s, then every carrier at 4 chips
+    /// per second for 8 s, then the configuration back (nothing is saved).
+    Blink,
     /// Check the link and measure the round-trip time.
     Ping(PingArgs),
     /// Run a virtual luminaire on a pseudo-terminal until Ctrl-C / SIGTERM.
@@ -212,10 +215,39 @@ fn talk(client: &mut DeviceClient, action: &DeviceAction) -> Result<()> {
             client.identify(*seconds)?;
             println!("identifying for {seconds} s");
         }
+        DeviceAction::Blink => return blink(client),
         DeviceAction::Ping(ping) => return ping_repeatedly(client, ping),
         DeviceAction::List(_) => {}
         #[cfg(unix)]
         DeviceAction::Emulate(_) => {}
+    }
+    Ok(())
+}
+
+/// Plays `protocol::bringup::blink_sequence`, naming each step as it starts; if a step fails,
+/// tries to put the configuration from before the check back.
+fn blink(client: &mut DeviceClient) -> Result<()> {
+    let active = client.config()?;
+    let leds = usize::from(active.led_count);
+    for (i, step) in protocol::bringup::blink_sequence(&active)
+        .iter()
+        .enumerate()
+    {
+        match i {
+            i if i < leds => println!("LED {} alone", i + 1),
+            i if i == leds => println!("all {leds} carriers at 4 chips per second"),
+            _ => println!("configuration restored"),
+        }
+        std::io::stdout().flush()?;
+        if let Err(err) = client.set_config(&step.config) {
+            let restored = client.set_config(&active).is_ok();
+            return Err(anyhow::Error::new(err).context(if restored {
+                "blink step failed; configuration restored"
+            } else {
+                "blink step failed; restore with `meb device set` or a power cycle"
+            }));
+        }
+        std::thread::sleep(Duration::from_millis(u64::from(step.hold_ms)));
     }
     Ok(())
 }

@@ -118,6 +118,57 @@ fn set_get_save_survives_emulator_restart() {
 }
 
 #[test]
+fn blink_lights_each_led_alone_then_the_slow_carriers_then_restores() {
+    let dir = tempfile::tempdir().unwrap();
+    let emulator = Emulator::start(dir.path());
+    let set = [
+        "set",
+        "--leds",
+        "2",
+        "--rate",
+        "30",
+        "--brightness",
+        "500,600",
+    ];
+    stdout_of(&emulator.meb(&set));
+    let shown = stdout_of(&emulator.meb(&["blink"]));
+    let lines: Vec<&str> = shown.lines().collect();
+    assert_eq!(
+        lines,
+        [
+            "LED 1 alone",
+            "LED 2 alone",
+            "all 2 carriers at 4 chips per second",
+            "configuration restored"
+        ]
+    );
+    emulator.stop();
+    // What the virtual LEDs played, in order: (rate in mHz, brightness of LEDs 1 and 2).
+    let timeline: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(dir.path().join("timeline.json")).unwrap())
+            .unwrap();
+    let played: Vec<(u64, Vec<u64>)> = timeline["segments"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|s| {
+            let b = s["brightness_permille"].as_array().unwrap();
+            let rate = s["chip_rate_millihertz"].as_u64().unwrap();
+            (rate, b[..2].iter().map(|v| v.as_u64().unwrap()).collect())
+        })
+        .collect();
+    let expected = [
+        (30_000, vec![500, 600]),
+        (960_000, vec![1000, 0]),
+        (960_000, vec![0, 1000]),
+        (4_000, vec![1000, 1000]),
+        (30_000, vec![500, 600]),
+    ];
+    let start = played.iter().position(|p| *p == expected[0]).unwrap();
+    assert_eq!(played[start..], expected, "{played:?}");
+}
+
+#[test]
 fn simulate_renders_what_the_emulated_luminaire_emits() {
     let dir = tempfile::tempdir().unwrap();
     let emulator = Emulator::start(dir.path());
