@@ -1,8 +1,8 @@
-//! Rules about the device side of the workspace that no compiler checks: comments cite papers,
-//! equations and the reference manual, never tracker issues; the protocol contract and the
-//! register plan contain no unsafe code; the firmware depends on nothing it does not use; the
-//! host's Unix-only dependency is declared for Unix only; the simulator depends on no part of
-//! the pipeline it is the oracle of.
+//! Rules about the workspace that no compiler checks: comments cite papers, equations and the
+//! reference manual, never tracker issues (nor, on the host side, work sessions); the protocol
+//! contract and the register plan contain no unsafe code; the firmware depends on nothing it
+//! does not use; the host's Unix-only dependency is declared for Unix only; the simulator
+//! depends on no part of the pipeline it is the oracle of.
 
 use std::path::{Path, PathBuf};
 
@@ -36,6 +36,49 @@ fn rust_files(path: &Path, out: &mut Vec<PathBuf>) {
     for entry in entries {
         rust_files(&entry, out);
     }
+}
+
+/// Host trees whose comments must not cite tracker issues or work sessions either.
+const HOST_SIDE: [&str; 6] = [
+    "host/core",
+    "host/sim",
+    "host/pipeline",
+    "host/device",
+    "host/cli/src",
+    "host/cli/tests",
+];
+
+/// Whether a comment line cites a work session by number ("session 27"): history belongs in
+/// the commits, not in the code.
+fn cites_a_session(comment: &str) -> bool {
+    let lower = comment.to_lowercase();
+    lower.match_indices("session").any(|(at, _)| {
+        let rest = lower[at + "session".len()..].trim_start_matches(['s', ' ']);
+        rest.starts_with(|c: char| c.is_ascii_digit())
+    })
+}
+
+#[test]
+fn host_comments_cite_no_tracker_issue_or_session() {
+    assert!(cites_a_session("//! (used before session 27)"));
+    assert!(!cites_a_session("/// a session of the virtual luminaire"));
+    let root = workspace_root();
+    let mut files = Vec::new();
+    for tree in HOST_SIDE {
+        rust_files(&root.join(tree), &mut files);
+    }
+    assert!(files.len() > 100, "found only {} files", files.len());
+    let mut citations = Vec::new();
+    for file in &files {
+        let text = std::fs::read_to_string(file).unwrap();
+        for (n, line) in text.lines().enumerate() {
+            let comment = line.trim_start();
+            if comment.starts_with("//") && (cites_an_issue(comment) || cites_a_session(comment)) {
+                citations.push(format!("{}:{}: {comment}", file.display(), n + 1));
+            }
+        }
+    }
+    assert!(citations.is_empty(), "{}", citations.join("\n"));
 }
 
 /// Whether a comment line cites a tracker issue: the word followed by a number, `#` or not.

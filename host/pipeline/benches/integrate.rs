@@ -3,7 +3,7 @@
 //! integrated by `integrate_surface` with the settings `reconstruct` gives a pass
 //! ([`meb_pipeline::reconstruct::pass_integration`]): an early pass of a cold window (at most 8 two-LED
 //! alternations, relative residual 10⁻⁵) for `cold` and `warm_same`, a warm window's pass (one
-//! alternation, 10⁻⁴; before session 32 the early-pass settings) for `warm_next`.
+//! alternation, 10⁻⁴) for `warm_next`.
 //!
 //! Cases: `cold` (no depth, as the first pass of a cold window); `warm_same` (this window's
 //! depth moved 2 mm away, as a later pass of the same window sees it after the offset search);
@@ -17,104 +17,8 @@
 //! profiles one case only (for `valgrind --tool=callgrind --collect-atstart=no
 //! --toggle-collect='*integrate_surface_with*'`).
 //!
-//! Measured (session 22, shared 2-core machine at a load average of 10–15, so wall-clock
-//! figures are 5–10× a quiet machine's; mask 41 483 measured, 9 590 two-LED, 2 865 filled
-//! pixels, 53 938 integrated):
-//!
-//! | case      | before: passes, CG iterations, ms      | after: passes, CG iterations       |
-//! |-----------|----------------------------------------|------------------------------------|
-//! | cold      | 6, 36 [12,6,4,4,6,4], 573 ms (crit. 615) | unchanged (no depth: same path)  |
-//! | warm_same | 6, 30 [6,6,4,4,6,4], 511–639 ms (crit. 559) | 2, 4 [2,2]                    |
-//! | warm_next | 8, 44 [12,6,5,5,5,4,4,3], 770 ms (crit. 784) | 3, 17 [10,4,3] (*)           |
-//!
-//! (*) measured with a hierarchy kept from the first pass, which was then dropped: it doubled
-//! the cold case's iterations (75). Before, per step (cold, load ≈ 11): conjugate gradients
-//! 299 ms (8.3 ms per iteration), coverage 78, edge equations 61, inpainting and set-up 53,
-//! hierarchy set-up 45, pixel classes 18, output 12 ms. Callgrind, before: the `warm_next`
-//! profile run (one cold priming integration plus the warm one) 4.91 G instructions: Gauss–Seidel
-//! 16 %, Laplacian products 11 %, memset 6 %, inpainting ≈ 10 %. The warm result lies 0.004 mm
-//! (median) from a cold solve to 10⁻⁷ (before: 0.002 mm). Quiet-machine criterion figures and
-//! an after-callgrind count were not taken (builds took 10–18 min at this load).
-//!
-//! Session 23 (callgrind instructions, `--toggle-collect='*integrate_surface_with*'`, the
-//! profile run of one case: its fresh and its `_workspace` integration; repeatable under load):
-//!
-//! | case      | before (main bcea852) | after   | change |
-//! |-----------|-----------------------|---------|--------|
-//! | warm_same | 1 101 M               | 744 M   | −32 %  |
-//! | cold      | 3 058 M               | 2 683 M | −12 %  |
-//!
-//! Where the warm case went before: push–pull inpainting 41 % (455 M: the slopes s_x, s_y and
-//! the albedo each built their pyramid and ran 30 Gauss–Seidel sweeps with 2-D bounds-checked
-//! indexing), V-cycles 11 %, hierarchy set-up 7 %, memset/calloc of fresh arrays 10 % (the
-//! full-frame class and slope arrays), edge equations 10 %. Changes: inpainting on flat arrays
-//! with each filled pixel's neighbours found once, s_x and s_y sharing one pyramid
-//! (`integrate/inpaint.rs`; 455 M → 117 M); pixel classes and slopes found inside the window
-//! only instead of on the 1280×720 grid. Results are bit-identical (same CG iterations per
-//! solve, same distances from the exact solve). Wall-clock figures were taken at a load
-//! average of 8–9 (a test build running), so only the instruction counts compare.
-//!
-//! Session 27 (the bench now prints a fingerprint of each depth map's bits). Red–black
-//! Gauss–Seidel instead of lexicographic in the V-cycle, the stencil in one cache line with its
-//! gathers unchecked, a band Cholesky factor for the coarsest level, and the per-node loops of
-//! every pass (side weights, edge equations, Laplacian rows, right-hand side, two-LED slope
-//! updates, the energy over fixed bands; slope and albedo inpainting joined) in parallel:
-//!
-//! | case      | before (a529b3b): CG iterations | after            |
-//! |-----------|---------------------------------|------------------|
-//! | cold      | 36 [12,6,4,4,6,4]               | 31 [12,5,3,4,5,2] |
-//! | warm_same | 2 [1,1]                         | 2 [1,1]          |
-//! | warm_next | 17 [10,4,3]                     | 15 [9,4,2]       |
-//!
-//! The distance from a cold solve to 10⁻⁷ is unchanged (cold 0.0022 mm, warm_same 0.0105 mm
-//! median). Callgrind (serial instructions of the `warm_next` profile run, the priming cold
-//! integration included) 2 088 M → 1 620 M (−22 %) with the smoother and kernel alone.
-//! Criterion `warm_next_workspace`, quiet machine (load 0.6–1.1), alternated, two runs each:
-//! before 134 / 145 ms, red–black alone 126 / 136 ms, everything 110 / 114 ms. With
-//! `RAYON_NUM_THREADS=1` the parallel code took 141 / 197 ms: when the other core is busy, the
-//! hand-offs to the thread pool cost more than they save.
-//!
-//! Session 28 (callgrind, `RAYON_NUM_THREADS=1`, the whole `warm_next` profile run: loading the
-//! cache, the priming cold integration and the warm one): 1 664 M → 1 536 M instructions
-//! (−7.7 %), depth fingerprint unchanged (7364d962d85ec999, CG iterations [9, 4, 2]). The
-//! inpainting (pyramids, fills and sweeps of slopes, albedo and warm start) 176 M → 86 M: s_x and
-//! s_y filled together as pairs in one pass, in the grid's own storage instead of three full
-//! copies, pull and push by rows. A node's edges and the energy as plain loops, each node's side
-//! sum once: 34 M less. The warm integration's steps, as shares of its time under callgrind
-//! (wall-clock, so only roughly comparable: pixel classes, which did not change, moved too):
-//!
-//! | step                     | before | after |
-//! |--------------------------|--------|-------|
-//! | conjugate gradients      | 39 %   | 41 %  |
-//! | inpainting               | 16 %   | 9.4 % |
-//! | edge equations           | 12 %   | 14 %  |
-//! | coverage                 | 11 %   | 10 %  |
-//! | hierarchy setup          | 5.1 %  | 6.6 % |
-//! | pixel classes and slopes | 3.8 %  | 6.2 % |
-//!
-//! Session 29 (callgrind, `RAYON_NUM_THREADS=1`, the whole `warm_next` profile run as in
-//! session 28; depth fingerprints of all five cases, CG iterations per solve and the distances
-//! from the cold solve to 10⁻⁷ unchanged: cold 0.0022 mm, warm_same 0.0105 mm median):
-//!
-//! | step (inclusive instructions) | before (03a19bf) | kept in place | even restriction | even prolongation  |
-//! |-------------------------------|------------------|---------------|------------------|--------------------|
-//! | whole run                     | 1 543 M          | 1 347 M       | 1 288 M          | 1 261 M (−18.3 %)  |
-//! | the two integrations          | 648 M            | 513 M         | 454 M            | 428 M (−34 %)      |
-//! | conjugate gradients           | 407 M            | 307 M         | 246 M            | 219 M (−46 %)      |
-//! | V-cycles                      | 332 M            | 233 M         | 172 M            | 145 M (−56 %)      |
-//! | memset + memcpy               | 152 M            | 45 M          | 37 M             | 37 M               |
-//!
-//! "Kept in place": the Laplacian of the graph (kept in the workspace) and the coarse operators
-//! take each solve's weights in place instead of being rebuilt, the CG vectors are allocated once
-//! per workspace, and the V-cycle neither clears nor copies (the finest level works in r and z;
-//! its first half-sweep from zero is b/a_kk). "Even restriction": the residual is restricted
-//! from the even nodes only (the odd ones, relaxed last, have none but rounding), which halves
-//! the residual products of the down leg. "Even prolongation": the coarse correction is added
-//! to the even nodes only (the backward sweep overwrites the odd ones from their even
-//! neighbours first). The last two are the same preconditioner in exact arithmetic; the f32
-//! depth maps came out bit-identical. Memset and memcpy are counted per byte by callgrind
-//! (`rep stos`/`rep movs`), so their share overstates their time. Criterion was not run: the
-//! load average stayed at 4 (other builds).
+//! The dated measurements (callgrind instruction counts per step, what each change saved) are in
+//! `NOTES.md` beside this file.
 
 use criterion::{BatchSize, Criterion, criterion_group, criterion_main};
 use meb_core::capture::Samples;

@@ -13,9 +13,9 @@
 //! positive-definite preconditioner, so CG converges in a number of iterations nearly
 //! independent of the mask's size. The grid is a checkerboard whose two colours never neighbour
 //! each other, so each half-sweep updates its nodes independently, in parallel bands on large
-//! levels. (Lexicographic Gauss–Seidel, used before session 27, chained every node to the one
-//! just updated and needed more iterations: 17 instead of 15 on the warm video window of
-//! `benches/integrate.rs`, 36 instead of 31 on its cold one.)
+//! levels. (Lexicographic Gauss–Seidel chains every node to the one just updated and needs more
+//! iterations: 17 instead of 15 on the warm video window of `benches/integrate.rs`, 36 instead
+//! of 31 on its cold one.)
 //!
 //! The aggregation (coarse grids, node maps, components) depends on the mask's graph only, so
 //! solves on the same mask with new edge weights (the coverage passes of one integration, the
@@ -30,7 +30,7 @@
 //! is zero but for rounding; and the coarse correction is prolongated to the even nodes alone:
 //! the backward sweep relaxes the odd ones first, from their even neighbours, and overwrites
 //! them. (The same preconditioner in exact arithmetic, for half the cost of residual and
-//! prolongation; since session 29.)
+//! prolongation.)
 
 use super::band_cholesky::BandCholesky;
 use rayon::prelude::*;
