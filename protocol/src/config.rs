@@ -170,8 +170,8 @@ pub struct LuminaireConfig {
 
 impl LuminaireConfig {
     /// Factory default: 4 LEDs at 960 Hz, full brightness, no phase offsets, running, each LED
-    /// at its largest IEEE 1789 low-risk depth at 960 Hz (LED 1 15.1 %, LED 2 18.2 %, LED 3
-    /// 5.9 %, LED 4 6.0 %; LEDs 5–8, not played, as LED 4), a test checks them.
+    /// 2 % below its largest IEEE 1789 low-risk depth at 960 Hz (LED 1 14.8 %, LED 2 17.8 %,
+    /// LED 3 5.8 %, LED 4 5.8 %; LEDs 5–8, not played, as LED 4), a test checks them.
     pub const DEFAULT: LuminaireConfig = LuminaireConfig {
         led_count: 4,
         chip_rate: ChipRate(960_000),
@@ -250,7 +250,8 @@ impl LuminaireConfig {
 }
 
 /// Off levels of [`LuminaireConfig::DEFAULT`]: the largest low-risk depths at 960 Hz.
-const DEFAULT_OFF_LEVELS: [u16; MAX_LEDS] = [738, 693, 889, 888, 888, 888, 888, 888];
+/// 2 % below the largest, so that nearby rates (959.5 Hz) stay low-risk too.
+const DEFAULT_OFF_LEVELS: [u16; MAX_LEDS] = [743, 698, 891, 890, 890, 890, 890, 890];
 
 /// A fraction in whole per mille, rounded down (0..=1 maps to 0..=1000).
 fn permille(x: f32) -> u16 {
@@ -289,10 +290,20 @@ mod tests {
         let config = LuminaireConfig::DEFAULT;
         assert_eq!(config.validate_for_people(), Ok(()));
         assert_eq!(crate::flicker::limited_to_low_risk(&config), config);
-        // One per mille less off light (a deeper modulation) on any played LED is refused.
+        let mut nearby = config;
+        nearby.chip_rate = ChipRate(959_500);
+        assert_eq!(nearby.validate_for_people(), Ok(()));
+        // Each played LED within 3 % of its largest depth: 10 per mille less off light (a
+        // deeper modulation) is refused.
         for led in 0..usize::from(config.led_count) {
+            let max =
+                crate::flicker::max_depth(led as u8, config.chip_rate, &crate::flicker::LOW_RISK);
+            assert!(
+                crate::flicker::played_depth(&config, led) > 0.97 * max.depth,
+                "LED {led}"
+            );
             let mut deeper = config;
-            deeper.off_level_permille[led] -= 1;
+            deeper.off_level_permille[led] -= 10;
             assert!(
                 matches!(deeper.validate_for_people(), Err(ConfigError::Flicker { led: l, .. }) if usize::from(l) == led),
                 "LED {led}"

@@ -248,6 +248,15 @@ pub fn limited_to_low_risk(config: &LuminaireConfig) -> LuminaireConfig {
     out
 }
 
+/// `config` with every LED at its largest low-risk depth (the lowest off level whose played
+/// compare values stay within IEEE 1789 low risk): `meb device set --depth auto`.
+pub fn at_largest_low_risk_depths(config: &LuminaireConfig) -> LuminaireConfig {
+    limited_to_low_risk(&LuminaireConfig {
+        off_level_permille: [0; MAX_LEDS],
+        ..*config
+    })
+}
+
 /// |tan(π·r/P)| for 0 ≤ r < P from two quarter-wave sines (exact integer folding).
 fn abs_tan_pi(r: u32, period: u32) -> f32 {
     let r = r % period;

@@ -826,7 +826,7 @@ mod tests {
             assert!(crate::flicker::is_low_risk(luminaire.config()));
             assert_eq!(
                 luminaire.config().off_level_permille[..4],
-                LuminaireConfig::DEFAULT.off_level_permille[..4]
+                [738, 693, 889, 888]
             );
             let Effect::ApplyOutput(plan) = luminaire.startup_effects()[0] else {
                 panic!("no output first");

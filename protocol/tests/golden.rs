@@ -11,7 +11,7 @@
 //! * `SetConfig(DEFAULT)`: after `03 01 03` comes `04` (LED count), `80 CC 3A` (960 000 mHz as
 //!   a varint: 0x00|0x80, 0x4C|0x80, 0x3A), eight times `E8 07` (1000), eight zero phases
 //!   (each becoming a COBS code `01`), `01` (running), the eight off levels as varints
-//!   (`E2 05` = 738, `B5 05` = 693, `F9 06` = 889, `F8 06` = 888 …) and `00` (allow_flicker).
+//!   (`E7 05` = 743, `BA 05` = 698, `FB 06` = 891, `FA 06` = 890 …) and `00` (allow_flicker).
 
 use protocol::config::{ChipRate, ConfigError, LuminaireConfig};
 use protocol::framing::{decode_request, decode_response, encode_request, encode_response};
@@ -83,8 +83,8 @@ fn every_request_variant_has_golden_bytes() {
             Request::SetConfig(LuminaireConfig::DEFAULT),
             &[
                 24, 3, 1, 3, 4, 128, 204, 58, 232, 7, 232, 7, 232, 7, 232, 7, 232, 7, 232, 7, 232,
-                7, 232, 7, 1, 1, 1, 1, 1, 1, 1, 18, 1, 226, 5, 181, 5, 249, 6, 248, 6, 248, 6, 248,
-                6, 248, 6, 248, 6, 5, 59, 144, 227, 187, 0,
+                7, 232, 7, 1, 1, 1, 1, 1, 1, 1, 18, 1, 231, 5, 186, 5, 251, 6, 250, 6, 250, 6, 250,
+                6, 250, 6, 250, 6, 5, 1, 13, 216, 227, 0,
             ],
         ),
         check_request(Request::SaveConfig(()), &[8, 3, 1, 4, 19, 146, 113, 227, 0]),
@@ -129,8 +129,8 @@ fn every_response_variant_has_golden_bytes() {
         Response::GetConfig(LuminaireConfig::DEFAULT),
         &[
             24, 3, 1, 3, 4, 128, 204, 58, 232, 7, 232, 7, 232, 7, 232, 7, 232, 7, 232, 7, 232, 7,
-            232, 7, 1, 1, 1, 1, 1, 1, 1, 18, 1, 226, 5, 181, 5, 249, 6, 248, 6, 248, 6, 248, 6,
-            248, 6, 248, 6, 5, 59, 144, 227, 187, 0,
+            232, 7, 1, 1, 1, 1, 1, 1, 1, 18, 1, 231, 5, 186, 5, 251, 6, 250, 6, 250, 6, 250, 6,
+            250, 6, 250, 6, 5, 1, 13, 216, 227, 0,
         ],
     );
     check_response(
