@@ -621,7 +621,12 @@ fn pa0_is_driven_only_with_eight_leds() {
         let mut engine = ChipEngine::new(&mut chip, 96_000_000, frames, Mode::Dma).unwrap();
         let table = ChipTable::new(leds).unwrap();
         engine
-            .load(&mut chip, &table, &[1000; MAX_LEDS], 4_000_000)
+            .load(
+                &mut chip,
+                &table,
+                &protocol::timing::LedLevels::full_depth(&[1000; MAX_LEDS]),
+                4_000_000,
+            )
             .unwrap();
         engine.start(&mut chip).unwrap();
         chip.run_until(chip.now + 2 * table.chips() as u64 * 24_000);
