@@ -9,6 +9,10 @@ use meb_pipeline::calibrate::calibrate_camera;
 use meb_pipeline::tof::chequerboard::{BoardSize, require_corner_detector};
 use std::path::PathBuf;
 
+/// A principal point standard error above this, pixels, is reported with what photos would
+/// pin it down (ten photos tilted 20–55° give 0.4–0.9 px).
+const PRINCIPAL_POINT_SE_PX: f64 = 1.0;
+
 /// Arguments of `meb calibrate camera`.
 #[derive(Args)]
 pub struct CameraArgs {
@@ -72,6 +76,14 @@ pub fn run(args: &CameraArgs) -> Result<()> {
         images.len(),
         calibration.view_rms_px.iter().copied().fold(0.0, f64::max)
     );
+    if se[2].max(se[3]) > PRINCIPAL_POINT_SE_PX {
+        eprintln!(
+            "note: the principal point is uncertain to ± {:.1} px (cx), ± {:.1} px (cy): add \
+             photos with the board tilted 30–50° about different axes and filling more of the \
+             image",
+            se[2], se[3]
+        );
+    }
     // A pinhole camera takes its scale from the intrinsics, not a field of view or a pitch.
     rig.camera.intrinsics = Some(k);
     rig.camera.fov_deg = None;

@@ -55,7 +55,7 @@ fn photos(dir: &Path, truth: &Rig, count: usize, seed: u64) -> Vec<PathBuf> {
 }
 
 /// Ten photos at random poses give fx, fy within 0.5 % and cx, cy within 1 px, written into
-/// the rig with the reprojection RMS; two pose sets (seeds) neither of which the bounds were
+/// the rig with the reprojection RMS; two pose sets (seeds 13, 14) outside the sweep the poses were
 /// tuned on.
 #[test]
 #[cfg_attr(
@@ -65,7 +65,7 @@ fn photos(dir: &Path, truth: &Rig, count: usize, seed: u64) -> Vec<PathBuf> {
 fn ten_board_photos_give_the_intrinsics() {
     let tmp = tempfile::tempdir().unwrap();
     let (nominal, truth) = rigs(tmp.path());
-    for seed in [5u64, 6] {
+    for seed in [13u64, 14] {
         let dir = tmp.path().join(format!("seed{seed}"));
         std::fs::create_dir_all(&dir).unwrap();
         let images = photos(&dir, &truth, 10, seed);
@@ -159,4 +159,67 @@ fn camera_calibration_refuses_too_few_photos_and_a_photo_without_the_board() {
     );
     let message = refuse(&all, "9by6", "bad-board");
     assert!(message.contains("COLSxROWS"), "{message}");
+}
+
+/// Twelve pose sets of ten photos each (seeds 1–12), through the library the command calls:
+/// every set within the targets (fx, fy 0.5 %, cx, cy 1 px). Measured: worst fx 0.10 %,
+/// fy 0.13 %, cx 0.66 px, cy 0.93 px; the standard errors OpenCV gives for cy are 0.6–0.9 px,
+/// so the 1 px target is met by the poses' tilts (docs/maths/camera-calibration.md#accuracy).
+#[test]
+#[cfg_attr(
+    not(feature = "opencv"),
+    ignore = "needs the opencv feature (calibrate camera)"
+)]
+#[cfg_attr(
+    feature = "opencv",
+    ignore = "sweep of 120 rendered photos (about 40 s); the fast version is ten_board_photos_give_the_intrinsics"
+)]
+fn intrinsics_over_twelve_pose_sets() {
+    use meb_pipeline::calibrate::calibrate_camera;
+    use meb_pipeline::tof::chequerboard::BoardSize;
+    let tmp = tempfile::tempdir().unwrap();
+    let (_, truth) = rigs(tmp.path());
+    let names: Vec<String> = (1..=10).map(|k| format!("photo {k}")).collect();
+    let mut worst = [0.0f64; 4];
+    for seed in 1..=12u64 {
+        let views = random_board_views(&truth.camera, 9, 6, 20.0, 10, seed);
+        // The 8-bit quantisation of the PNG photos the command reads.
+        let images: Vec<_> = views
+            .iter()
+            .enumerate()
+            .map(|(k, v)| {
+                v.image(&truth.camera, 0.01, seed * 100 + k as u64)
+                    .mapv(|x| (x * 255.0).round() / 255.0)
+            })
+            .collect();
+        let fit = calibrate_camera(&images, &names, BoardSize { cols: 9, rows: 6 }, 20.0)
+            .expect("calibration");
+        let k = fit.intrinsics;
+        let errors = [
+            100.0 * (k.fx / TRUTH.fx - 1.0),
+            100.0 * (k.fy / TRUTH.fy - 1.0),
+            k.cx - TRUTH.cx,
+            k.cy - TRUTH.cy,
+        ];
+        eprintln!(
+            "| {seed} | {:+.3} % | {:+.3} % | {:+.2} px (± {:.2}) | {:+.2} px (± {:.2}) | {:.4} | {:.3} px |",
+            errors[0],
+            errors[1],
+            errors[2],
+            fit.standard_errors[2],
+            errors[3],
+            fit.standard_errors[3],
+            k.k1,
+            fit.rms_px
+        );
+        for (w, e) in worst.iter_mut().zip(errors) {
+            *w = w.max(e.abs());
+        }
+    }
+    eprintln!(
+        "worst: fx {:.3} %, fy {:.3} %, cx {:.2} px, cy {:.2} px",
+        worst[0], worst[1], worst[2], worst[3]
+    );
+    assert!(worst[0] < 0.5 && worst[1] < 0.5, "{worst:?}");
+    assert!(worst[2] < 1.0 && worst[3] < 1.0, "{worst:?}");
 }

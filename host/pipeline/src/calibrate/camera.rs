@@ -173,8 +173,8 @@ mod opencv_fit {
             criteria,
         )
         .map_err(cv)?;
-        let at = |m: &Mat, r: i32, c: i32| m.at_2d::<f64>(r, c).map(|v| *v).map_err(cv);
-        let flat = |m: &Mat, k: i32| m.at::<f64>(k).map(|v| *v).map_err(cv);
+        let at = |m: &Mat, r: i32, c: i32| m.at_2d::<f64>(r, c).copied().map_err(cv);
+        let flat = |m: &Mat, k: i32| m.at::<f64>(k).copied().map_err(cv);
         let intrinsics = Intrinsics {
             fx: at(&camera, 0, 0)?,
             fy: at(&camera, 1, 1)?,

@@ -363,7 +363,7 @@ fn gather(captures: &[SphereCapture], projection: &Projection) -> Vec<Pixel> {
                 .take(a.len())
                 .zip(capture.images.iter().zip(&peaks))
                 .map(|(s, (im, &peak))| {
-                    if local_mean(im, &capture.region, r, col) >= MIN_READING_SHARE * peak {
+                    if local_mean(im, capture.region, r, col) >= MIN_READING_SHARE * peak {
                         s
                     } else {
                         f64::INFINITY
