@@ -241,7 +241,7 @@ fn frame_source(
 #[pyfunction]
 #[pyo3(signature = (
     source, rig, *, window = 40, drop = 4, hop = None, leds = None, fps = None, bin = 1,
-    linearize = "none", max_frames = None, force = false
+    linearize = "none", integrator = "least-squares", max_frames = None, force = false
 ))]
 #[allow(clippy::too_many_arguments)]
 pub fn video(
@@ -255,6 +255,7 @@ pub fn video(
     fps: Option<f64>,
     bin: usize,
     linearize: &str,
+    integrator: &str,
     max_frames: Option<usize>,
     force: bool,
 ) -> PyResult<Video> {
@@ -278,6 +279,7 @@ pub fn video(
     if force {
         config.decode.on_implausible = meb_pipeline::demod::OnImplausible::Keep;
     }
+    config.reconstruct.integrate.integrator = crate::reconstruct::integrator(integrator)?;
     config.bin = bin;
     config.max_frames = max_frames;
     let source = frame_source(py, source, fps)?;

@@ -281,6 +281,7 @@ def video(
     fps: float | None = None,
     bin: int = 1,
     linearize: str = "none",
+    integrator: _Integrator = "least-squares",
     max_frames: int | None = None,
     force: bool = False,
 ) -> Video:
