@@ -57,9 +57,15 @@ def read_object(folder: Path):
     """Normals, mask and K of a benchmark object, as meb's reader makes them."""
     import matplotlib.image
 
-    rgb = matplotlib.image.imread(folder / "normal_map.png")[..., :3].astype(np.float32)
-    n = rgb * 2 - 1
-    length = np.linalg.norm(n, axis=-1, keepdims=True)
+    # The codes back from matplotlib's floats, then code / (2^bits − 1) in float32 as meb's
+    # reader (the image crate) computes it; the PNG header's byte 24 is the bit depth.
+    path = folder / "normal_map.png"
+    full = np.float32(65535 if path.read_bytes()[24] == 16 else 255)
+    codes = np.rint(matplotlib.image.imread(path)[..., :3] * full)
+    rgb = codes.astype(np.float32) / full
+    n = rgb * np.float32(2) - np.float32(1)
+    # The length as meb's reader sums it (x² + y² + z², left to right, in float32).
+    length = np.sqrt(n[..., 0] * n[..., 0] + n[..., 1] * n[..., 1] + n[..., 2] * n[..., 2])[..., None]
     normals = np.where(length > 0, n / np.where(length > 0, length, 1), np.nan).astype(np.float32)
     mask_image = matplotlib.image.imread(folder / "mask.png")
     mask = (mask_image[..., 0] if mask_image.ndim == 3 else mask_image) > 0
@@ -85,7 +91,16 @@ def main() -> None:
         python = timed(lambda: meb.decode(frames, leds=4, fps=fps, force=True), args.repeats)
         r, p = statistics.median(rust), statistics.median(python)
         print(f"| decode 32 × 1280x720 | {r:.0f} | {p:.0f} | {p / r:.2f} | | |")
-    rust = rust_times(args.profile, "integrate", str(args.repeats), *map(str, objects))
+    # The Rust side integrates the very normals the Python side passes.
+    import tempfile
+
+    scratch = Path(tempfile.mkdtemp(prefix="meb-compare-"))
+    inputs = {folder.name: read_object(folder) for folder in objects}
+    pairs = []
+    for folder in objects:
+        np.save(scratch / f"{folder.name}.npy", inputs[folder.name][0])
+        pairs += [str(folder), str(scratch / f"{folder.name}.npy")]
+    rust = rust_times(args.profile, "integrate", str(args.repeats), *pairs)
     bini = None
     if args.bini:
         import sys
@@ -101,7 +116,7 @@ def main() -> None:
         bini = importlib.util.module_from_spec(spec)
         spec.loader.exec_module(bini)
     for folder in objects:
-        normals, mask, K = read_object(folder)
+        normals, mask, K = inputs[folder.name]
         python = timed(lambda: meb.integrate(normals, mask, K=K, distance=1500.0), args.repeats)
         r, p = statistics.median(rust[folder.name]), statistics.median(python)
         row = f"| integrate {folder.name} | {r:.0f} | {p:.0f} | {p / r:.2f} |"

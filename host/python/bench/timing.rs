@@ -5,9 +5,10 @@
 //!   `meb.simulate("thesis-out-of-plane", "sphere", frames=32, camera_size=(1280, 720))`
 //!   renders, from an in-memory source, as the decode benchmark (`host/pipeline/benches/
 //!   decode.rs`) times it;
-//! * `integrate REPEATS DIR…`: [`meb_pipeline::integrate::integrate_surface`] of each
-//!   DiLiGenT object's normal map through its camera (`K.txt`, 1500 mm, automatic
-//!   integrator), as `meb.integrate(normals, mask, K=K, distance=1500)` calls it.
+//! * `integrate REPEATS DIR NORMALS.npy …`: [`meb_pipeline::integrate::integrate_surface`] of
+//!   each DiLiGenT object's normals (the H×W×3 float32 array the Python side passes, so that
+//!   both integrate the same bits) in its mask through its camera (`K.txt`, 1500 mm,
+//!   automatic integrator), as `meb.integrate(normals, mask, K=K, distance=1500)` calls it.
 //!
 //! Prints one JSON object per case: `{"case": …, "ms": [one time per repeat]}`.
 
@@ -54,11 +55,14 @@ fn time_decode(repeats: usize) -> Result<Vec<f64>, Box<dyn Error>> {
 }
 
 /// Times `integrate_surface` on one benchmark object.
-fn time_integrate(dir: &Path, repeats: usize) -> Result<Vec<f64>, Box<dyn Error>> {
+fn time_integrate(dir: &Path, normals: &Path, repeats: usize) -> Result<Vec<f64>, Box<dyn Error>> {
     let object = load_normal_integration_object(dir)?;
     let (rows, cols) = object.mask.dim();
     let field = NormalField {
-        normals: object.normals,
+        normals: meb_core::io::read_float::<ndarray::Ix3>(
+            normals,
+            &[Some(rows), Some(cols), Some(3)],
+        )?,
         albedo: Array2::from_elem((rows, cols), 1.0),
         mask: object.mask,
     };
@@ -96,15 +100,20 @@ fn main() -> Result<(), Box<dyn Error>> {
         }
         Some("integrate") => {
             let n = repeats(1)?;
-            for dir in &args[2..] {
-                let ms = time_integrate(Path::new(dir), n)?;
+            for pair in args[2..].chunks_exact(2) {
+                let (dir, normals) = (&pair[0], &pair[1]);
+                let ms = time_integrate(Path::new(dir), Path::new(normals), n)?;
                 let name = Path::new(dir)
                     .file_name()
                     .map(|s| s.to_string_lossy().into_owned());
                 println!("{}", serde_json::json!({"case": name, "ms": ms}));
             }
         }
-        _ => return Err("usage: timing decode REPEATS | timing integrate REPEATS DIR…".into()),
+        _ => {
+            return Err(
+                "usage: timing decode REPEATS | timing integrate REPEATS (DIR NORMALS.npy)…".into(),
+            );
+        }
     }
     Ok(())
 }
