@@ -106,7 +106,9 @@ def main() -> None:
         import sys
         import types
 
-        sys.modules.setdefault("pyvista", types.ModuleType("pyvista"))
+        mesh = types.ModuleType("pyvista")
+        mesh.PolyData = lambda *_, **__: None
+        sys.modules.setdefault("pyvista", mesh)
         progress = types.ModuleType("tqdm.auto")
         progress.tqdm = lambda iterable, **_: iterable
         sys.modules.setdefault("tqdm", types.ModuleType("tqdm"))
