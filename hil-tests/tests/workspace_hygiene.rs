@@ -39,13 +39,15 @@ fn rust_files(path: &Path, out: &mut Vec<PathBuf>) {
 }
 
 /// Host trees whose comments must not cite tracker issues or work sessions either.
-const HOST_SIDE: [&str; 6] = [
+const HOST_SIDE: [&str; 8] = [
     "host/core",
     "host/sim",
     "host/pipeline",
     "host/device",
     "host/cli/src",
     "host/cli/tests",
+    "host/python/src",
+    "host/python/bench",
 ];
 
 /// Whether a comment line cites a work session by number ("session 27"): history belongs in

@@ -1,0 +1,83 @@
+"""`video` yields the 3-D frames `meb video` writes; `Luminaire` drives the virtual luminaire
+of `meb device emulate` on a pseudo-terminal through the client `meb device` uses."""
+
+import json
+import subprocess
+
+import numpy as np
+import pytest
+
+import meb
+from conftest import meb_binary, nan_equal, run_meb
+
+
+def test_video_yields_the_frames_meb_video_writes(tmp_path):
+    clip = tmp_path / "clip"
+    run_meb("simulate", "--rig", "thesis-dynamic", "--camera-size", "320x180", "--scene",
+            "ellipsoid", "--axes-mm", "100,60,60", "--rpm", "7.5", "--frames", "120",
+            "--format", "y4m", "--out", str(clip))
+    out = tmp_path / "video"
+    rig = str(clip / "rig.toml")
+    run_meb("video", str(clip / "capture.y4m"), "--rig", rig, "--out", str(out))
+    records = json.loads((out / "video.json").read_text())["frames"]
+    frames = meb.video(clip / "capture.y4m", rig)
+    seen = list(frames)
+    assert len(seen) == len(records) == 3
+    for frame, record in zip(seen, records):
+        assert frame.index == record["index"] and frame.status == record["status"]
+        written = out / f"depth_{frame.index:05}.npy"
+        if written.exists():
+            assert frame.depth is not None and nan_equal(frame.depth, np.load(written))
+    assert frames.summary["reconstructed"] == sum(r["status"] == "reconstructed" for r in records)
+
+
+def test_a_closed_video_stops_its_pipeline():
+    capture = meb.simulate("thesis-dynamic", "sphere", frames=120, camera_size=(160, 90))
+    frames = meb.video(capture.frames, capture.rig, fps=capture.fps)
+    first = next(frames)
+    assert first.index == 0
+    frames.close()
+    with pytest.raises(StopIteration):
+        next(frames)
+
+
+@pytest.fixture
+def virtual_luminaire(tmp_path):
+    """A `meb device emulate` process and the pseudo-terminal it prints."""
+    process = subprocess.Popen(
+        [str(meb_binary()), "device", "emulate", "--storage", str(tmp_path / "flash")],
+        stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+    )
+    try:
+        port = process.stdout.readline().strip()
+        assert port, process.stderr.read()
+        yield port
+    finally:
+        process.terminate()
+        process.wait(timeout=10)
+
+
+def test_a_luminaire_is_configured_saved_and_read_back(virtual_luminaire):
+    luminaire = meb.Luminaire(virtual_luminaire)
+    info = luminaire.info()
+    assert info["max_leds"] == 8
+    luminaire.set(4, 959.5, brightness=[1000, 900, 800, 700], phase=[0, 3, 7, 11])
+    config = luminaire.get()
+    assert config == {"leds": 4, "rate": 959.5, "brightness": [1000, 900, 800, 700],
+                      "phase": [0, 3, 7, 11], "running": True}
+    assert luminaire.status()["unsaved_changes"] is True
+    assert luminaire.save() == "saved"
+    assert luminaire.status()["unsaved_changes"] is False
+    luminaire.stop()
+    assert luminaire.get()["running"] is False
+    with pytest.raises(ValueError, match="needs 4 values"):
+        luminaire.set(4, 960, brightness=[1000])
+    with pytest.raises(ValueError, match="outside the supported"):
+        luminaire.set(4, 1e9)
+    with pytest.raises(ValueError, match="phase_chips"):
+        luminaire.set(2, 960, phase=[0, 8])
+
+
+def test_a_port_without_a_luminaire_is_refused():
+    with pytest.raises(meb.MebError, match="cannot open /nonexistent/tty"):
+        meb.Luminaire("/nonexistent/tty")
