@@ -4,6 +4,7 @@
 //! * [`transport`]: the byte link, a `serialport` port with deadlines.
 //! * [`pty`]: a raw pseudo-terminal pair the virtual luminaire serves on (Unix).
 //! * [`client`]: [`DeviceClient`], one method per protocol command, retries and typed errors.
+//! * [`settings`]: a configuration from what a user asks for, and the IEEE 1789 check.
 //! * [`storage`]: the emulator's record file standing in for flash.
 //! * [`timeline`]: the light a luminaire emits, recorded, as a waveform for the simulator.
 //! * [`emulator`]: [`VirtualLuminaire`], the protocol's state machine served on a pty (Unix).
@@ -19,6 +20,7 @@ pub mod discovery;
 pub mod emulator;
 #[cfg(unix)]
 pub mod pty;
+pub mod settings;
 pub mod storage;
 pub mod timeline;
 pub mod transport;

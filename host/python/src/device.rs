@@ -3,10 +3,13 @@
 
 use crate::errors::meb_error;
 use crate::json::to_python;
+use crate::refusals::warn;
 use meb_device::discovery::list_ports;
+use meb_device::settings::{self, DepthRequest, SettingsRequest, Spelling};
 use meb_device::{DeviceClient, Timeouts};
 use protocol::carriers::MAX_LEDS;
-use protocol::config::{ChipRate, FULL_BRIGHTNESS_PERMILLE, LuminaireConfig};
+use protocol::config::LuminaireConfig;
+use protocol::flicker;
 use protocol::wire::SaveOutcome;
 use pyo3::exceptions::PyValueError;
 use pyo3::prelude::*;
@@ -94,7 +97,8 @@ impl Luminaire {
         to_python(py, &status)
     }
 
-    /// The active configuration: leds, rate (Hz), brightness and phase per LED, running.
+    /// The active configuration: leds, rate (Hz), brightness, phase and modulation depth per
+    /// LED, allow_flicker, running.
     fn get(&self, py: Python<'_>) -> PyResult<Py<PyAny>> {
         let config = self.with(py, "cannot read the luminaire's configuration", |c| {
             c.config()
@@ -107,6 +111,8 @@ impl Luminaire {
                 "rate": config.chip_rate.hz(),
                 "brightness": config.brightness_permille[..n],
                 "phase": config.phase_chips[..n],
+                "depth": (0..n).map(|led| flicker::played_depth(&config, led)).collect::<Vec<_>>(),
+                "allow_flicker": config.allow_flicker,
                 "running": config.running,
             }),
         )
@@ -114,8 +120,13 @@ impl Luminaire {
 
     /// Applies a configuration (not saved; `save` persists it): `leds` LEDs at chip `rate` Hz
     /// (= the camera frame rate), per-LED `brightness` in per mille and carrier `phase` in
-    /// chips (defaults: full brightness, no delay). The running state is kept.
-    #[pyo3(signature = (leds, rate, *, brightness = None, phase = None))]
+    /// chips (defaults: full brightness, no delay), modulation `depth` (on − off)/(on + off):
+    /// "auto" (each LED's largest IEEE 1789 low-risk depth), one depth in (0, 1] or one per
+    /// LED (default: the luminaire's current depths). A configuration above IEEE 1789 low risk
+    /// is refused with what would be low-risk unless `allow_flicker`. The running state is
+    /// kept.
+    #[pyo3(signature = (leds, rate, *, brightness = None, phase = None, depth = None, allow_flicker = false))]
+    #[allow(clippy::too_many_arguments)]
     fn set(
         &self,
         py: Python<'_>,
@@ -123,56 +134,38 @@ impl Luminaire {
         rate: f64,
         brightness: Option<Vec<u16>>,
         phase: Option<Vec<u16>>,
+        depth: Option<DepthArg>,
+        allow_flicker: bool,
     ) -> PyResult<()> {
-        let n = usize::from(leds);
-        if n == 0 || n > MAX_LEDS {
-            return Err(PyValueError::new_err(format!(
-                "leds {leds} is outside 1..={MAX_LEDS}"
-            )));
-        }
-        let (min, max) = (ChipRate::MIN.hz(), ChipRate::MAX.hz());
-        if !(rate >= min && rate <= max) {
-            return Err(PyValueError::new_err(format!(
-                "rate {rate} Hz is outside the supported {min:.3}..={max:.3} Hz"
-            )));
-        }
-        let per_led =
-            |name: &str, values: Option<Vec<u16>>, default: u16| -> PyResult<[u16; MAX_LEDS]> {
-                let mut out = [default; MAX_LEDS];
-                if let Some(values) = values {
-                    if values.len() != n {
-                        return Err(PyValueError::new_err(format!(
-                            "{name} needs {n} values (one per LED), got {}",
-                            values.len()
-                        )));
-                    }
-                    out[..n].copy_from_slice(&values);
-                }
-                Ok(out)
-            };
-        let brightness = per_led("brightness", brightness, FULL_BRIGHTNESS_PERMILLE)?;
-        let phase = per_led("phase", phase, 0)?;
+        let depth = depth.map(|d| d.request()).transpose()?;
+        let request = SettingsRequest {
+            leds,
+            rate_hz: rate,
+            brightness: brightness.as_deref(),
+            phase: phase.as_deref(),
+            depth: depth.as_ref(),
+            allow_flicker,
+        };
         let current = self.with(py, "cannot read the luminaire's configuration", |c| {
             c.config()
         })?;
-        let config = LuminaireConfig {
-            led_count: leds,
-            chip_rate: ChipRate::from_hz(rate),
-            brightness_permille: brightness,
-            phase_chips: phase,
-            running: current.running,
-        };
-        config
-            .validate()
+        let config = settings::configure(&request, &current, &PYTHON)
             .map_err(|e| PyValueError::new_err(e.to_string()))?;
+        check_flicker(py, &config, allow_flicker, "set")?;
         self.with(py, "cannot apply the configuration", |c| {
             c.set_config(&config)
         })
     }
 
     /// Persists the active configuration to flash and waits for it; returns "saved" or
-    /// "already saved".
-    fn save(&self, py: Python<'_>) -> PyResult<&'static str> {
+    /// "already saved". A configuration above IEEE 1789 low risk is refused unless
+    /// `allow_flicker` (the luminaire then plays it at power-up instead of limiting it).
+    #[pyo3(signature = (*, allow_flicker = false))]
+    fn save(&self, py: Python<'_>, allow_flicker: bool) -> PyResult<&'static str> {
+        let current = self.with(py, "cannot read the luminaire's configuration", |c| {
+            c.config()
+        })?;
+        check_flicker(py, &current, allow_flicker, "save")?;
         let outcome = self.with(py, "cannot save the configuration", |c| c.save_and_wait())?;
         Ok(match outcome {
             SaveOutcome::AlreadySaved => "already saved",
@@ -199,4 +192,65 @@ impl Luminaire {
     fn __repr__(&self) -> String {
         format!("Luminaire({:?})", self.port.display().to_string())
     }
+}
+
+/// The keyword arguments' names in messages.
+const PYTHON: Spelling = Spelling {
+    leds: "leds",
+    rate: "rate",
+    brightness: "brightness",
+    phase: "phase",
+    depth: "depth",
+    depth_auto: "depth=\"auto\"",
+    allow_flicker: "pass allow_flicker=True",
+};
+
+/// `depth=`: "auto", one depth or one per LED.
+#[derive(FromPyObject)]
+enum DepthArg {
+    Text(String),
+    One(f32),
+    PerLed(Vec<f32>),
+}
+
+impl DepthArg {
+    fn request(self) -> PyResult<DepthRequest> {
+        let depths = match self {
+            DepthArg::Text(text) => {
+                return DepthRequest::parse(&text, &PYTHON)
+                    .map_err(|e| PyValueError::new_err(e.to_string()));
+            }
+            DepthArg::One(d) => vec![d],
+            DepthArg::PerLed(depths) => depths,
+        };
+        if let Some(bad) = depths.iter().find(|d| !(**d > 0.0 && **d <= 1.0)) {
+            return Err(PyValueError::new_err(format!(
+                "depth {bad}: a depth in (0, 1] or \"auto\" expected"
+            )));
+        }
+        Ok(DepthRequest::Depths(depths))
+    }
+}
+
+/// Refuses `config` above IEEE 1789 low risk (a `ValueError` saying what would be low-risk)
+/// unless `allowed`, which warns.
+fn check_flicker(
+    py: Python<'_>,
+    config: &LuminaireConfig,
+    allowed: bool,
+    command: &str,
+) -> PyResult<()> {
+    let Some(excess) = settings::flicker_excess(config) else {
+        return Ok(());
+    };
+    if allowed {
+        return warn(
+            py,
+            &format!(
+                "LED {} flickers above IEEE 1789 low risk (accepted with allow_flicker=True)",
+                excess.led + 1
+            ),
+        );
+    }
+    Err(PyValueError::new_err(excess.refusal(command, &PYTHON)))
 }

@@ -1,14 +1,18 @@
-//! The refusals of a reconstruction, with the rules and messages of `meb reconstruct`: a
-//! decode whose verdict is not plausible, a rig the capture contradicts, a depth its support
-//! check finds implausible. Each raises `ImplausibleError` carrying the verdict unless
-//! `force`, which turns it into a warning.
+//! The refusals of a reconstruction, by the rules `meb reconstruct` applies
+//! ([`meb_pipeline::reconstruct::acceptance`]): a decode whose verdict is not plausible, a rig
+//! the capture contradicts, a depth its support check finds implausible. Each raises
+//! `ImplausibleError` carrying the verdict unless `force`, which turns it into a warning.
 
 use crate::errors::implausible;
 use crate::json::to_python;
-use meb_pipeline::demod::{DecodeReport, Verdict, VerdictStatus};
+use meb_pipeline::demod::DecodeReport;
 use meb_pipeline::reconstruct::Reconstruction;
-use meb_pipeline::reconstruct::rig_check::{RigCheck, RigFit};
+use meb_pipeline::reconstruct::acceptance::{self, Ruling};
+use meb_pipeline::reconstruct::rig_check::RigCheck;
 use pyo3::prelude::*;
+
+/// The override's name in messages.
+const FORCE: &str = "force=True";
 
 /// Issues a Python `UserWarning` with `message`.
 pub fn warn(py: Python<'_>, message: &str) -> PyResult<()> {
@@ -24,28 +28,16 @@ pub fn check_decode_verdict(
     what: &str,
     force: bool,
 ) -> PyResult<()> {
-    let verdict = &report.verdict;
-    if verdict.status == VerdictStatus::Plausible {
-        return Ok(());
+    match acceptance::decode_verdict(&report.verdict, what, force, FORCE) {
+        Ruling::Keep => Ok(()),
+        Ruling::Warn(warning) => warn(py, &warning),
+        Ruling::Refuse(refusal) => Err(implausible(
+            py,
+            refusal,
+            to_python(py, &report.verdict)?,
+            Some(to_python(py, report)?),
+        )),
     }
-    let found = match verdict.status {
-        VerdictStatus::Unchecked => {
-            "was decoded without a quality verdict (an older meb); decode it again".to_string()
-        }
-        _ => format!(
-            "holds a decode its quality verdict found implausible ({})",
-            verdict.problems.join("; ")
-        ),
-    };
-    if force {
-        return warn(py, &format!("{what} {found}; using it anyway (force=True)"));
-    }
-    Err(implausible(
-        py,
-        format!("{what} {found}; use force=True to reconstruct from it anyway"),
-        to_python(py, verdict)?,
-        Some(to_python(py, report)?),
-    ))
 }
 
 /// Reports a doubtful or inconsistent rig and refuses an inconsistent one unless `force`;
@@ -58,35 +50,20 @@ pub fn check_rig(
     force: bool,
     implausible_result: bool,
 ) -> PyResult<Option<String>> {
-    let line = check.describe(rig_name);
-    match check.fit {
-        RigFit::Inconsistent if !force => Err(implausible(
-            py,
-            format!(
-                "{line} (try: {}; force=True keeps the reconstruction anyway)",
-                check.advice()
-            ),
-            to_python(py, &check.verdict(rig_name))?,
-            Some(to_python(py, check)?),
-        )),
-        RigFit::Inconsistent => {
-            warn(
+    let (ruling, hint) = acceptance::rig(check, rig_name, force, implausible_result, FORCE);
+    match ruling {
+        Ruling::Keep => {}
+        Ruling::Warn(warning) => warn(py, &warning)?,
+        Ruling::Refuse(refusal) => {
+            return Err(implausible(
                 py,
-                &format!("kept despite the rig check (force=True): {line}"),
-            )?;
-            Ok(None)
+                refusal,
+                to_python(py, &check.verdict(rig_name))?,
+                Some(to_python(py, check)?),
+            ));
         }
-        RigFit::Doubtful if implausible_result => Ok(Some(format!(
-            "the rig may be the cause: {line} (if its LED positions or intensities are \
-             uncertain: {})",
-            check.advice()
-        ))),
-        RigFit::Doubtful => {
-            warn(py, &line)?;
-            Ok(None)
-        }
-        RigFit::Consistent | RigFit::Unjudged => Ok(None),
     }
+    Ok(hint)
 }
 
 /// Refuses a reconstruction whose support verdict is implausible unless `force` (then warns);
@@ -97,24 +74,10 @@ pub fn check_support(
     rig_hint: Option<String>,
     force: bool,
 ) -> PyResult<()> {
-    let verdict: &Verdict = &reconstruction.support.verdict;
-    if verdict.is_plausible() {
-        return Ok(());
+    let verdict = &reconstruction.support.verdict;
+    match acceptance::support(verdict, rig_hint.as_deref(), force, FORCE) {
+        Ruling::Keep => Ok(()),
+        Ruling::Warn(warning) => warn(py, &warning),
+        Ruling::Refuse(refusal) => Err(implausible(py, refusal, to_python(py, verdict)?, None)),
     }
-    let problems = verdict.problems.join("; ");
-    if force {
-        return warn(
-            py,
-            &format!("kept an implausible reconstruction (force=True): {problems}"),
-        );
-    }
-    let advice = verdict.advice.join("; ");
-    let refusal = format!(
-        "the reconstruction looks implausible: {problems} (try: {advice}; force=True keeps it anyway)"
-    );
-    let message = match rig_hint {
-        Some(hint) => format!("{refusal}; {hint}"),
-        None => refusal,
-    };
-    Err(implausible(py, message, to_python(py, verdict)?, None))
 }

@@ -3,6 +3,7 @@ of `meb device emulate` on a pseudo-terminal through the client `meb device` use
 
 import json
 import subprocess
+import warnings
 
 import numpy as np
 import pytest
@@ -61,13 +62,36 @@ def test_a_luminaire_is_configured_saved_and_read_back(virtual_luminaire):
     luminaire = meb.Luminaire(virtual_luminaire)
     info = luminaire.info()
     assert info["max_leds"] == 8
-    luminaire.set(4, 959.5, brightness=[1000, 900, 800, 700], phase=[0, 3, 7, 11])
+    luminaire.set(4, 959.5, brightness=[1000, 900, 800, 700], phase=[0, 3, 7, 11], depth="auto")
     config = luminaire.get()
+    depths = config.pop("depth")
     assert config == {"leds": 4, "rate": 959.5, "brightness": [1000, 900, 800, 700],
-                      "phase": [0, 3, 7, 11], "running": True}
+                      "phase": [0, 3, 7, 11], "allow_flicker": False, "running": True}
+    # Each LED's largest low-risk depth at this rate: below full on/off keying, and accepted
+    # again when given explicitly (no warning: it is low-risk).
+    assert len(depths) == 4 and all(0 < d < 1 for d in depths)
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        luminaire.set(4, 959.5, brightness=[1000, 900, 800, 700], phase=[0, 3, 7, 11],
+                      depth=[round(d, 3) - 0.001 for d in depths])
+    depths = luminaire.get()["depth"]
     assert luminaire.status()["unsaved_changes"] is True
     assert luminaire.save() == "saved"
     assert luminaire.status()["unsaved_changes"] is False
+    # Full on/off keying is above IEEE 1789 low risk: refused with what would be low-risk,
+    # accepted (with a warning) only when asked for, and then not saved without asking again.
+    with pytest.raises(ValueError, match=r'refusing to set: LED \d.*depth="auto".*allow_flicker=True'):
+        luminaire.set(4, 960, depth=1.0)
+    assert luminaire.get()["depth"] == depths
+    with pytest.warns(UserWarning, match="above IEEE 1789 low risk"):
+        luminaire.set(4, 960, depth=[1.0, 1.0, 1.0, 1.0], allow_flicker=True)
+    assert luminaire.get()["depth"] == [1.0, 1.0, 1.0, 1.0]
+    with pytest.raises(ValueError, match="refusing to save"):
+        luminaire.save()
+    with pytest.raises(ValueError, match=r"depth 1\.5: a depth in \(0, 1\]"):
+        luminaire.set(4, 960, depth=1.5)
+    with pytest.raises(ValueError, match="depth needs 4 values"):
+        luminaire.set(4, 960, depth=[0.5, 0.5])
     luminaire.stop()
     assert luminaire.get()["running"] is False
     with pytest.raises(ValueError, match="needs 4 values"):

@@ -7,6 +7,7 @@ use meb_core::io::{FilesError, OutputFolder, Replace, read_mask, remove_temporar
 use meb_core::metrics::{AngularErrors, DepthErrors};
 use meb_core::timing::StageTiming;
 use meb_core::types::{Confidence, DepthMap, NormalField};
+use meb_pipeline::reconstruct::acceptance;
 use ndarray::Array2;
 use std::path::Path;
 
@@ -134,24 +135,31 @@ pub fn mesh_extensions(formats: &[MeshFormat]) -> Vec<String> {
 }
 
 /// Refuses a reconstruction whose depth its support check ([`meb_pipeline::reconstruct::Support`])
-/// finds implausible, saying what looks wrong and what to try, unless `force` (then warns).
+/// finds implausible, saying what looks wrong and what to try, unless `force` (then warns);
+/// `rig_hint` ([`super::rig::enforce`]) joins the refusal.
 pub fn check_support(
     reconstruction: &meb_pipeline::reconstruct::Reconstruction,
+    rig_hint: Option<&str>,
     force: bool,
 ) -> Result<()> {
-    let verdict = &reconstruction.support.verdict;
-    if verdict.is_plausible() {
-        return Ok(());
+    apply(acceptance::support(
+        &reconstruction.support.verdict,
+        rig_hint,
+        force,
+        "--force",
+    ))
+}
+
+/// Prints a ruling's warning, or returns its refusal as the command's error.
+pub fn apply(ruling: acceptance::Ruling) -> Result<()> {
+    match ruling {
+        acceptance::Ruling::Keep => Ok(()),
+        acceptance::Ruling::Warn(warning) => {
+            eprintln!("warning: {warning}");
+            Ok(())
+        }
+        acceptance::Ruling::Refuse(refusal) => Err(anyhow::anyhow!(refusal)),
     }
-    let problems = verdict.problems.join("; ");
-    if force {
-        eprintln!("warning: kept an implausible reconstruction (--force): {problems}");
-        return Ok(());
-    }
-    let advice = verdict.advice.join("; ");
-    anyhow::bail!(
-        "the reconstruction looks implausible: {problems} (try: {advice}; --force writes it anyway)"
-    )
 }
 
 /// The report summary every decoded-capture reconstruction shares: LED images, frames,

@@ -1,7 +1,7 @@
 //! `meb decode`: demodulate a capture into one image per LED and write the output directory.
 
 use super::parse;
-use anyhow::{Context, Result, bail};
+use anyhow::{Context, Result};
 use clap::Args;
 use indicatif::{ProgressBar, ProgressStyle};
 use meb_core::capture::raw::RawLayout;
@@ -11,6 +11,7 @@ use meb_pipeline::demod::{
     DecodeConfig, DecodeReport, Decoded, DemodError, Estimator, LedCount, Linearize, OnImplausible,
     Roi, VerdictStatus, decode,
 };
+use meb_pipeline::reconstruct::acceptance;
 use std::path::{Path, PathBuf};
 
 /// Arguments of `meb decode`.
@@ -188,30 +189,13 @@ fn warn_if_overridden(report: &DecodeReport) {
 
 /// Refuses a decode folder whose verdict is not plausible unless `force` (then warns).
 pub fn check_folder_verdict(report: &DecodeReport, folder: &Path, force: bool) -> Result<()> {
-    let verdict = &report.verdict;
-    if verdict.status == VerdictStatus::Plausible {
-        return Ok(());
-    }
-    let what = match verdict.status {
-        VerdictStatus::Unchecked => {
-            "was decoded without a quality verdict (an older meb); decode it again".to_string()
-        }
-        _ => format!(
-            "holds a decode its quality verdict found implausible ({})",
-            verdict.problems.join("; ")
-        ),
-    };
-    if force {
-        eprintln!(
-            "warning: {} {what}; using it anyway (--force)",
-            folder.display()
-        );
-        return Ok(());
-    }
-    bail!(
-        "{} {what}; use --force to reconstruct from it anyway",
-        folder.display()
-    )
+    let what = folder.display().to_string();
+    super::common::apply(acceptance::decode_verdict(
+        &report.verdict,
+        &what,
+        force,
+        "--force",
+    ))
 }
 
 /// Runs `meb decode`.

@@ -60,7 +60,7 @@ pub fn run(args: &DemoArgs) -> Result<()> {
             },
         )?;
         bar.finish_and_clear();
-        super::common::check_support(&out.reconstruction, args.force)?;
+        super::common::check_support(&out.reconstruction, None, args.force)?;
         let e = &out.depth_errors;
         let config = ReconstructConfig::decoded_capture();
         let summary = Summary {

@@ -7,9 +7,10 @@ use std::time::Duration;
 use anyhow::{Result, anyhow, bail};
 use clap::{Args, Subcommand};
 use meb_device::discovery::{self, DiscoveryError, PortEntry};
+use meb_device::settings::{self, DepthRequest, SettingsRequest, Spelling};
 use meb_device::{DeviceClient, Timeouts};
 use protocol::carriers::MAX_LEDS;
-use protocol::config::{ChipRate, FULL_BRIGHTNESS_PERMILLE, LuminaireConfig};
+use protocol::config::LuminaireConfig;
 use protocol::flicker::{self, LOW_RISK, NO_OBSERVABLE_EFFECT};
 use protocol::wire::{ConfigSource, SaveOutcome};
 use serde::Serialize;
@@ -315,10 +316,10 @@ fn ping_repeatedly(client: &mut DeviceClient, ping: &PingArgs) -> Result<()> {
     }
 }
 
-/// Refuses `config` above IEEE 1789 low risk unless `allowed`, naming the LED, the line that
-/// sets the limit and the depth and rate that would be low-risk.
+/// Refuses `config` above IEEE 1789 low risk unless `allowed` (then warns), naming the LED,
+/// the line that sets the limit and the depth and rate that would be low-risk.
 fn check_flicker(config: &LuminaireConfig, allowed: bool, command: &str) -> Result<()> {
-    let Some(excess) = flicker::first_excess(config, &LOW_RISK) else {
+    let Some(excess) = settings::flicker_excess(config) else {
         return Ok(());
     };
     if allowed {
@@ -328,45 +329,7 @@ fn check_flicker(config: &LuminaireConfig, allowed: bool, command: &str) -> Resu
         );
         return Ok(());
     }
-    let f = excess.limit.frequency_hz;
-    let band = if (flicker::SEIZURE_BAND_HZ.0..=flicker::SEIZURE_BAND_HZ.1).contains(&f) {
-        ", inside the 3–60 Hz band where flicker can trigger seizures"
-    } else {
-        ""
-    };
-    let leds = usize::from(config.led_count);
-    let auto: Vec<String> = (0..leds)
-        .map(|led| {
-            format!(
-                "{:.3}",
-                flicker::max_depth(led as u8, config.chip_rate, &LOW_RISK).depth
-            )
-        })
-        .collect();
-    let depth = excess.depth;
-    let rate = lowest_low_risk_rate(config)
-        .map(|hz| format!("a chip rate of at least {hz} Hz at this depth"))
-        .unwrap_or_else(|| "no chip rate up to 4000 Hz at this depth".into());
-    bail!(
-        "refusing to {command}: LED {} plays its {f:.2} Hz line at {:.2} % modulation (depth {depth:.3}), above IEEE 1789 low risk ({:.2} % at {f:.2} Hz){band}.
-         Low-risk: --depth auto (depths {}; decoding noise ×{:.1} of full depth), or {rate}; or pass --allow-flicker to {command} it anyway.",
-        excess.led + 1,
-        depth * excess.limit.full_depth_percent,
-        LOW_RISK.percent_at(f).unwrap_or(f32::INFINITY),
-        auto.join(","),
-        1.0 / flicker::max_depth(excess.led, config.chip_rate, &LOW_RISK).depth,
-    )
-}
-
-/// The lowest whole chip rate in hertz, from `config`'s up to 4000 Hz, at which its LEDs'
-/// depths are low-risk.
-fn lowest_low_risk_rate(config: &LuminaireConfig) -> Option<u32> {
-    let start = config.chip_rate.hz().ceil() as u32;
-    (start..=4000).find(|&hz| {
-        let mut trial = *config;
-        trial.chip_rate = ChipRate(hz * 1000);
-        flicker::is_low_risk(&trial)
-    })
+    bail!("{}", excess.refusal(command, &Spelling::CLI))
 }
 
 /// Readable boot source.
@@ -381,88 +344,23 @@ fn source_text(source: ConfigSource) -> &'static str {
     }
 }
 
-/// Off levels for `--depth`: `auto`, one depth or one per LED.
-fn off_levels_from_arg(
-    arg: &str,
-    n: usize,
-    auto: &LuminaireConfig,
-    out: &mut [u16; MAX_LEDS],
-) -> Result<()> {
-    if arg.trim() == "auto" {
-        *out = auto.off_level_permille;
-        return Ok(());
-    }
-    let depths: Vec<f32> = arg
-        .split(',')
-        .map(|v| {
-            v.trim()
-                .parse::<f32>()
-                .ok()
-                .filter(|d| *d > 0.0 && *d <= 1.0)
-                .ok_or_else(|| anyhow!("--depth {v:?}: a depth in (0, 1] or `auto` expected"))
-        })
-        .collect::<Result<_>>()?;
-    match depths.len() {
-        1 => out[..n].fill(flicker::off_level_for_depth(depths[0])),
-        len if len == n => {
-            for (level, &d) in out.iter_mut().zip(&depths) {
-                *level = flicker::off_level_for_depth(d);
-            }
-        }
-        len => bail!("--depth needs 1 or {n} values (one per LED), got {len}"),
-    }
-    Ok(())
-}
-
 /// The full configuration `meb device set` sends: the flags given, the current off levels
 /// for LEDs without `--depth`.
 fn config_from_args(set: &SetArgs, current: &LuminaireConfig) -> Result<LuminaireConfig> {
-    let running = current.running;
-    let n = usize::from(set.leds);
-    if n == 0 || n > MAX_LEDS {
-        bail!("--leds {} is outside 1..={MAX_LEDS}", set.leds);
-    }
-    let (min, max) = (ChipRate::MIN.hz(), ChipRate::MAX.hz());
-    // Checked in hertz: converting first would saturate 1e9 Hz to u32::MAX millihertz.
-    if !(set.rate >= min && set.rate <= max) {
-        bail!(
-            "--rate {} Hz is outside the supported {min:.3}..={max:.3} Hz",
-            set.rate
-        );
-    }
-    let mut brightness = [FULL_BRIGHTNESS_PERMILLE; MAX_LEDS];
-    if let Some(values) = &set.brightness {
-        per_led("--brightness", values, n, &mut brightness)?;
-    }
-    let mut phases = [0u16; MAX_LEDS];
-    if let Some(values) = &set.phase {
-        per_led("--phase", values, n, &mut phases)?;
-    }
-    let mut config = LuminaireConfig {
-        led_count: set.leds,
-        chip_rate: ChipRate::from_hz(set.rate),
-        brightness_permille: brightness,
-        phase_chips: phases,
-        running,
-        off_level_permille: current.off_level_permille,
+    let depth = set
+        .depth
+        .as_deref()
+        .map(|text| DepthRequest::parse(text, &Spelling::CLI))
+        .transpose()?;
+    let request = SettingsRequest {
+        leds: set.leds,
+        rate_hz: set.rate,
+        brightness: set.brightness.as_deref(),
+        phase: set.phase.as_deref(),
+        depth: depth.as_ref(),
         allow_flicker: set.allow_flicker,
     };
-    if let Some(arg) = &set.depth {
-        let auto = flicker::at_largest_low_risk_depths(&config);
-        off_levels_from_arg(arg, n, &auto, &mut config.off_level_permille)?;
-    }
-    Ok(config)
-}
-
-fn per_led(flag: &str, values: &[u16], n: usize, out: &mut [u16; MAX_LEDS]) -> Result<()> {
-    if values.len() != n {
-        bail!(
-            "{flag} needs {n} values (one per LED), got {}",
-            values.len()
-        );
-    }
-    out[..n].copy_from_slice(values);
-    Ok(())
+    Ok(settings::configure(&request, current, &Spelling::CLI)?)
 }
 
 /// A configuration as printed: only the N LEDs in use, the rate in Hz.

@@ -119,12 +119,7 @@ pub fn run(args: &ReconstructArgs) -> Result<()> {
     let rig_check = check_decoded_rig(&inputs.decoded, &inputs.rig, &reconstruction);
     let implausible = !reconstruction.support.verdict.is_plausible();
     let rig_hint = super::rig::enforce(&rig_check, &args.rig, args.force, implausible)?;
-    super::common::check_support(&reconstruction, args.force).map_err(
-        |refusal| match rig_hint {
-            Some(hint) => anyhow::anyhow!("{refusal}; {hint}"),
-            None => refusal,
-        },
-    )?;
+    super::common::check_support(&reconstruction, rig_hint.as_deref(), args.force)?;
     if let Some(clipping) = &inputs.decoded.report.clipping {
         eprintln!("note: {}", clipping.message);
     }

@@ -12,6 +12,7 @@ use meb_pipeline::calibrate::sphere_check::{
 };
 use meb_pipeline::demod::Decoded;
 use meb_pipeline::demod::output::read_decode_dir;
+use meb_pipeline::reconstruct::acceptance;
 use meb_pipeline::reconstruct::rig_check::{RigCheck, RigFit};
 use meb_pipeline::reconstruct::{
     ReconstructConfig, Request, Source, check_decoded_rig, level_noise, reconstruct,
@@ -182,36 +183,15 @@ fn print_table(check: &RigCheck) {
 }
 
 /// Reports a doubtful or inconsistent rig on stderr and refuses an inconsistent one unless
-/// `force`. When the reconstruction is `implausible` anyway and the rig fits only roughly, the
-/// rig may be the cause (a nominal rig 35 mm off per LED on the blobby shape: misfit 2.35 times
-/// the noise's, and the offset search ran to its edge) or a victim (a surface lit mostly by two
-/// LEDs is integrated at a wrong depth, where the right rig fits worse too); the returned hint
-/// names the rig beside the reconstruction's own problem, and nothing is printed, so the
-/// refusal that follows stays one line.
+/// `force`; returns the hint that names the rig when the reconstruction is `implausible` anyway
+/// and the rig fits only roughly ([`acceptance::rig`]).
 pub fn enforce(
     check: &RigCheck,
     rig_name: &str,
     force: bool,
     implausible: bool,
 ) -> Result<Option<String>> {
-    let line = check.describe(rig_name);
-    match check.fit {
-        RigFit::Inconsistent if !force => bail!(
-            "{line} (try: {}; --force writes the reconstruction anyway)",
-            check.advice()
-        ),
-        RigFit::Inconsistent => eprintln!("warning: kept despite the rig check (--force): {line}"),
-        RigFit::Doubtful if implausible => {
-            return Ok(Some(format!(
-                "the rig may be the cause: {line} (if its LED positions or intensities are \
-                 uncertain: {})",
-                check.advice()
-            )));
-        }
-        RigFit::Doubtful => eprintln!("warning: {line}"),
-        // A consistent rig is recorded in report.json only: a refusal that follows for
-        // another reason stays one line.
-        RigFit::Consistent | RigFit::Unjudged => {}
-    }
-    Ok(None)
+    let (ruling, hint) = acceptance::rig(check, rig_name, force, implausible, "--force");
+    super::common::apply(ruling)?;
+    Ok(hint)
 }

@@ -60,6 +60,7 @@ use rayon::prelude::*;
 use std::time::Instant;
 use thiserror::Error;
 
+pub mod acceptance;
 mod coarse;
 mod inputs;
 mod offset;

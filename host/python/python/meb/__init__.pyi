@@ -302,7 +302,8 @@ class Luminaire:
     def status(self) -> dict[str, Any]:
         """Running, faults, unsaved changes, save state, link counters."""
     def get(self) -> dict[str, Any]:
-        """The active configuration: leds, rate (Hz), brightness, phase, running."""
+        """The active configuration: leds, rate (Hz), brightness, phase and modulation depth per
+        LED, allow_flicker, running."""
     def set(
         self,
         leds: int,
@@ -310,11 +311,17 @@ class Luminaire:
         *,
         brightness: Sequence[int] | None = None,
         phase: Sequence[int] | None = None,
+        depth: float | Sequence[float] | Literal["auto"] | None = None,
+        allow_flicker: bool = False,
     ) -> None:
-        """Applies a configuration (not saved); ValueError for values outside the protocol's
-        limits."""
-    def save(self) -> str:
-        """Persists the configuration: "saved" or "already saved"."""
+        """Applies a configuration (not saved). ``depth`` is the modulation depth
+        (on − off)/(on + off): "auto" for each LED's largest IEEE 1789 low-risk depth, one
+        value in (0, 1] or one per LED (default: the current depths). ValueError for values
+        outside the protocol's limits, and for a configuration above IEEE 1789 low risk unless
+        ``allow_flicker`` (then a UserWarning)."""
+    def save(self, *, allow_flicker: bool = False) -> str:
+        """Persists the configuration: "saved" or "already saved"; ValueError above IEEE 1789
+        low risk unless ``allow_flicker``."""
     def start(self) -> None: ...
     def stop(self) -> None: ...
     @property
