@@ -38,7 +38,9 @@
 //! For a fixed residue r = k mod P, |tan| is the same and k² grows, so within one slope segment
 //! the smallest k of each residue binds: [`max_depth`] evaluates at most two k per odd residue
 //! (the first below 90 Hz, the first at or above it), P/2 residues per LED, in `f32` with a
-//! Taylor sine, and takes [`ROUNDING_MARGIN`] off the result.
+//! Taylor sine, and takes [`ROUNDING_MARGIN`] off the result. `tests/flicker_conservative.rs`
+//! checks over seeded sweeps that this never accepts a configuration an exact `f64` reference
+//! (the DFT of the carriers' chips, every harmonic) rejects.
 
 use crate::carriers::MAX_LEDS;
 use crate::config::{ChipRate, LuminaireConfig};
@@ -235,6 +237,9 @@ pub fn limited_to_low_risk(config: &LuminaireConfig) -> LuminaireConfig {
     let leds = usize::from(config.led_count).min(MAX_LEDS);
     for led in 0..leds {
         let bound = max_depth(led as u8, config.chip_rate, &LOW_RISK);
+        if played_depth(config, led) <= bound.depth {
+            continue;
+        }
         let mut level = off_level_for_depth(bound.depth).max(config.off_level_permille[led]);
         // Compare-value rounding at low brightness can push the played depth over: step up.
         loop {
