@@ -326,6 +326,54 @@ mod tests {
     }
 
     #[test]
+    fn limits_follow_the_standards_segments() {
+        // IEEE 1789-2015 §8: 0.025·f below 90 Hz, 0.08·f up to 1250 Hz, unrestricted above.
+        assert_eq!(LOW_RISK.percent_at(40.0), Some(0.025 * 40.0));
+        assert_eq!(LOW_RISK.percent_at(89.9), Some(0.025 * 89.9));
+        assert_eq!(LOW_RISK.percent_at(90.0), Some(0.08 * 90.0));
+        assert_eq!(LOW_RISK.percent_at(1250.0), Some(0.08 * 1250.0));
+        assert_eq!(LOW_RISK.percent_at(1250.5), None);
+        assert_eq!(NO_OBSERVABLE_EFFECT.percent_at(3.0), Some(0.01 * 3.0));
+        assert_eq!(
+            NO_OBSERVABLE_EFFECT.percent_at(3000.0),
+            Some(0.0333 * 3000.0)
+        );
+        assert_eq!(NO_OBSERVABLE_EFFECT.percent_at(3000.5), None);
+    }
+
+    #[test]
+    fn largest_low_risk_depths_do_not_depend_on_the_off_levels_asked_for() {
+        for leds in 1..=MAX_LEDS as u8 {
+            for rate in [1_000, 30_000, 240_000, 960_000, 4_000_000] {
+                let base = LuminaireConfig {
+                    led_count: leds,
+                    chip_rate: ChipRate(rate),
+                    brightness_permille: [1000; MAX_LEDS],
+                    ..LuminaireConfig::DEFAULT
+                };
+                let auto = at_largest_low_risk_depths(&base);
+                for off in [0, 500, 1000] {
+                    let asked = LuminaireConfig {
+                        off_level_permille: [off; MAX_LEDS],
+                        ..base
+                    };
+                    assert_eq!(
+                        at_largest_low_risk_depths(&asked),
+                        auto,
+                        "{leds} {rate} {off}"
+                    );
+                }
+                // At full brightness the compare values are the per-mille levels: the off level
+                // is the lowest whose depth is within the bound.
+                for led in 0..usize::from(leds) {
+                    let bound = max_depth(led as u8, ChipRate(rate), &LOW_RISK).depth;
+                    assert_eq!(auto.off_level_permille[led], off_level_for_depth(bound));
+                }
+            }
+        }
+    }
+
+    #[test]
     fn off_level_rounds_towards_less_flicker() {
         assert_eq!(off_level_for_depth(1.0), 0);
         assert_eq!(off_level_for_depth(0.0), 1000);
