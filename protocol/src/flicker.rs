@@ -374,6 +374,41 @@ mod tests {
     }
 
     #[test]
+    fn an_led_index_beyond_the_table_is_the_last_led() {
+        for k in [1, 3, 511] {
+            assert_eq!(full_depth_percent(8, k), full_depth_percent(7, k));
+        }
+        for rate in [1_000, 960_000] {
+            assert_eq!(
+                max_depth(200, ChipRate(rate), &LOW_RISK),
+                max_depth(7, ChipRate(rate), &LOW_RISK)
+            );
+        }
+    }
+
+    #[test]
+    fn limiting_steps_the_off_level_up_when_f32_rounding_lands_above_the_bound() {
+        // LED 7 at 2059 Hz: the off level for the bound plays a depth one ulp above it.
+        let config = LuminaireConfig {
+            led_count: 8,
+            chip_rate: ChipRate(2_059_000),
+            brightness_permille: [1000; MAX_LEDS],
+            off_level_permille: [0; MAX_LEDS],
+            ..LuminaireConfig::DEFAULT
+        };
+        let bound = max_depth(6, config.chip_rate, &LOW_RISK).depth;
+        let mut first_guess = config;
+        first_guess.off_level_permille[6] = off_level_for_depth(bound);
+        assert!(played_depth(&first_guess, 6) > bound);
+        let limited = limited_to_low_risk(&config);
+        assert_eq!(
+            limited.off_level_permille[6],
+            first_guess.off_level_permille[6] + 1
+        );
+        assert!(played_depth(&limited, 6) <= bound);
+    }
+
+    #[test]
     fn off_level_rounds_towards_less_flicker() {
         assert_eq!(off_level_for_depth(1.0), 0);
         assert_eq!(off_level_for_depth(0.0), 1000);
