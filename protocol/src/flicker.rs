@@ -294,6 +294,11 @@ mod tests {
         assert!((full_depth_percent(1, 1) - 52.74).abs() < 0.01);
         assert!((full_depth_percent(2, 1) - 25.33).abs() < 0.01);
         assert!((full_depth_percent(3, 1) - 12.54).abs() < 0.01);
+        // Harmonics: a square wave's third at a third of the fundamental; LED 4's k = 35 folds
+        // to residue 3 of its 32 chips.
+        assert!((full_depth_percent(0, 3) - 400.0 / (3.0 * core::f32::consts::PI)).abs() < 1e-3);
+        let r3 = (400.0 / core::f32::consts::PI) * (3.0 * core::f32::consts::PI / 32.0).tan();
+        assert!((full_depth_percent(3, 35) - r3 / 35.0).abs() < 1e-3);
     }
 
     #[test]
