@@ -9,22 +9,30 @@
 //! watchdog feeding) while the erase runs.
 //!
 //! The erase time depends on the program/erase parallelism, FLASH_CR.PSIZE at the moment STRT is
-//! set. embassy-stm32's F4 driver (the version in `Cargo.lock`) sets PSIZE = x32 only for word
-//! programming and clears it again afterwards (it writes FLASH_CR whole, PSIZE = 00); its sector
-//! erase modifies SER/SNB/STRT and leaves PSIZE alone. Every erase therefore runs at x8, whose
-//! worst case in the STM32F411xC/E datasheet (flash memory programming characteristics,
-//! t_ERASE128KB, PSIZE = x8) is 4 s, twice the x32 figure.
+//! set. embassy-stm32 0.6.0's F4 driver (`src/flash/f4.rs`, the version in `Cargo.lock`) sets
+//! PSIZE = x32 only for word programming (`enable_write` writes FLASH_CR whole with PG and
+//! PSIZE32) and clears it again afterwards (`disable_write` writes FLASH_CR whole, PSIZE = 00,
+//! as after reset); its sector erase (`erase_sector`) modifies SER/SNB/STRT and leaves PSIZE
+//! alone. Every erase therefore runs at x8.
+//!
+//! STM32F411xC/E datasheet (DS10314 Rev 8), §6.3.12, Table 45 "Flash memory programming"
+//! (T_A = −40 to 125 °C; maxima evaluated by characterisation, not tested in production):
+//!
+//! ```text
+//! t_ERASE128KB   PSIZE x8: typ 2 s, max 4 s;  x16: 1.3 s, 2.6 s;  x32: 1 s, 2 s
+//! t_prog (word)  PSIZE x8/16/32: typ 16 µs, max 100 µs (max measured after 100 k erases)
+//! ```
 
 use crate::record::MAX_RECORD_LEN;
 
 /// Program/erase parallelism (bits) of the firmware's sector erases: x8, see the module docs.
 pub const ERASE_PARALLELISM_BITS: u32 = 8;
 
-/// Longest erase of one 128 KiB sector at [`ERASE_PARALLELISM_BITS`] (datasheet maximum of
-/// t_ERASE128KB at x8; typical 2 s).
+/// Longest erase of one 128 KiB sector at [`ERASE_PARALLELISM_BITS`] (DS10314 Table 45,
+/// maximum of t_ERASE128KB at x8; typical 2 s).
 pub const SECTOR_ERASE_MAX_MS: u32 = 4_000;
 
-/// Longest programming of one 32-bit word (datasheet maximum of t_prog; typical 16 µs).
+/// Longest programming of one 32-bit word (DS10314 Table 45, maximum of t_prog; typical 16 µs).
 pub const WORD_PROGRAM_MAX_US: u32 = 100;
 
 /// Bytes programmed by one save at most: the item (key, record, sequential-storage's item

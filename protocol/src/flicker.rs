@@ -38,7 +38,9 @@
 //! For a fixed residue r = k mod P, |tan| is the same and k² grows, so within one slope segment
 //! the smallest k of each residue binds: [`max_depth`] evaluates at most two k per odd residue
 //! (the first below 90 Hz, the first at or above it), P/2 residues per LED, in `f32` with a
-//! Taylor sine, and takes [`ROUNDING_MARGIN`] off the result.
+//! Taylor sine, and takes [`ROUNDING_MARGIN`] off the result. `tests/flicker_conservative.rs`
+//! checks over seeded sweeps that this never accepts a configuration an exact `f64` reference
+//! (the DFT of the carriers' chips, every harmonic) rejects.
 
 use crate::carriers::MAX_LEDS;
 use crate::config::{ChipRate, LuminaireConfig};
@@ -235,6 +237,9 @@ pub fn limited_to_low_risk(config: &LuminaireConfig) -> LuminaireConfig {
     let leds = usize::from(config.led_count).min(MAX_LEDS);
     for led in 0..leds {
         let bound = max_depth(led as u8, config.chip_rate, &LOW_RISK);
+        if played_depth(config, led) <= bound.depth {
+            continue;
+        }
         let mut level = off_level_for_depth(bound.depth).max(config.off_level_permille[led]);
         // Compare-value rounding at low brightness can push the played depth over: step up.
         loop {
@@ -289,6 +294,11 @@ mod tests {
         assert!((full_depth_percent(1, 1) - 52.74).abs() < 0.01);
         assert!((full_depth_percent(2, 1) - 25.33).abs() < 0.01);
         assert!((full_depth_percent(3, 1) - 12.54).abs() < 0.01);
+        // Harmonics: a square wave's third at a third of the fundamental; LED 4's k = 35 folds
+        // to residue 3 of its 32 chips.
+        assert!((full_depth_percent(0, 3) - 400.0 / (3.0 * core::f32::consts::PI)).abs() < 1e-3);
+        let r3 = (400.0 / core::f32::consts::PI) * (3.0 * core::f32::consts::PI / 32.0).tan();
+        assert!((full_depth_percent(3, 35) - r3 / 35.0).abs() < 1e-3);
     }
 
     #[test]
@@ -318,6 +328,89 @@ mod tests {
         let fast = max_depth(0, ChipRate(4_000_000), &LOW_RISK);
         assert!((fast.frequency_hz - 1000.0).abs() < 1e-2);
         assert!((fast.depth - 80.0 / 127.32).abs() < 1e-3);
+    }
+
+    #[test]
+    fn limits_follow_the_standards_segments() {
+        // IEEE 1789-2015 §8: 0.025·f below 90 Hz, 0.08·f up to 1250 Hz, unrestricted above.
+        assert_eq!(LOW_RISK.percent_at(40.0), Some(0.025 * 40.0));
+        assert_eq!(LOW_RISK.percent_at(89.9), Some(0.025 * 89.9));
+        assert_eq!(LOW_RISK.percent_at(90.0), Some(0.08 * 90.0));
+        assert_eq!(LOW_RISK.percent_at(1250.0), Some(0.08 * 1250.0));
+        assert_eq!(LOW_RISK.percent_at(1250.5), None);
+        assert_eq!(NO_OBSERVABLE_EFFECT.percent_at(3.0), Some(0.01 * 3.0));
+        assert_eq!(
+            NO_OBSERVABLE_EFFECT.percent_at(3000.0),
+            Some(0.0333 * 3000.0)
+        );
+        assert_eq!(NO_OBSERVABLE_EFFECT.percent_at(3000.5), None);
+    }
+
+    #[test]
+    fn largest_low_risk_depths_do_not_depend_on_the_off_levels_asked_for() {
+        for leds in 1..=MAX_LEDS as u8 {
+            for rate in [1_000, 30_000, 240_000, 960_000, 4_000_000] {
+                let base = LuminaireConfig {
+                    led_count: leds,
+                    chip_rate: ChipRate(rate),
+                    brightness_permille: [1000; MAX_LEDS],
+                    ..LuminaireConfig::DEFAULT
+                };
+                let auto = at_largest_low_risk_depths(&base);
+                for off in [0, 500, 1000] {
+                    let asked = LuminaireConfig {
+                        off_level_permille: [off; MAX_LEDS],
+                        ..base
+                    };
+                    assert_eq!(
+                        at_largest_low_risk_depths(&asked),
+                        auto,
+                        "{leds} {rate} {off}"
+                    );
+                }
+                // At full brightness the compare values are the per-mille levels: the off level
+                // is the lowest whose depth is within the bound.
+                for led in 0..usize::from(leds) {
+                    let bound = max_depth(led as u8, ChipRate(rate), &LOW_RISK).depth;
+                    assert_eq!(auto.off_level_permille[led], off_level_for_depth(bound));
+                }
+            }
+        }
+    }
+
+    #[test]
+    fn an_led_index_beyond_the_table_is_the_last_led() {
+        for k in [1, 3, 511] {
+            assert_eq!(full_depth_percent(8, k), full_depth_percent(7, k));
+        }
+        for rate in [1_000, 960_000] {
+            assert_eq!(
+                max_depth(200, ChipRate(rate), &LOW_RISK),
+                max_depth(7, ChipRate(rate), &LOW_RISK)
+            );
+        }
+    }
+
+    #[test]
+    fn limiting_steps_the_off_level_up_when_f32_rounding_lands_above_the_bound() {
+        // LED 7 at 2059 Hz: the off level for the bound plays a depth one ulp above it.
+        let config = LuminaireConfig {
+            led_count: 8,
+            chip_rate: ChipRate(2_059_000),
+            brightness_permille: [1000; MAX_LEDS],
+            off_level_permille: [0; MAX_LEDS],
+            ..LuminaireConfig::DEFAULT
+        };
+        let bound = max_depth(6, config.chip_rate, &LOW_RISK).depth;
+        let mut first_guess = config;
+        first_guess.off_level_permille[6] = off_level_for_depth(bound);
+        assert!(played_depth(&first_guess, 6) > bound);
+        let limited = limited_to_low_risk(&config);
+        assert_eq!(
+            limited.off_level_permille[6],
+            first_guess.off_level_permille[6] + 1
+        );
+        assert!(played_depth(&limited, 6) <= bound);
     }
 
     #[test]
