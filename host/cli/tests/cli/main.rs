@@ -20,6 +20,7 @@ mod reconstruct_targets;
 mod reference_data;
 mod report_page;
 mod rig_calibration;
+mod room_effects;
 mod simulate_cli;
 mod tof_calibration;
 mod tof_cli;

@@ -66,6 +66,7 @@ pub mod fit;
 pub(crate) mod fixture;
 mod levenberg;
 mod matched;
+pub mod nuisance;
 pub mod output;
 pub mod quality;
 mod report;
@@ -254,7 +255,14 @@ fn add_window(
     state: &mut Accumulated,
 ) -> Result<bool, DemodError> {
     let got = frames.len();
-    let sample = decoder.sample(frames);
+    let rate = state
+        .fits
+        .last()
+        .map(|(fit, _, _)| fit.model.timing.rate_ratio);
+    let sample = decoder.sample_at(frames, rate);
+    if let Some(found) = sample.nuisance() {
+        state.room.add(found);
+    }
     let (leds, seed) = match state.leds {
         Some(n) => (n, None),
         None => {
@@ -427,6 +435,15 @@ pub struct WindowSample {
     sample: PixelSample,
     gram: DMatrix<f64>,
     spectrum: Spectrum,
+    /// The room's nuisance components found in the window (`None`: not looked for).
+    found: Option<nuisance::Nuisance>,
+}
+
+impl WindowSample {
+    /// The room's nuisance components found in the window, when they were looked for.
+    pub fn nuisance(&self) -> Option<&nuisance::Nuisance> {
+        self.found.as_ref()
+    }
 }
 
 /// The outcome of the LED-count check.
@@ -481,6 +498,12 @@ pub struct WindowDecoder {
     estimator: Estimator,
     /// Most LEDs a window's signal space is analysed for (the count check's probe).
     spectrum_leds: usize,
+    /// LEDs whose carriers are set aside when looking for room nuisances.
+    nuisance_leds: usize,
+    /// Camera frame rate (places the mains flicker in the window).
+    fps: f64,
+    /// Largest rate mismatch searched, and a given rate ratio.
+    rate: (f64, Option<f64>),
 }
 
 impl WindowDecoder {
@@ -505,7 +528,44 @@ impl WindowDecoder {
                 LedCount::Fixed(n) => n,
                 LedCount::Auto => AUTO_MAX_LEDS,
             },
+            nuisance_leds: match config.leds {
+                LedCount::Fixed(n) => n,
+                LedCount::Auto => AUTO_MAX_LEDS,
+            },
+            fps: format.fps,
+            rate: (config.max_rate_mismatch, config.rate_ratio),
         })
+    }
+
+    /// What to try when room-light flicker on 50 or 60 Hz mains falls on a carrier line of
+    /// `leds` LEDs at rate ratio `rate` (where the decoder cannot tell it from the carrier,
+    /// [`meb_core::mains`]); `None` when it falls clear of them.
+    fn mains_advice(&self, leds: usize, rate: f64) -> Option<String> {
+        let chip_rate = rate * self.fps;
+        let window = MAX_WINDOW_FRAMES.min(1 << (leds + 3));
+        let clashes = meb_core::mains::clashes(leds as u8, chip_rate, self.fps, window);
+        let first = clashes.first()?;
+        let clear = meb_core::mains::clear_chip_rates(leds as u8, self.fps, window, self.rate.0, 3);
+        let rates = if clear.is_empty() {
+            "a camera frame rate that `meb carriers` shows clear".to_string()
+        } else {
+            clear
+                .iter()
+                .map(|r| format!("a chip rate of {r:.1} Hz"))
+                .collect::<Vec<_>>()
+                .join(" or ")
+        };
+        Some(format!(
+            "if a room light on the mains is on: its flicker at {:.0} Hz ({} Hz mains) falls on \
+             LED {}'s carrier line at this chip rate ({chip_rate:.1} Hz, camera {} fps), where it \
+             cannot be told from the carrier; switch it off, or use {rates} (`meb carriers \
+             --rate {chip_rate:.1} --fps {}`)",
+            first.family_hz * first.harmonic as f64,
+            first.family_hz / 2.0,
+            first.led,
+            self.fps,
+            self.fps
+        ))
     }
 
     /// The decoded region.
@@ -513,8 +573,56 @@ impl WindowDecoder {
         self.roi
     }
 
-    /// Picks the pixel sample of a window of frames cropped to the region.
+    /// Picks the pixel sample of a window of frames cropped to the region, with the room's
+    /// nuisance components found and projected out ([`nuisance`]).
     pub fn sample(&self, frames: &[Samples]) -> WindowSample {
+        self.sample_at(frames, None)
+    }
+
+    /// [`WindowDecoder::sample`] with the rate ratio of an earlier window of the stream.
+    pub fn sample_at(&self, frames: &[Samples], rate: Option<f64>) -> WindowSample {
+        let raw = self.raw_sample(frames);
+        let leds = self.nuisance_leds;
+        if raw.sample.is_empty() || frames.len() < 1 << (leds.min(2) + 1) {
+            return raw;
+        }
+        let rate = rate.or(self.rate.1).unwrap_or_else(|| {
+            let space = SignalSpace::from_spectrum(&raw.spectrum, &raw.gram, leds);
+            let waves = ReceivedWaveform::set(leds, None);
+            seed::scan_rate_of(&space, &waves, frames.len(), self.rate.0)
+        });
+        let noise = SignalSpace::from_spectrum(&raw.spectrum, &raw.gram, self.spectrum_leds).noise;
+        let window = nuisance::Window {
+            values: raw.sample.values(),
+            means: raw.sample.means(),
+            gram: &raw.gram,
+            frames: frames.len(),
+            noise,
+        };
+        let found = nuisance::detect(&window, self.fps, rate, leds);
+        if found.is_empty() {
+            return WindowSample {
+                found: Some(found),
+                ..raw
+            };
+        }
+        let found = std::sync::Arc::new(found);
+        let WindowSample {
+            mut sample, gram, ..
+        } = raw;
+        let gram = found.project_gram(&gram);
+        sample.project(std::sync::Arc::clone(&found));
+        let spectrum = Spectrum::new(&gram, self.spectrum_leds);
+        WindowSample {
+            sample,
+            gram,
+            spectrum,
+            found: Some((*found).clone()),
+        }
+    }
+
+    /// The pixel sample without nuisance components.
+    fn raw_sample(&self, frames: &[Samples]) -> WindowSample {
         let grid = RowGrid::new(
             self.frame_pixels,
             self.roi.y,
@@ -534,6 +642,7 @@ impl WindowDecoder {
             sample,
             gram,
             spectrum,
+            found: None,
         }
     }
 
@@ -571,7 +680,7 @@ impl WindowDecoder {
         if window.sample.is_empty() {
             return Err(DemodError::NothingToDecode("saturated"));
         }
-        let waves: Vec<ReceivedWaveform> = (0..probe).map(ReceivedWaveform::new).collect();
+        let waves = ReceivedWaveform::set(probe, window.sample.nuisance());
         let space = SignalSpace::from_spectrum(&window.spectrum, &window.gram, probe);
         let fit = fit_timing(
             &window.sample,
@@ -616,6 +725,20 @@ impl WindowDecoder {
                                 / sample.examined().max(1) as f64,
                         });
                     }
+                    if detected > n
+                        && let Some(advice) = self.mains_advice(n, fit.model.timing.rate_ratio)
+                    {
+                        return Err(DemodError::Implausible {
+                            problems: format!(
+                                "{n} LEDs requested and the video shows {detected} modulated \
+                                 components"
+                            ),
+                            advice: format!(
+                                "{advice}; use --leds {detected} only if a further modulated LED \
+                                 is really on"
+                            ),
+                        });
+                    }
                     return Err(DemodError::LedCountMismatch {
                         requested: n,
                         detected,
@@ -646,7 +769,7 @@ impl WindowDecoder {
     ) -> WindowDecode {
         let count = frames.len();
         let height = self.roi.height;
-        let waves: Vec<ReceivedWaveform> = (0..leds).map(ReceivedWaveform::new).collect();
+        let waves = ReceivedWaveform::set(leds, window.sample.nuisance());
         let space = SignalSpace::from_spectrum(&window.spectrum, &window.gram, leds);
         let (fit, quality) = match seed {
             Some(same) if same.timing.model.shifts.len() == leds => {
@@ -668,7 +791,12 @@ impl WindowDecoder {
                 (fit, quality)
             }
         };
-        let verdict = quality::judge(&quality.leds, &fit);
+        let mut verdict = quality::judge(&quality.leds, &fit);
+        if !verdict.is_plausible()
+            && let Some(advice) = self.mains_advice(leds, fit.model.timing.rate_ratio)
+        {
+            verdict.advice.insert(0, advice);
+        }
         let bands = if fit.rolling {
             let ramp = fit.model.ramp_chips(height).abs();
             ((ramp / BAND_PHASE_STEP).ceil() as usize).clamp(1, height)
@@ -730,6 +858,8 @@ struct Accumulated {
     /// The verdict over the windows so far.
     verdict: Option<Verdict>,
     variance_factors: Vec<f64>,
+    /// The room's nuisance components found so far.
+    room: nuisance::RoomReport,
 }
 
 impl Accumulated {
@@ -886,6 +1016,7 @@ fn finish(
         verdict: state
             .verdict
             .unwrap_or_else(|| Verdict::from_findings(Vec::new(), Vec::new())),
+        room: state.room,
     };
     Ok(Decoded {
         leds: LedImages { images },

@@ -1,0 +1,567 @@
+//! Nuisance components of a real room: mains flicker and a drifting exposure, found in a window
+//! and projected out with the carriers.
+//!
+//! A room lamp on mains of frequency f_m adds to every pixel a(p)·w(t), w periodic at 2·f_m
+//! (any waveform: harmonics at h·2·f_m), a(p) the lamp's light on the pixel. Sampled at F frames
+//! of rate fps, harmonic h is a sinusoid at ν_h = h·2·f_m/fps cycles per frame (aliased into
+//! [0, ½]); f_m is free within ±0.5 % of 50 or 60 Hz, which over a window of F frames moves the
+//! phase by up to 0.005·h·2·f_m·F/fps cycles, so each harmonic is modelled by four columns,
+//! cos, sin, τ·cos and τ·sin (τ the centred frame time): the first-order expansion of a
+//! sinusoid of slightly unknown frequency and slowly varying amplitude. An auto-exposure that
+//! drifts multiplies the frame by g(j) ≈ 1 + g₁·τ + g₂·τ²; on the background B(p) that is
+//! B(p)·(g(j) − 1), spanned by the Legendre columns τ and τ² − mean.
+//!
+//! Each pixel then reads r = 1·b + T·a + P·c + noise, P the nuisance columns (orthonormal,
+//! orthogonal to the constant) and T the LEDs' templates. By the Frisch–Waugh–Lovell theorem
+//! (R. Frisch, F. V. Waugh, "Partial time regressions as compared with individual trends",
+//! Econometrica 1933; M. C. Lovell, "Seasonal adjustment of economic time series and multiple
+//! regression analysis", J. Am. Stat. Assoc. 1963) the least-squares a of that model are those of
+//! r against the projected templates T' = (I − PPᵀ)·T: so every template the decoder forms (seed
+//! scores, timing fit, per-pixel filter, quality) is projected ([`Nuisance::project`]), the
+//! timing sample is projected once, and the per-pixel filter keeps its size. Where a harmonic
+//! coincides with a carrier's line, T' loses that line and the LED's gain rests on its other
+//! harmonics (unbiased, noisier).
+//!
+//! Detection ([`detect`]) tests each candidate against the window's Gram matrix G = XᵀX of
+//! the centred pixel sample after removing the carriers' strongest harmonics at the estimated
+//! rate (the subspace C of [`super::quality`]): G' = (I − CCᵀ)·G·(I − CCᵀ). The energy per
+//! direction q'ᵀG'q' (q' = (I − CCᵀ)q normalised) of a candidate is compared with the noise
+//! energy per direction σ²_G and with nearby control frequencies (or, for the drift, the next
+//! two Legendre degrees), which carry the same leakage from the carriers' weaker harmonics: a
+//! component counts when its energy per direction exceeds [`DETECTION_RATIO`] times the larger
+//! of the two. A false detection costs only a little of the carriers' energy (the projection
+//! keeps the estimates unbiased), a missed one biases the gains.
+
+use super::waveform::ReceivedWaveform;
+use nalgebra::DMatrix;
+use serde::{Deserialize, Serialize};
+use std::f64::consts::TAU;
+
+/// Nominal flicker fundamentals: twice the 50 and 60 Hz mains.
+pub const FLICKER_FAMILIES_HZ: [f64; 2] = [100.0, 120.0];
+/// Largest relative offset of the mains frequency from nominal.
+pub const MAINS_TOLERANCE: f64 = 0.005;
+/// Steps of the mains-frequency scan across ±[`MAINS_TOLERANCE`].
+const MAINS_STEPS: usize = 21;
+/// Flicker harmonics tested.
+pub const MAX_HARMONICS: usize = 4;
+/// A component counts when its energy per direction exceeds this multiple of the noise's and of
+/// its controls'.
+pub const DETECTION_RATIO: f64 = 1.5;
+/// Control frequencies beside a candidate, in frequency bins (1/F) either side.
+const CONTROL_OFFSETS: [f64; 4] = [2.5, 3.5, 4.5, 5.5];
+/// A candidate keeping less than this share of its norm outside the carriers' harmonics lies on
+/// a carrier line: it cannot be told apart from the carrier.
+const SEPARABLE_SHARE: f64 = 0.3;
+/// Harmonics of each carrier removed before testing (as [`super::quality`]'s subspaces).
+const CARRIER_HARMONICS: usize = 4;
+
+/// Flicker found in a window.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct Flicker {
+    /// Nominal flicker fundamental of the family, Hz (100 for 50 Hz mains, 120 for 60 Hz).
+    pub nominal_hz: f64,
+    /// Best-fitting flicker fundamental, Hz (twice the mains frequency).
+    pub frequency_hz: f64,
+    /// Harmonics (multiples of the fundamental) found and projected out.
+    pub harmonics: Vec<usize>,
+    /// Amplitude of the strongest harmonic, RMS over the sampled pixels, fraction of full scale.
+    pub amplitude: f64,
+    /// Harmonics that fall on a carrier's line at this camera rate: their flicker cannot be
+    /// measured apart from that carrier, and projecting them out costs that carrier's line.
+    pub on_carrier_lines: Vec<usize>,
+}
+
+/// An exposure drift found in a window.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct Drift {
+    /// Relative change of the frames' gain from the window's first frame to its last.
+    pub relative_change: f64,
+}
+
+/// What a decode found of the room over its windows (`decode.json`'s `room`).
+#[derive(Debug, Clone, PartialEq, Default, Serialize, Deserialize)]
+pub struct RoomReport {
+    /// Mains flicker per family found, from the window where it was strongest.
+    pub flicker: Vec<Flicker>,
+    /// Exposure drift: relative gain change over the window, largest over the windows
+    /// (`None`: none found).
+    pub exposure_drift: Option<f64>,
+    /// Windows in which some nuisance component was found and projected out.
+    pub windows_modelled: usize,
+}
+
+impl RoomReport {
+    /// Adds one window's findings.
+    pub fn add(&mut self, window: &Nuisance) {
+        if window.is_empty() && window.flicker.is_empty() {
+            return;
+        }
+        self.windows_modelled += usize::from(!window.is_empty());
+        for found in &window.flicker {
+            match self
+                .flicker
+                .iter_mut()
+                .find(|f| f.nominal_hz == found.nominal_hz)
+            {
+                Some(f) if f.amplitude >= found.amplitude => {}
+                Some(f) => *f = found.clone(),
+                None => self.flicker.push(found.clone()),
+            }
+        }
+        if let Some(drift) = &window.drift {
+            let change = drift.relative_change;
+            if self.exposure_drift.is_none_or(|d| change.abs() > d.abs()) {
+                self.exposure_drift = Some(change);
+            }
+        }
+    }
+}
+
+/// The nuisance components of one window and their orthonormal columns.
+#[derive(Debug, Clone, PartialEq, Default)]
+pub struct Nuisance {
+    frames: usize,
+    /// Orthonormal columns (F values each), orthogonal to the constant.
+    columns: Vec<Vec<f64>>,
+    /// Mains flicker found.
+    pub flicker: Vec<Flicker>,
+    /// Exposure drift found.
+    pub drift: Option<Drift>,
+    /// The drift's gain g(j) relative to the window's mean (empty without a drift): the
+    /// carriers' templates are multiplied by it, A_i·g·t_i being what a drifting camera records.
+    gain: Vec<f64>,
+}
+
+impl Nuisance {
+    /// Whether nothing was found.
+    pub fn is_empty(&self) -> bool {
+        self.columns.is_empty()
+    }
+
+    /// Number of nuisance columns.
+    pub fn columns(&self) -> usize {
+        self.columns.len()
+    }
+
+    /// v ← (I − PPᵀ)·v, for a vector of the window's length (others are left alone).
+    pub fn project(&self, v: &mut [f64]) {
+        if v.len() != self.frames {
+            return;
+        }
+        self.project_only(v);
+    }
+
+    /// A carrier template t ← (I − PPᵀ)·(g·t): the drift's gain applied, then projected.
+    pub fn project_template(&self, v: &mut [f64]) {
+        if v.len() != self.frames {
+            return;
+        }
+        if self.gain.len() == v.len() {
+            v.iter_mut().zip(&self.gain).for_each(|(x, g)| *x *= g);
+        }
+        self.project_only(v);
+    }
+
+    /// (I − PPᵀ)·v.
+    fn project_only(&self, v: &mut [f64]) {
+        for q in &self.columns {
+            let d = dot(q, v);
+            v.iter_mut().zip(q).for_each(|(x, &y)| *x -= d * y);
+        }
+    }
+
+    /// (I − PPᵀ)·G·(I − PPᵀ) of an F × F matrix.
+    pub fn project_gram(&self, gram: &DMatrix<f64>) -> DMatrix<f64> {
+        let m = complement(&self.columns, self.frames);
+        &m * gram * &m
+    }
+}
+
+/// What [`detect`] needs to know about the window.
+pub struct Window<'a> {
+    /// Centred pixel values, pixel-major (`frames` per pixel).
+    pub values: &'a [f64],
+    /// Each pixel's mean (the background with the LEDs' mean light), fraction of full scale.
+    pub means: &'a [f64],
+    /// Gram matrix of the centred values.
+    pub gram: &'a DMatrix<f64>,
+    /// Frames F.
+    pub frames: usize,
+    /// σ²_G: noise energy per direction, summed over the pixels.
+    pub noise: f64,
+}
+
+/// Finds mains flicker and exposure drift in `window` (module docs): `fps` the camera rate,
+/// `rate` the chips per frame and `leds` the LEDs whose carriers are removed before testing.
+pub fn detect(window: &Window<'_>, fps: f64, rate: f64, leds: usize) -> Nuisance {
+    let f = window.frames;
+    let pixels = window.means.len();
+    if f < 16 || pixels == 0 || !(fps.is_finite() && fps > 0.0) {
+        return Nuisance::default();
+    }
+    let carriers = carrier_columns(rate, leds, f);
+    let m = complement(&carriers, f);
+    let residual = &m * window.gram * &m;
+    let floor = window.noise.max(f64::MIN_POSITIVE);
+    // Energy per direction of the span of `columns` in the residual Gram matrix, and whether
+    // enough of them lies outside the carriers' harmonics.
+    let energy = |columns: &[Vec<f64>]| -> (f64, bool) {
+        let projected: Vec<Vec<f64>> = columns.iter().map(|c| apply(&m, c)).collect();
+        let kept = columns
+            .iter()
+            .zip(&projected)
+            .map(|(c, p)| dot(p, p) / dot(c, c).max(f64::MIN_POSITIVE))
+            .fold(1.0f64, f64::min);
+        let basis = orthonormal(&projected, &[]);
+        if basis.is_empty() {
+            return (0.0, false);
+        }
+        let total: f64 = basis.iter().map(|q| quadratic(&residual, q)).sum();
+        (total / basis.len() as f64, kept >= SEPARABLE_SHARE)
+    };
+    let mut nuisance = Nuisance {
+        frames: f,
+        ..Nuisance::default()
+    };
+    let mut columns: Vec<Vec<f64>> = Vec::new();
+    for nominal in FLICKER_FAMILIES_HZ {
+        if let Some((flicker, found)) = flicker_of(nominal, fps, f, pixels, floor, &energy) {
+            columns.extend(found);
+            nuisance.flicker.push(flicker);
+        }
+    }
+    // Drift: Legendre degrees 1 and 2 against degrees 3 and 4.
+    let legendre: Vec<Vec<f64>> = orthonormal(
+        &(1..=4)
+            .map(|d| (0..f).map(|j| centred_time(j, f).powi(d)).collect())
+            .collect::<Vec<_>>(),
+        &[vec![1.0; f]],
+    );
+    if legendre.len() == 4 {
+        let (low, _) = energy(&legendre[..2]);
+        let (control, _) = energy(&legendre[2..]);
+        if low > DETECTION_RATIO * floor.max(control) {
+            let smooth = drift_series(window, &legendre[..2]);
+            nuisance.drift = Some(Drift {
+                relative_change: smooth[f - 1] - smooth[0],
+            });
+            nuisance.gain = smooth.iter().map(|d| 1.0 + d).collect();
+            columns.extend(legendre[..2].iter().cloned());
+        }
+    }
+    nuisance.columns = orthonormal(&columns, &[vec![1.0; f]]);
+    nuisance
+}
+
+/// The flicker of the family of nominal fundamental `nominal` Hz, if found: its report and its
+/// columns.
+fn flicker_of(
+    nominal: f64,
+    fps: f64,
+    f: usize,
+    pixels: usize,
+    floor: f64,
+    energy: &dyn Fn(&[Vec<f64>]) -> (f64, bool),
+) -> Option<(Flicker, Vec<Vec<f64>>)> {
+    let bin = 1.0 / f as f64;
+    // Per harmonic: the scan's energies at every mains step, and the control level.
+    let mut best: Option<(f64, f64)> = None;
+    for step in 0..MAINS_STEPS {
+        let offset = MAINS_TOLERANCE * (2.0 * step as f64 / (MAINS_STEPS - 1) as f64 - 1.0);
+        let fundamental = nominal * (1.0 + offset);
+        let total: f64 = (1..=MAX_HARMONICS)
+            .filter_map(|h| usable(alias(h as f64 * fundamental / fps), bin))
+            .map(|nu| energy(&pair(nu, f)).0)
+            .sum();
+        if best.is_none_or(|(e, _)| total > e) {
+            best = Some((total, fundamental));
+        }
+    }
+    let (_, fundamental) = best?;
+    let mut harmonics = Vec::new();
+    let mut on_lines = Vec::new();
+    let mut columns = Vec::new();
+    let mut amplitude = 0.0f64;
+    for h in 1..=MAX_HARMONICS {
+        let Some(nu) = usable(alias(h as f64 * fundamental / fps), bin) else {
+            continue;
+        };
+        let (e, separable) = energy(&pair(nu, f));
+        let controls: Vec<f64> = CONTROL_OFFSETS
+            .iter()
+            .flat_map(|&o| [nu + o * bin, nu - o * bin])
+            .filter_map(|c| usable(alias(c), bin))
+            .map(|c| energy(&pair(c, f)).0)
+            .collect();
+        if !separable {
+            // Its energy cannot be measured apart from the carrier's: projected out below
+            // with the family, if the family shows elsewhere.
+            on_lines.push((h, nu));
+            continue;
+        }
+        let control = median(controls).unwrap_or(floor);
+        if e > DETECTION_RATIO * floor.max(control) {
+            harmonics.push(h);
+            columns.extend(quad(nu, f));
+            // Excess energy of the pair = a²·F/2 per pixel (a the amplitude).
+            let excess = 2.0 * (e - floor.max(control)).max(0.0);
+            amplitude = amplitude.max((2.0 * excess / (pixels as f64 * f as f64)).sqrt());
+        }
+    }
+    if harmonics.is_empty() {
+        return None;
+    }
+    // The family is present: its harmonics on carrier lines are projected out too (unbiased,
+    // at the cost of that carrier's line).
+    for &(h, nu) in &on_lines {
+        harmonics.push(h);
+        columns.extend(quad(nu, f));
+    }
+    harmonics.sort_unstable();
+    let on_lines: Vec<usize> = on_lines.into_iter().map(|(h, _)| h).collect();
+    Some((
+        Flicker {
+            nominal_hz: nominal,
+            frequency_hz: fundamental,
+            harmonics,
+            amplitude,
+            on_carrier_lines: on_lines,
+        },
+        columns,
+    ))
+}
+
+/// The window's relative gain change per frame (mean 0): the pixels' centred values regressed
+/// on their means, frame by frame, then on the drift columns.
+fn drift_series(window: &Window<'_>, columns: &[Vec<f64>]) -> Vec<f64> {
+    let f = window.frames;
+    let weight: f64 = window.means.iter().map(|m| m * m).sum();
+    if weight <= 0.0 {
+        return vec![0.0; f];
+    }
+    let mut series = vec![0.0; f];
+    for (p, &m) in window.means.iter().enumerate() {
+        let x = &window.values[p * f..(p + 1) * f];
+        series.iter_mut().zip(x).for_each(|(s, v)| *s += m * v);
+    }
+    series.iter_mut().for_each(|s| *s /= weight);
+    let mut smooth = vec![0.0; f];
+    for q in columns {
+        let c = dot(q, &series);
+        smooth.iter_mut().zip(q).for_each(|(s, v)| *s += c * v);
+    }
+    smooth
+}
+
+/// Centred, scaled frame time τ ∈ [−½, ½].
+fn centred_time(j: usize, f: usize) -> f64 {
+    (j as f64 - (f as f64 - 1.0) / 2.0) / f as f64
+}
+
+/// A frequency folded into [0, ½] cycles per frame.
+fn alias(nu: f64) -> f64 {
+    let x = nu.rem_euclid(1.0);
+    if x > 0.5 { 1.0 - x } else { x }
+}
+
+/// `nu` unless it sits within 1.5 bins of 0 (a constant or drift, not a flicker the window
+/// resolves) or within half a bin of ½ (the sine vanishes).
+fn usable(nu: f64, bin: f64) -> Option<f64> {
+    (nu > 1.5 * bin && nu < 0.5 - 0.5 * bin).then_some(nu)
+}
+
+/// cos and sin at `nu` cycles per frame.
+fn pair(nu: f64, f: usize) -> [Vec<f64>; 2] {
+    [
+        (0..f).map(|j| (TAU * nu * j as f64).cos()).collect(),
+        (0..f).map(|j| (TAU * nu * j as f64).sin()).collect(),
+    ]
+}
+
+/// cos, sin, τ·cos and τ·sin at `nu` cycles per frame (module docs).
+fn quad(nu: f64, f: usize) -> Vec<Vec<f64>> {
+    let [c, s] = pair(nu, f);
+    let tc = c
+        .iter()
+        .enumerate()
+        .map(|(j, v)| centred_time(j, f) * v)
+        .collect();
+    let ts = s
+        .iter()
+        .enumerate()
+        .map(|(j, v)| centred_time(j, f) * v)
+        .collect();
+    vec![c, s, tc, ts]
+}
+
+/// The carriers' strongest harmonics at rate `rate` for `leds` LEDs, orthonormal and
+/// orthogonal to the constant.
+fn carrier_columns(rate: f64, leds: usize, f: usize) -> Vec<Vec<f64>> {
+    let columns: Vec<Vec<f64>> = (0..leds)
+        .flat_map(|i| {
+            super::quality::led_subspace(&ReceivedWaveform::new(i), rate, f)
+                .into_iter()
+                .take(2 * CARRIER_HARMONICS)
+        })
+        .collect();
+    orthonormal(&columns, &[vec![1.0; f]])
+}
+
+/// Gram–Schmidt of `columns` against the span of `against` (kept out of the result) and each
+/// other; columns that vanish are dropped.
+fn orthonormal(columns: &[Vec<f64>], against: &[Vec<f64>]) -> Vec<Vec<f64>> {
+    let mut done: Vec<Vec<f64>> = Vec::new();
+    for a in against {
+        let mut v = a.clone();
+        for q in &done {
+            let d = dot(q, &v);
+            v.iter_mut().zip(q).for_each(|(x, &y)| *x -= d * y);
+        }
+        let n = dot(&v, &v).sqrt();
+        if n > 1e-12 {
+            v.iter_mut().for_each(|x| *x /= n);
+            done.push(v);
+        }
+    }
+    let fixed = done.len();
+    for c in columns {
+        let scale = dot(c, c).sqrt();
+        let mut v = c.clone();
+        for _ in 0..2 {
+            for q in &done {
+                let d = dot(q, &v);
+                v.iter_mut().zip(q).for_each(|(x, &y)| *x -= d * y);
+            }
+        }
+        let n = dot(&v, &v).sqrt();
+        if n > 1e-6 * scale && n > 0.0 {
+            v.iter_mut().for_each(|x| *x /= n);
+            done.push(v);
+        }
+    }
+    done.split_off(fixed)
+}
+
+/// I − QQᵀ (F × F) for orthonormal columns Q.
+fn complement(columns: &[Vec<f64>], f: usize) -> DMatrix<f64> {
+    let mut m = DMatrix::identity(f, f);
+    for q in columns {
+        for a in 0..f {
+            for b in 0..f {
+                m[(a, b)] -= q[a] * q[b];
+            }
+        }
+    }
+    m
+}
+
+/// M·v.
+fn apply(m: &DMatrix<f64>, v: &[f64]) -> Vec<f64> {
+    (0..m.nrows())
+        .map(|a| (0..m.ncols()).map(|b| m[(a, b)] * v[b]).sum())
+        .collect()
+}
+
+/// qᵀ·G·q.
+fn quadratic(g: &DMatrix<f64>, q: &[f64]) -> f64 {
+    dot(q, &apply(g, q))
+}
+
+fn dot(a: &[f64], b: &[f64]) -> f64 {
+    a.iter().zip(b).map(|(x, y)| x * y).sum()
+}
+
+fn median(mut values: Vec<f64>) -> Option<f64> {
+    if values.is_empty() {
+        return None;
+    }
+    values.sort_by(f64::total_cmp);
+    Some(values[values.len() / 2])
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// A window of `pixels` pixels: white noise of σ plus `extra(p, j)`.
+    fn window_of(
+        pixels: usize,
+        f: usize,
+        sigma: f64,
+        extra: impl Fn(usize, usize) -> f64,
+    ) -> (Vec<f64>, Vec<f64>, DMatrix<f64>) {
+        use rand::SeedableRng;
+        use rand_distr::{Distribution, Normal};
+        let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(7);
+        let normal = Normal::new(0.0, sigma).unwrap_or_else(|_| unreachable!());
+        let mut values = vec![0.0; pixels * f];
+        for p in 0..pixels {
+            let x = &mut values[p * f..(p + 1) * f];
+            for (j, v) in x.iter_mut().enumerate() {
+                *v = extra(p, j) + normal.sample(&mut rng);
+            }
+            let mean = x.iter().sum::<f64>() / f as f64;
+            x.iter_mut().for_each(|v| *v -= mean);
+        }
+        let m = DMatrix::from_row_slice(pixels, f, &values);
+        let gram = m.tr_mul(&m);
+        (values, vec![0.2; pixels], gram)
+    }
+
+    #[test]
+    fn finds_flicker_and_its_family_and_nothing_in_noise() {
+        let (pixels, f, sigma) = (400, 128, 0.01);
+        let noise = pixels as f64 * sigma * sigma;
+        // 100.3 Hz flicker at 960 fps, amplitude 0.004 varying over the pixels.
+        let (values, means, gram) = window_of(pixels, f, sigma, |p, j| {
+            let a = 0.004 * (0.5 + p as f64 / pixels as f64);
+            a * (TAU * 100.3 / 960.0 * j as f64 + 0.7).cos()
+        });
+        let window = Window {
+            values: &values,
+            means: &means,
+            gram: &gram,
+            frames: f,
+            noise,
+        };
+        let found = detect(&window, 960.0, 1.0, 4);
+        assert_eq!(found.flicker.len(), 1, "{found:?}");
+        assert_eq!(found.flicker[0].nominal_hz, 100.0);
+        assert_eq!(found.flicker[0].harmonics, vec![1]);
+        assert!(found.drift.is_none(), "{found:?}");
+        let (values, means, gram) = window_of(pixels, f, sigma, |_, _| 0.0);
+        let quiet = Window {
+            values: &values,
+            means: &means,
+            gram: &gram,
+            frames: f,
+            noise,
+        };
+        assert!(detect(&quiet, 960.0, 1.0, 4).is_empty());
+    }
+
+    #[test]
+    fn finds_a_drift_and_measures_it() {
+        let (pixels, f, sigma) = (400, 128, 0.01);
+        let noise = pixels as f64 * sigma * sigma;
+        // Gain rising 5 % over the window on a background of 0.2.
+        let (values, means, gram) = window_of(pixels, f, sigma, |_, j| {
+            0.2 * 0.05 * j as f64 / (f - 1) as f64
+        });
+        let window = Window {
+            values: &values,
+            means: &means,
+            gram: &gram,
+            frames: f,
+            noise,
+        };
+        let found = detect(&window, 960.0, 1.0, 4);
+        let drift = found.drift.clone().unwrap_or_else(|| panic!("{found:?}"));
+        assert!((drift.relative_change - 0.05).abs() < 0.005, "{drift:?}");
+        assert!(found.flicker.is_empty(), "{found:?}");
+        let mut v: Vec<f64> = (0..f).map(|j| centred_time(j, f)).collect();
+        found.project(&mut v);
+        assert!(dot(&v, &v) < 1e-20);
+    }
+}
