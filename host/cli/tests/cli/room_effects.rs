@@ -33,7 +33,16 @@ const BACKGROUND: f64 = 0.15;
 
 /// The capture with `room` added; `seed` fixes phases and noise.
 fn capture(room: RoomEffects, seed: u64) -> SimulatedCapture {
-    let rig = Rig::from_toml_str(&rig_toml(WIDTH, HEIGHT, 0.5, &LEDS), "room").unwrap();
+    capture_at(room, seed, None)
+}
+
+/// [`capture`] by a camera at `rates.0` fps with every LED at a chip rate of `rates.1` Hz
+/// (960 fps and chips when `None`).
+fn capture_at(room: RoomEffects, seed: u64, rates: Option<(f64, f64)>) -> SimulatedCapture {
+    let (fps, chip_rate_hz) = rates.unwrap_or((FPS, FPS));
+    let toml =
+        rig_toml(WIDTH, HEIGHT, 0.5, &LEDS).replace("fps = 960.0", &format!("fps = {fps:?}"));
+    let rig = Rig::from_toml_str(&toml, "room").unwrap();
     let mut scene = Scene::single(SceneObject::sphere(60.0));
     scene.ground = Some(GroundPlane {
         z_mm: -30.0,
@@ -50,6 +59,7 @@ fn capture(room: RoomEffects, seed: u64) -> SimulatedCapture {
         peak: 0.08,
         seed,
         room,
+        chip_rates_hz: Some(vec![chip_rate_hz; LEDS.len()]),
         ..SimConfig::default()
     };
     let dark =
@@ -63,7 +73,7 @@ fn decode_capture(capture: &SimulatedCapture) -> Result<Decoded, DemodError> {
     let frames: Vec<Frame> = (0..capture.config().frames)
         .map(|j| capture.render_frame(j))
         .collect();
-    let format = FrameFormat::full_range(WIDTH, HEIGHT, 8, FPS);
+    let format = FrameFormat::full_range(WIDTH, HEIGHT, 8, capture.info().fps);
     let mut source = MemorySource::new(format, frames).unwrap();
     let config = DecodeConfig {
         leds: LedCount::Fixed(4),
@@ -95,6 +105,44 @@ fn gains(capture: &SimulatedCapture, decoded: &Decoded) -> Vec<f64> {
         .collect()
 }
 
+/// Decodes a capture of `room` and checks it is decoded with every gain within 1 % of the
+/// truth, or refused with a reason that names the flicker found and never advises more LEDs;
+/// returns the flicker families reported (empty when refused).
+fn decoded_or_refused_naming_flicker(
+    room: RoomEffects,
+    seed: u64,
+    rates: Option<(f64, f64)>,
+) -> Vec<f64> {
+    let capture = capture_at(room.clone(), seed, rates);
+    match decode_capture(&capture) {
+        Ok(decoded) => {
+            let gains = gains(&capture, &decoded);
+            eprintln!(
+                "{room:?} {rates:?} seed {seed}: gains {gains:.4?}, room {:?}",
+                decoded.report.room
+            );
+            assert!(
+                gains.iter().all(|g| (g - 1.0).abs() < 0.01),
+                "{room:?}: decoded with gains {gains:.4?}"
+            );
+            decoded
+                .report
+                .room
+                .flicker
+                .iter()
+                .map(|f| f.nominal_hz)
+                .collect()
+        }
+        Err(e) => {
+            let text = e.to_string();
+            eprintln!("{room:?} {rates:?} seed {seed}: refused: {text}");
+            assert!(text.contains("flicker at"), "{text}");
+            assert!(!text.contains("--leds"), "{text}");
+            Vec::new()
+        }
+    }
+}
+
 /// A lamp of mean `level` on `mains` Hz with `waveform`.
 fn lamp(mains: f64, level: f64, waveform: LampWaveform) -> RoomEffects {
     RoomEffects {
@@ -105,7 +153,18 @@ fn lamp(mains: f64, level: f64, waveform: LampWaveform) -> RoomEffects {
 
 /// Decodes and checks every gain within `tolerance` of 1 (of their mean with `relative`).
 fn decoded_within(room: RoomEffects, seed: u64, tolerance: f64, relative: bool) -> Decoded {
-    let capture = capture(room.clone(), seed);
+    decoded_within_at(room, seed, None, tolerance, relative)
+}
+
+/// [`decoded_within`] with the camera's and the chips' rates `rates` ([`capture_at`]).
+fn decoded_within_at(
+    room: RoomEffects,
+    seed: u64,
+    rates: Option<(f64, f64)>,
+    tolerance: f64,
+    relative: bool,
+) -> Decoded {
+    let capture = capture_at(room.clone(), seed, rates);
     let decoded =
         decode_capture(&capture).unwrap_or_else(|e| panic!("{room:?} seed {seed}: refused: {e}"));
     let gains = gains(&capture, &decoded);
@@ -165,16 +224,11 @@ fn a_lamp_on_50_hz_mains_is_modelled_and_reported() {
 }
 
 #[test]
-fn a_rectified_lamp_with_harmonics_far_brighter_than_the_leds_is_modelled() {
+fn a_rectified_lamp_with_harmonics_far_brighter_than_the_leds_is_modelled_or_named() {
     // |sin| on 49.8 Hz mains, mean 0.15 of full scale: several times the LEDs' light.
-    let decoded = decoded_within(lamp(49.8, 0.15, LampWaveform::AbsSin), 4, 0.01, false);
-    let flicker = &decoded.report.room.flicker;
-    assert!(
-        flicker
-            .iter()
-            .any(|f| f.nominal_hz == 100.0 && f.harmonics.len() >= 2),
-        "{flicker:?}"
-    );
+    let families =
+        decoded_or_refused_naming_flicker(lamp(49.8, 0.15, LampWaveform::AbsSin), 4, None);
+    assert!(families.iter().all(|&f| f == 100.0), "{families:?}");
 }
 
 #[test]
@@ -191,4 +245,81 @@ fn an_exposure_ramp_is_modelled_and_reported() {
         "{:?}",
         decoded.report.room
     );
+}
+
+/// A camera rate at which `meb carriers` finds chip rates clear of both flicker families for
+/// 4 LEDs within the decoder's rate search (at 960 fps none is: LED 2's fundamental stays
+/// within a bin of 120 Hz), and the first of them.
+fn clear_rates() -> (f64, f64) {
+    let fps = 720.0;
+    let window = (1usize << (LEDS.len() + 3)).min(256);
+    let clear = meb_core::mains::clear_chip_rates(
+        LEDS.len() as u8,
+        fps,
+        window,
+        DecodeConfig::default().max_rate_mismatch,
+        3,
+    );
+    assert!(!clear.is_empty(), "no clear chip rate at {fps} fps");
+    assert!(meb_core::mains::clashes(LEDS.len() as u8, clear[0], fps, window).is_empty());
+    (fps, clear[0])
+}
+
+#[test]
+fn a_lamp_on_60_hz_mains_on_the_carriers_lines_is_refused_naming_the_flicker() {
+    // At a chip rate equal to the camera's 960 fps every 120 Hz harmonic falls on a carrier's
+    // line: the flicker cannot be told from the carriers, and the refusal says so.
+    let capture = capture(lamp(60.1, 0.025, LampWaveform::SinSquared), 6);
+    match decode_capture(&capture) {
+        Ok(decoded) => {
+            // Decoded only if right.
+            let gains = gains(&capture, &decoded);
+            assert!(
+                gains.iter().all(|g| (g - 1.0).abs() < 0.01),
+                "decoded with gains {gains:.4?}"
+            );
+        }
+        Err(e) => {
+            let text = e.to_string();
+            eprintln!("60 Hz lamp at 2.5 %, chip rate 960 Hz: {text}");
+            assert!(text.contains("60 Hz mains"), "{text}");
+            assert!(text.contains("meb carriers"), "{text}");
+            assert!(!text.contains("--leds"), "{text}");
+        }
+    }
+}
+
+#[test]
+fn a_lamp_on_60_hz_mains_at_a_recommended_chip_rate_is_modelled() {
+    let rates = clear_rates();
+    let decoded = decoded_within_at(
+        lamp(60.1, 0.025, LampWaveform::SinSquared),
+        7,
+        Some(rates),
+        0.01,
+        false,
+    );
+    let flicker = &decoded.report.room.flicker;
+    assert!(
+        flicker.iter().any(|f| f.nominal_hz == 120.0),
+        "{rates:?}: {flicker:?}"
+    );
+}
+
+#[test]
+fn a_lamp_ten_times_the_leds_level_at_a_recommended_chip_rate_is_modelled_or_named() {
+    // Mean 0.3 of full scale: ten times the LEDs' mean level on the object (0.03).
+    let rates = clear_rates();
+    for (mains, seed) in [(50.2, 8), (59.8, 9)] {
+        let nominal = if mains < 55.0 { 100.0 } else { 120.0 };
+        let families = decoded_or_refused_naming_flicker(
+            lamp(mains, 0.3, LampWaveform::SinSquared),
+            seed,
+            Some(rates),
+        );
+        assert!(
+            families.iter().all(|&f| f == nominal),
+            "{mains} Hz: {families:?}"
+        );
+    }
 }

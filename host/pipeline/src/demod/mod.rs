@@ -255,18 +255,39 @@ fn add_window(
     state: &mut Accumulated,
 ) -> Result<bool, DemodError> {
     let got = frames.len();
-    let rate = state
-        .fits
-        .last()
-        .map(|(fit, _, _)| fit.model.timing.rate_ratio);
-    let sample = decoder.sample_at(frames, rate);
-    if let Some(found) = sample.nuisance() {
-        state.room.add(found);
-    }
+    let mut sample = decoder.sample(frames);
+    // Whether the room's components were looked for in a fit of this window.
+    let mut looked = false;
     let (leds, seed) = match state.leds {
         Some(n) => (n, None),
         None => {
-            let count = decoder.count_leds(&sample, config.leds, config.check_led_count)?;
+            let checked = decoder.count_leds(&sample, config.leds, config.check_led_count);
+            let count = match &checked {
+                // The check's fit shows what the carriers leave; an unchecked count is
+                // looked at after the decode's fit.
+                Ok(LedCountCheck { fit: None, .. }) => checked?,
+                Ok(LedCountCheck { fit: Some(fit), .. }) => {
+                    looked = true;
+                    match decoder.with_nuisance(
+                        &sample,
+                        Some(&fit.timing),
+                        fit.timing.model.shifts.len(),
+                    ) {
+                        Some(projected) => {
+                            sample = projected;
+                            decoder.count_leds(&sample, config.leds, config.check_led_count)?
+                        }
+                        None => checked?,
+                    }
+                }
+                Err(_) => match decoder.with_nuisance(&sample, None, decoder.nuisance_leds) {
+                    Some(projected) => {
+                        sample = projected;
+                        decoder.count_leds(&sample, config.leds, config.check_led_count)?
+                    }
+                    None => checked?,
+                },
+            };
             state.leds = Some(count.leds);
             state.detected = count.detected;
             (count.leds, count.fit)
@@ -289,7 +310,18 @@ fn add_window(
         }
         return Ok(false);
     }
-    state.add(decoder.decode(frames, &sample, leds, seed.as_ref()));
+    let mut decoded = decoder.decode(frames, &sample, leds, seed.as_ref());
+    if !looked
+        && sample.found.is_none()
+        && let Some(projected) = decoder.with_nuisance(&sample, Some(&decoded.fit), leds)
+    {
+        decoded = decoder.decode(frames, &projected, leds, None);
+        sample = projected;
+    }
+    if let Some(found) = sample.nuisance() {
+        state.room.add(found);
+    }
+    state.add(decoded);
     Ok(true)
 }
 
@@ -573,52 +605,76 @@ impl WindowDecoder {
         self.roi
     }
 
-    /// Picks the pixel sample of a window of frames cropped to the region, with the room's
-    /// nuisance components found and projected out ([`nuisance`]).
+    /// Picks the pixel sample of a window of frames cropped to the region (no nuisance
+    /// component projected out: [`WindowDecoder::with_nuisance`]).
     pub fn sample(&self, frames: &[Samples]) -> WindowSample {
-        self.sample_at(frames, None)
+        self.raw_sample(frames)
     }
 
-    /// [`WindowDecoder::sample`] with the rate ratio of an earlier window of the stream.
-    pub fn sample_at(&self, frames: &[Samples], rate: Option<f64>) -> WindowSample {
-        let raw = self.raw_sample(frames);
-        let leds = self.nuisance_leds;
-        if raw.sample.is_empty() || frames.len() < 1 << (leds.min(2) + 1) {
-            return raw;
+    /// The room's nuisance components ([`nuisance`]) in `raw`, a sample with none projected
+    /// out, and the sample with them projected out; `None` when none is found. They are
+    /// looked for in what `fit` leaves unexplained (its templates and the carriers' strongest
+    /// lines removed) or, without a fit (the LED-count check refused the window), beside the
+    /// carriers' lines at the rate the seeds' scan finds for `leds` LEDs.
+    pub fn with_nuisance(
+        &self,
+        raw: &WindowSample,
+        fit: Option<&TimingFit>,
+        leds: usize,
+    ) -> Option<WindowSample> {
+        let frames = raw.sample.frames();
+        if raw.sample.is_empty() || raw.found.is_some() || frames < 1 << (leds.min(2) + 1) {
+            return None;
         }
-        let rate = rate.or(self.rate.1).unwrap_or_else(|| {
-            let space = SignalSpace::from_spectrum(&raw.spectrum, &raw.gram, leds);
-            let waves = ReceivedWaveform::set(leds, None);
-            seed::scan_rate_of(&space, &waves, frames.len(), self.rate.0)
-        });
+        let (rate, leds, fitted) = match fit {
+            Some(fit) => {
+                let leds = fit.model.shifts.len();
+                let waves = ReceivedWaveform::set(leds, None);
+                let rows = raw.sample.rows();
+                let rows: Vec<f64> = match (fit.rolling, rows.first(), rows.last()) {
+                    (true, Some(&top), Some(&bottom)) => {
+                        vec![top as f64, (top + bottom) as f64 / 2.0, bottom as f64]
+                    }
+                    _ => vec![0.0],
+                };
+                let fitted = rows
+                    .iter()
+                    .flat_map(|&row| fit.model.columns(&waves, row, frames).split_off(1))
+                    .collect();
+                (fit.model.timing.rate_ratio, leds, fitted)
+            }
+            None => {
+                let rate = self.rate.1.unwrap_or_else(|| {
+                    let space = SignalSpace::from_spectrum(&raw.spectrum, &raw.gram, leds);
+                    let waves = ReceivedWaveform::set(leds, None);
+                    seed::scan_rate_of(&space, &waves, frames, self.rate.0)
+                });
+                (rate, leds, Vec::new())
+            }
+        };
         let noise = SignalSpace::from_spectrum(&raw.spectrum, &raw.gram, self.spectrum_leds).noise;
         let window = nuisance::Window {
             values: raw.sample.values(),
             means: raw.sample.means(),
             gram: &raw.gram,
-            frames: frames.len(),
+            frames,
             noise,
         };
-        let found = nuisance::detect(&window, self.fps, rate, leds);
+        let found = nuisance::detect(&window, self.fps, rate, leds, &fitted);
         if found.is_empty() {
-            return WindowSample {
-                found: Some(found),
-                ..raw
-            };
+            return None;
         }
         let found = std::sync::Arc::new(found);
-        let WindowSample {
-            mut sample, gram, ..
-        } = raw;
-        let gram = found.project_gram(&gram);
+        let mut sample = raw.sample.clone();
+        let gram = found.project_gram(&raw.gram);
         sample.project(std::sync::Arc::clone(&found));
-        let spectrum = Spectrum::new(&gram, self.spectrum_leds);
-        WindowSample {
+        let spectrum = Spectrum::projected(&gram, self.spectrum_leds, found.columns());
+        Some(WindowSample {
             sample,
             gram,
             spectrum,
             found: Some((*found).clone()),
-        }
+        })
     }
 
     /// The pixel sample without nuisance components.
@@ -726,6 +782,25 @@ impl WindowDecoder {
                         });
                     }
                     if detected > n
+                        && let Some(found) = window.sample.nuisance()
+                        && let Some(cause) = found.describe()
+                    {
+                        // The room's components were found and projected out, and the window
+                        // still shows more: name what was found rather than advise more LEDs.
+                        return Err(DemodError::Implausible {
+                            problems: format!(
+                                "{n} LEDs requested and the video shows {detected} modulated \
+                                 components after the room's {cause} was projected out"
+                            ),
+                            advice: format!(
+                                "switch the room light off or run it from a steady supply, and \
+                                 lock the camera's exposure; or use a chip rate `meb carriers \
+                                 --fps {}` lists clear of the flicker",
+                                self.fps
+                            ),
+                        });
+                    }
+                    if detected > n
                         && let Some(advice) = self.mains_advice(n, fit.model.timing.rate_ratio)
                     {
                         return Err(DemodError::Implausible {
@@ -733,10 +808,7 @@ impl WindowDecoder {
                                 "{n} LEDs requested and the video shows {detected} modulated \
                                  components"
                             ),
-                            advice: format!(
-                                "{advice}; use --leds {detected} only if a further modulated LED \
-                                 is really on"
-                            ),
+                            advice,
                         });
                     }
                     return Err(DemodError::LedCountMismatch {
@@ -792,10 +864,19 @@ impl WindowDecoder {
             }
         };
         let mut verdict = quality::judge(&quality.leds, &fit);
-        if !verdict.is_plausible()
-            && let Some(advice) = self.mains_advice(leds, fit.model.timing.rate_ratio)
-        {
-            verdict.advice.insert(0, advice);
+        if !verdict.is_plausible() {
+            if let Some(cause) = window.sample.nuisance().and_then(|n| n.describe()) {
+                verdict.advice.insert(
+                    0,
+                    format!(
+                        "the window holds the room's {cause}, projected out: switch the room \
+                         light off or run it from a steady supply, and lock the camera's exposure"
+                    ),
+                );
+            }
+            if let Some(advice) = self.mains_advice(leds, fit.model.timing.rate_ratio) {
+                verdict.advice.push(advice);
+            }
         }
         let bands = if fit.rolling {
             let ramp = fit.model.ramp_chips(height).abs();

@@ -23,14 +23,20 @@
 //! harmonics (unbiased, noisier).
 //!
 //! Detection ([`detect`]) tests each candidate against the window's Gram matrix G = XᵀX of
-//! the centred pixel sample after removing the carriers' strongest harmonics at the estimated
-//! rate (the subspace C of [`super::quality`]): G' = (I − CCᵀ)·G·(I − CCᵀ). The energy per
-//! direction q'ᵀG'q' (q' = (I − CCᵀ)q normalised) of a candidate is compared with the noise
-//! energy per direction σ²_G and with nearby control frequencies (or, for the drift, the next
-//! two Legendre degrees), which carry the same leakage from the carriers' weaker harmonics: a
-//! component counts when its energy per direction exceeds [`DETECTION_RATIO`] times the larger
-//! of the two. A false detection costs only a little of the carriers' energy (the projection
-//! keeps the estimates unbiased), a missed one biases the gains.
+//! the centred pixel sample after removing what the carriers explain: a timing fit's
+//! templates and the carriers' strongest harmonics at its rate (the subspace C of
+//! [`super::quality`]), G' = (I − CCᵀ)·G·(I − CCᵀ). Without a fit the carriers' weaker lines
+//! and any misfit of a scanned rate stand far above the noise (hundreds of noise levels beside
+//! the lines in a steady capture), so the decoder tests before a fit only when the LED-count
+//! check refused the window. The energy per direction q'ᵀG'q' (q' = (I − CCᵀ)q normalised)
+//! of a candidate is compared with the noise energy per direction σ²_G and with nearby
+//! control frequencies (or, for the drift, the next two Legendre degrees), which carry the
+//! same leakage from the carriers' weaker harmonics and from a misfit: a component counts
+//! when its energy per direction exceeds [`DETECTION_RATIO`] times the larger of the two,
+//! exceeds the noise by [`DETECTION_SIGMAS`] standard deviations of the noise's energy, and
+//! does both in the top and in the bottom half of the sample (a lamp lights the whole view).
+//! A false detection costs a little of the carriers' energy (the projection keeps the
+//! estimates unbiased), a missed one biases the gains.
 
 use super::waveform::ReceivedWaveform;
 use nalgebra::DMatrix;
@@ -44,15 +50,20 @@ pub const MAINS_TOLERANCE: f64 = 0.005;
 /// Steps of the mains-frequency scan across ±[`MAINS_TOLERANCE`].
 const MAINS_STEPS: usize = 21;
 /// Flicker harmonics tested.
-pub const MAX_HARMONICS: usize = 4;
+pub const MAX_HARMONICS: usize = 8;
 /// A component counts when its energy per direction exceeds this multiple of the noise's and of
 /// its controls'.
-pub const DETECTION_RATIO: f64 = 1.5;
+pub const DETECTION_RATIO: f64 = 4.0;
+/// … and when its excess over the noise exceeds this many standard deviations of the noise
+/// energy (a white-noise sample's energy per direction spreads by σ²_G·√(2/(P·d))).
+pub const DETECTION_SIGMAS: f64 = 10.0;
+/// Harmonics landing within this many bins of a lower one are not tested on their own.
+const ALIAS_BINS: f64 = 1.5;
 /// Control frequencies beside a candidate, in frequency bins (1/F) either side.
 const CONTROL_OFFSETS: [f64; 4] = [2.5, 3.5, 4.5, 5.5];
 /// A candidate keeping less than this share of its norm outside the carriers' harmonics lies on
 /// a carrier line: it cannot be told apart from the carrier.
-const SEPARABLE_SHARE: f64 = 0.3;
+const SEPARABLE_SHARE: f64 = 0.5;
 /// Harmonics of each carrier removed before testing (as [`super::quality`]'s subspaces).
 const CARRIER_HARMONICS: usize = 4;
 
@@ -144,6 +155,31 @@ impl Nuisance {
         self.columns.len()
     }
 
+    /// What was found, in words (`None` when nothing was): the flicker per family with its
+    /// frequency and level, and the exposure drift.
+    pub fn describe(&self) -> Option<String> {
+        let mut parts: Vec<String> = self
+            .flicker
+            .iter()
+            .map(|f| {
+                format!(
+                    "flicker at {:.1} Hz ({:.1} Hz mains, harmonics {:?}, {:.2} % of full scale)",
+                    f.frequency_hz,
+                    f.frequency_hz / 2.0,
+                    f.harmonics,
+                    100.0 * f.amplitude
+                )
+            })
+            .collect();
+        if let Some(drift) = &self.drift {
+            parts.push(format!(
+                "exposure drift ({:+.1} % over the window)",
+                100.0 * drift.relative_change
+            ));
+        }
+        (!parts.is_empty()).then(|| parts.join(" and "))
+    }
+
     /// v ← (I − PPᵀ)·v, for a vector of the window's length (others are left alone).
     pub fn project(&self, v: &mut [f64]) {
         if v.len() != self.frames {
@@ -193,40 +229,72 @@ pub struct Window<'a> {
 }
 
 /// Finds mains flicker and exposure drift in `window` (module docs): `fps` the camera rate,
-/// `rate` the chips per frame and `leds` the LEDs whose carriers are removed before testing.
-pub fn detect(window: &Window<'_>, fps: f64, rate: f64, leds: usize) -> Nuisance {
+/// `rate` the chips per frame, `leds` the LEDs whose carriers' strongest lines are removed
+/// before testing, and `fitted` further columns removed with them (a timing fit's templates).
+pub fn detect(
+    window: &Window<'_>,
+    fps: f64,
+    rate: f64,
+    leds: usize,
+    fitted: &[Vec<f64>],
+) -> Nuisance {
     let f = window.frames;
     let pixels = window.means.len();
-    if f < 16 || pixels == 0 || !(fps.is_finite() && fps > 0.0) {
+    if f < 16 || pixels < 2 || !(fps.is_finite() && fps > 0.0) {
         return Nuisance::default();
     }
-    let carriers = carrier_columns(rate, leds, f);
-    let m = complement(&carriers, f);
-    let residual = &m * window.gram * &m;
-    let floor = window.noise.max(f64::MIN_POSITIVE);
-    // Energy per direction of the span of `columns` in the residual Gram matrix, and whether
-    // enough of them lies outside the carriers' harmonics.
-    let energy = |columns: &[Vec<f64>]| -> (f64, bool) {
-        let projected: Vec<Vec<f64>> = columns.iter().map(|c| apply(&m, c)).collect();
-        let kept = columns
+    let mut carriers = carrier_columns(rate, leds, f);
+    carriers = orthonormal(
+        &fitted
             .iter()
-            .zip(&projected)
-            .map(|(c, p)| dot(p, p) / dot(c, c).max(f64::MIN_POSITIVE))
-            .fold(1.0f64, f64::min);
-        let basis = orthonormal(&projected, &[]);
-        if basis.is_empty() {
-            return (0.0, false);
-        }
-        let total: f64 = basis.iter().map(|q| quadratic(&residual, q)).sum();
-        (total / basis.len() as f64, kept >= SEPARABLE_SHARE)
-    };
+            .filter(|c| c.len() == f)
+            .cloned()
+            .collect::<Vec<_>>(),
+        &[vec![1.0; f]],
+    )
+    .into_iter()
+    .chain(carriers)
+    .collect();
+    let carriers = orthonormal(&carriers, &[vec![1.0; f]]);
+    let m = complement(&carriers, f);
+    let whole = Evidence::new(&m, window.gram, window.noise, pixels);
     let mut nuisance = Nuisance {
         frames: f,
         ..Nuisance::default()
     };
+    // The halves of the sample (its pixels are in row order: the top and the bottom of the
+    // region), formed only when a candidate stands out in the whole sample.
+    let mut halves: Option<[Evidence; 2]> = None;
+    let mut consistent = |test: &dyn Fn(&Evidence) -> bool| {
+        let halves = halves.get_or_insert_with(|| Evidence::halves(&m, window, &whole));
+        halves.iter().all(test)
+    };
     let mut columns: Vec<Vec<f64>> = Vec::new();
-    for nominal in FLICKER_FAMILIES_HZ {
-        if let Some((flicker, found)) = flicker_of(nominal, fps, f, pixels, floor, &energy) {
+    // The family with more energy at its harmonics is tested first; the other is tested with
+    // the first's columns set aside too (at some camera rates harmonics of 100 and 120 Hz
+    // alias onto the same frequencies).
+    let mut families: Vec<(f64, f64, f64)> = FLICKER_FAMILIES_HZ
+        .iter()
+        .filter_map(|&nominal| {
+            scan_family(nominal, fps, f, &whole).map(|(at, total)| (nominal, at, total))
+        })
+        .collect();
+    families.sort_by(|a, b| b.2.total_cmp(&a.2));
+    for (nominal, fundamental, _) in families {
+        let found = if columns.is_empty() {
+            flicker_at(nominal, fundamental, fps, f, &whole, &mut consistent)
+        } else {
+            let set_aside: Vec<Vec<f64>> = carriers.iter().chain(&columns).cloned().collect();
+            let m = complement(&orthonormal(&set_aside, &[vec![1.0; f]]), f);
+            let whole = Evidence::new(&m, window.gram, window.noise, pixels);
+            let mut halves: Option<[Evidence; 2]> = None;
+            let mut consistent = |test: &dyn Fn(&Evidence) -> bool| {
+                let halves = halves.get_or_insert_with(|| Evidence::halves(&m, window, &whole));
+                halves.iter().all(test)
+            };
+            flicker_at(nominal, fundamental, fps, f, &whole, &mut consistent)
+        };
+        if let Some((flicker, found)) = found {
             columns.extend(found);
             nuisance.flicker.push(flicker);
         }
@@ -239,9 +307,23 @@ pub fn detect(window: &Window<'_>, fps: f64, rate: f64, leds: usize) -> Nuisance
         &[vec![1.0; f]],
     );
     if legendre.len() == 4 {
-        let (low, _) = energy(&legendre[..2]);
-        let (control, _) = energy(&legendre[2..]);
-        if low > DETECTION_RATIO * floor.max(control) {
+        let test = |e: &Evidence| {
+            let (low, _) = e.energy(&legendre[..2]);
+            let (control, _) = e.energy(&legendre[2..]);
+            e.stands_out(low, control, 2)
+        };
+        if std::env::var("MEB_NUISANCE_DEBUG").is_ok() {
+            let (low, _) = whole.energy(&legendre[..2]);
+            let (control, _) = whole.energy(&legendre[2..]);
+            if low > 1.5 * whole.noise {
+                eprintln!(
+                    "DBG drift low/noise {:.2} low/control {:.2}",
+                    low / whole.noise,
+                    low / control
+                );
+            }
+        }
+        if test(&whole) && consistent(&test) {
             let smooth = drift_series(window, &legendre[..2]);
             nuisance.drift = Some(Drift {
                 relative_change: smooth[f - 1] - smooth[0],
@@ -254,59 +336,175 @@ pub fn detect(window: &Window<'_>, fps: f64, rate: f64, leds: usize) -> Nuisance
     nuisance
 }
 
-/// The flicker of the family of nominal fundamental `nominal` Hz, if found: its report and its
-/// columns.
-fn flicker_of(
-    nominal: f64,
-    fps: f64,
-    f: usize,
+/// A pixel set's energies with the carriers' lines removed, against which candidates are
+/// tested (module docs).
+struct Evidence<'a> {
+    /// I − CCᵀ, C the carriers' strongest lines.
+    carriers: &'a DMatrix<f64>,
+    /// (I − CCᵀ)·G·(I − CCᵀ) of the set's Gram matrix G.
+    residual: DMatrix<f64>,
+    /// σ²_G of the set: noise energy per direction.
+    noise: f64,
+    /// Pixels in the set.
     pixels: usize,
-    floor: f64,
-    energy: &dyn Fn(&[Vec<f64>]) -> (f64, bool),
-) -> Option<(Flicker, Vec<Vec<f64>>)> {
+}
+
+impl<'a> Evidence<'a> {
+    fn new(carriers: &'a DMatrix<f64>, gram: &DMatrix<f64>, noise: f64, pixels: usize) -> Self {
+        Self {
+            carriers,
+            residual: carriers * gram * carriers,
+            noise: noise.max(f64::MIN_POSITIVE),
+            pixels,
+        }
+    }
+
+    /// The top and bottom halves of the window's sample, each with its share of the noise.
+    fn halves(carriers: &'a DMatrix<f64>, window: &Window<'_>, whole: &Self) -> [Self; 2] {
+        let f = window.frames;
+        let split = whole.pixels / 2;
+        let top = DMatrix::from_row_slice(split, f, &window.values[..split * f]);
+        let top_gram = top.tr_mul(&top);
+        let bottom_gram = window.gram - &top_gram;
+        let share = split as f64 / whole.pixels as f64;
+        [
+            Self::new(carriers, &top_gram, whole.noise * share, split),
+            Self::new(
+                carriers,
+                &bottom_gram,
+                whole.noise * (1.0 - share),
+                whole.pixels - split,
+            ),
+        ]
+    }
+
+    /// Energy per direction of the span of `columns` with the carriers' lines removed, and
+    /// the least share of a column's norm left by that removal.
+    fn energy(&self, columns: &[Vec<f64>]) -> (f64, f64) {
+        let projected: Vec<Vec<f64>> = columns.iter().map(|c| apply(self.carriers, c)).collect();
+        let kept = columns
+            .iter()
+            .zip(&projected)
+            .map(|(c, p)| dot(p, p) / dot(c, c).max(f64::MIN_POSITIVE))
+            .fold(1.0f64, f64::min);
+        let basis = orthonormal(&projected, &[]);
+        if basis.is_empty() {
+            return (0.0, 0.0);
+        }
+        let total: f64 = basis.iter().map(|q| quadratic(&self.residual, q)).sum();
+        (total / basis.len() as f64, kept)
+    }
+
+    /// Whether energy per direction `energy` over `directions` directions stands out: above
+    /// [`DETECTION_RATIO`] times the larger of the noise and the `control` energy, and above
+    /// the noise by [`DETECTION_SIGMAS`] of the noise energy's own spread (σ²_G·√(2/(P·d)) for
+    /// P pixels of white noise over d directions).
+    fn stands_out(&self, energy: f64, control: f64, directions: usize) -> bool {
+        let spread = self.noise * (2.0 / (self.pixels * directions.max(1)) as f64).sqrt();
+        energy > DETECTION_RATIO * self.noise.max(control)
+            && energy - self.noise > DETECTION_SIGMAS * spread
+    }
+
+    /// The excess energy per direction above the larger of the noise and `control`.
+    fn excess(&self, energy: f64, control: f64) -> f64 {
+        (energy - self.noise.max(control)).max(0.0)
+    }
+}
+
+/// The fundamental (within the mains tolerance of `nominal` Hz) whose harmonics hold the
+/// most energy in `whole`, and that energy.
+fn scan_family(nominal: f64, fps: f64, f: usize, whole: &Evidence<'_>) -> Option<(f64, f64)> {
     let bin = 1.0 / f as f64;
-    // Per harmonic: the scan's energies at every mains step, and the control level.
     let mut best: Option<(f64, f64)> = None;
     for step in 0..MAINS_STEPS {
         let offset = MAINS_TOLERANCE * (2.0 * step as f64 / (MAINS_STEPS - 1) as f64 - 1.0);
         let fundamental = nominal * (1.0 + offset);
-        let total: f64 = (1..=MAX_HARMONICS)
-            .filter_map(|h| usable(alias(h as f64 * fundamental / fps), bin))
-            .map(|nu| energy(&pair(nu, f)).0)
+        let total: f64 = harmonics_of(fundamental, fps, bin)
+            .into_iter()
+            .map(|(_, nu)| whole.energy(&pair(nu, f)).0)
             .sum();
-        if best.is_none_or(|(e, _)| total > e) {
-            best = Some((total, fundamental));
+        if best.is_none_or(|(_, e)| total > e) {
+            best = Some((fundamental, total));
         }
     }
-    let (_, fundamental) = best?;
-    let mut harmonics = Vec::new();
-    let mut on_lines = Vec::new();
-    let mut columns = Vec::new();
-    let mut amplitude = 0.0f64;
+    best
+}
+
+/// The harmonics h ≤ [`MAX_HARMONICS`] of `fundamental` Hz and where they land (cycles per
+/// frame) that a window of bins `bin` resolves, each more than [`ALIAS_BINS`] bins from the
+/// lower ones (a harmonic aliased onto a lower one's frequency adds no column of its own).
+fn harmonics_of(fundamental: f64, fps: f64, bin: f64) -> Vec<(usize, f64)> {
+    let mut found: Vec<(usize, f64)> = Vec::new();
     for h in 1..=MAX_HARMONICS {
         let Some(nu) = usable(alias(h as f64 * fundamental / fps), bin) else {
             continue;
         };
-        let (e, separable) = energy(&pair(nu, f));
-        let controls: Vec<f64> = CONTROL_OFFSETS
+        if found
+            .iter()
+            .all(|&(_, at)| (at - nu).abs() > ALIAS_BINS * bin)
+        {
+            found.push((h, nu));
+        }
+    }
+    found
+}
+
+/// The flicker of fundamental `fundamental` Hz (family `nominal`), if found: its report and
+/// its columns. A harmonic counts when it stands out against its controls in the whole sample
+/// and, by `consistent`, in each half of it.
+fn flicker_at(
+    nominal: f64,
+    fundamental: f64,
+    fps: f64,
+    f: usize,
+    whole: &Evidence<'_>,
+    consistent: &mut dyn FnMut(&dyn Fn(&Evidence) -> bool) -> bool,
+) -> Option<(Flicker, Vec<Vec<f64>>)> {
+    let bin = 1.0 / f as f64;
+    let mut harmonics = Vec::new();
+    let mut on_lines = Vec::new();
+    let mut columns = Vec::new();
+    let mut amplitude = 0.0f64;
+    for (h, nu) in harmonics_of(fundamental, fps, bin) {
+        let candidate = pair(nu, f);
+        let controls: Vec<[Vec<f64>; 2]> = CONTROL_OFFSETS
             .iter()
             .flat_map(|&o| [nu + o * bin, nu - o * bin])
             .filter_map(|c| usable(alias(c), bin))
-            .map(|c| energy(&pair(c, f)).0)
+            .map(|c| pair(c, f))
             .collect();
-        if !separable {
+        let judge = |e: &Evidence| {
+            let (energy, _) = e.energy(&candidate);
+            let control = median(controls.iter().map(|c| e.energy(c).0).collect());
+            (energy, control.unwrap_or(e.noise))
+        };
+        let (_, share) = whole.energy(&candidate);
+        if share < SEPARABLE_SHARE {
             // Its energy cannot be measured apart from the carrier's: projected out below
             // with the family, if the family shows elsewhere.
             on_lines.push((h, nu));
             continue;
         }
-        let control = median(controls).unwrap_or(floor);
-        if e > DETECTION_RATIO * floor.max(control) {
+        let (energy, control) = judge(whole);
+        if std::env::var("MEB_NUISANCE_DEBUG").is_ok() && energy > 1.5 * whole.noise {
+            eprintln!(
+                "DBG flicker {nominal} h{h} nu {nu:.4} e/noise {:.2} e/control {:.2} share {share:.2} out {}",
+                energy / whole.noise,
+                energy / control,
+                whole.stands_out(energy, control, 2)
+            );
+        }
+        if whole.stands_out(energy, control, 2)
+            && consistent(&|e: &Evidence| {
+                let (energy, control) = judge(e);
+                e.stands_out(energy, control, 2)
+            })
+        {
             harmonics.push(h);
             columns.extend(quad(nu, f));
-            // Excess energy of the pair = a²·F/2 per pixel (a the amplitude).
-            let excess = 2.0 * (e - floor.max(control)).max(0.0);
-            amplitude = amplitude.max((2.0 * excess / (pixels as f64 * f as f64)).sqrt());
+            // Excess energy per direction of the pair = a²·F/4 per pixel (a the amplitude).
+            let excess = whole.excess(energy, control);
+            amplitude = amplitude.max((4.0 * excess / (whole.pixels as f64 * f as f64)).sqrt());
         }
     }
     if harmonics.is_empty() {
@@ -525,7 +723,7 @@ mod tests {
             frames: f,
             noise,
         };
-        let found = detect(&window, 960.0, 1.0, 4);
+        let found = detect(&window, 960.0, 1.0, 4, &[]);
         assert_eq!(found.flicker.len(), 1, "{found:?}");
         assert_eq!(found.flicker[0].nominal_hz, 100.0);
         assert_eq!(found.flicker[0].harmonics, vec![1]);
@@ -538,7 +736,7 @@ mod tests {
             frames: f,
             noise,
         };
-        assert!(detect(&quiet, 960.0, 1.0, 4).is_empty());
+        assert!(detect(&quiet, 960.0, 1.0, 4, &[]).is_empty());
     }
 
     #[test]
@@ -556,12 +754,62 @@ mod tests {
             frames: f,
             noise,
         };
-        let found = detect(&window, 960.0, 1.0, 4);
+        let found = detect(&window, 960.0, 1.0, 4, &[]);
         let drift = found.drift.clone().unwrap_or_else(|| panic!("{found:?}"));
         assert!((drift.relative_change - 0.05).abs() < 0.005, "{drift:?}");
         assert!(found.flicker.is_empty(), "{found:?}");
         let mut v: Vec<f64> = (0..f).map(|j| centred_time(j, f)).collect();
         found.project(&mut v);
         assert!(dot(&v, &v) < 1e-20);
+    }
+
+    #[test]
+    fn a_tone_in_one_part_of_the_view_is_not_flicker() {
+        // The same 100.3 Hz tone as a lamp's, on the top half of the sample only (a local
+        // change, not a lamp lighting the view): it stands out in the whole sample but not in
+        // the bottom half, so it is not taken for flicker. On every pixel it is.
+        let (pixels, f, sigma) = (400, 128, 0.01);
+        let noise = pixels as f64 * sigma * sigma;
+        let tone = |j: usize| 0.006 * (TAU * 100.3 / 960.0 * j as f64 + 0.7).cos();
+        for (local, expected) in [(true, 0), (false, 1)] {
+            let (values, means, gram) = window_of(pixels, f, sigma, |p, j| {
+                if local && p >= pixels / 2 {
+                    0.0
+                } else {
+                    tone(j)
+                }
+            });
+            let window = Window {
+                values: &values,
+                means: &means,
+                gram: &gram,
+                frames: f,
+                noise,
+            };
+            let found = detect(&window, 960.0, 1.0, 4, &[]);
+            assert_eq!(found.flicker.len(), expected, "local {local}: {found:?}");
+        }
+    }
+
+    #[test]
+    fn fitted_templates_are_set_aside_before_testing() {
+        // A tone that is one of the fitted templates is the carriers', not the room's.
+        let (pixels, f, sigma) = (400, 128, 0.01);
+        let noise = pixels as f64 * sigma * sigma;
+        let template: Vec<f64> = (0..f)
+            .map(|j| (TAU * 100.3 / 960.0 * j as f64 + 0.7).cos())
+            .collect();
+        let (values, means, gram) = window_of(pixels, f, sigma, |p, j| {
+            0.006 * (1.0 + (p % 3) as f64) * template[j]
+        });
+        let window = Window {
+            values: &values,
+            means: &means,
+            gram: &gram,
+            frames: f,
+            noise,
+        };
+        assert_eq!(detect(&window, 960.0, 1.0, 4, &[]).flicker.len(), 1);
+        assert!(detect(&window, 960.0, 1.0, 4, &[template]).is_empty());
     }
 }
