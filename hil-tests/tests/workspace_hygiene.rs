@@ -188,3 +188,76 @@ fn the_simulator_depends_on_no_part_of_the_pipeline() {
         );
     }
 }
+
+/// The GitHub anchor of a Markdown heading: lower case, spaces to hyphens, other punctuation
+/// dropped.
+fn anchor_of(heading: &str) -> String {
+    heading
+        .trim()
+        .to_lowercase()
+        .chars()
+        .filter(|c| c.is_alphanumeric() || *c == ' ' || *c == '-' || *c == '_')
+        .map(|c| if c == ' ' { '-' } else { c })
+        .collect()
+}
+
+/// Every `docs/….md#anchor` a source comment cites names a page of `docs/` and one of its
+/// headings, so the code's citations of the maths cannot point into the void.
+#[test]
+fn docs_cited_by_the_code_exist() {
+    assert_eq!(
+        anchor_of("The subspace projection"),
+        "the-subspace-projection"
+    );
+    assert_eq!(
+        anchor_of("Duty, runs and half-period negation"),
+        "duty-runs-and-half-period-negation"
+    );
+    let root = workspace_root();
+    let mut files = Vec::new();
+    for tree in HOST_SIDE.iter().chain(&DEVICE_SIDE) {
+        rust_files(&root.join(tree), &mut files);
+    }
+    let mut cited = 0;
+    let mut broken = Vec::new();
+    for file in &files {
+        let text = std::fs::read_to_string(file).unwrap();
+        for (at, _) in text.match_indices("docs/") {
+            let rest = &text[at..];
+            let Some(end) = rest.find(".md") else {
+                continue;
+            };
+            let page = &rest[..end + 3];
+            let is_path = |c: char| c.is_ascii_alphanumeric() || "/-_.".contains(c);
+            if !page.chars().all(is_path) {
+                continue;
+            }
+            cited += 1;
+            let anchor: String = rest[end + 3..]
+                .strip_prefix('#')
+                .map(|a| {
+                    a.chars()
+                        .take_while(|c| c.is_alphanumeric() || *c == '-')
+                        .collect()
+                })
+                .unwrap_or_default();
+            let Ok(markdown) = std::fs::read_to_string(root.join(page)) else {
+                broken.push(format!("{}: {page} does not exist", file.display()));
+                continue;
+            };
+            let headings: Vec<String> = markdown
+                .lines()
+                .filter_map(|l| l.strip_prefix('#'))
+                .map(|h| anchor_of(h.trim_start_matches('#')))
+                .collect();
+            if !anchor.is_empty() && !headings.contains(&anchor) {
+                broken.push(format!(
+                    "{}: {page} has no heading #{anchor}",
+                    file.display()
+                ));
+            }
+        }
+    }
+    assert!(cited > 50, "only {cited} citations of docs/ found");
+    assert!(broken.is_empty(), "{}", broken.join("\n"));
+}

@@ -211,11 +211,11 @@ mod tests {
     #[test]
     fn sin_squared_flickers_at_twice_the_mains() {
         let lamp = RoomLamp::new(50.0, 0.1, LampWaveform::SinSquared);
-        // Half a mains period later the light repeats; a quarter of a flicker period later the
+        // Half a mains period later the light repeats; half a flicker period (5 ms) later the
         // 100 %-modulated tone is at the opposite side of its mean.
         let (a, b) = (lamp.window_mean(0.0123, 0.0), lamp.window_mean(0.0223, 0.0));
         assert!((a - b).abs() < 1e-9);
-        let c = lamp.window_mean(0.0123 + 0.0025, 0.0);
+        let c = lamp.window_mean(0.0123 + 0.005, 0.0);
         assert!(((a - 1.0) + (c - 1.0)).abs() < 1e-9, "{a} {c}");
     }
 

@@ -14,7 +14,7 @@ pub struct CameraArgs {
     /// Orthographic camera: grid pitch in mm per pixel.
     #[arg(long, conflicts_with_all = ["intrinsics", "rig"])]
     pub pitch: Option<f64>,
-    /// Pinhole camera: "fx,fy,cx,cy[,k1,k2]" in pixels (OpenCV convention: rows down, pixel
+    /// Pinhole camera: "fx,fy,cx,cy" or "fx,fy,cx,cy,k1,k2" in pixels (OpenCV convention: rows down, pixel
     /// centres at integer coordinates; k1, k2 radial distortion), or a 3×3 matrix file (K.txt).
     #[arg(long, conflicts_with = "rig")]
     pub intrinsics: Option<String>,
@@ -139,7 +139,7 @@ impl CameraArgs {
     }
 }
 
-/// Intrinsics from "fx,fy,cx,cy[,k1,k2]" or a 3×3 matrix file.
+/// Intrinsics from "fx,fy,cx,cy", "fx,fy,cx,cy,k1,k2" or a 3×3 matrix file.
 pub fn parse_intrinsics(spec: &str) -> Result<Intrinsics> {
     let path = Path::new(spec);
     if path.exists() {

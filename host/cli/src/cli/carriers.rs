@@ -61,16 +61,17 @@ fn mains_report(leds: u8, rate: f64, fps: f64) -> MainsReport {
 /// Prints the mains-flicker section.
 fn print_mains(report: &MainsReport, rate: f64) {
     println!(
-        "
-Room-light flicker (100 Hz family: 50 Hz mains, 120 Hz: 60 Hz mains) at {rate} Hz chip          rate, camera {} fps, {}-frame windows:",
+        "\nRoom-light flicker (100 Hz family: 50 Hz mains, 120 Hz: 60 Hz mains) at {rate} Hz chip \
+         rate, camera {} fps, {}-frame windows:",
         report.fps, report.window_frames
     );
     if report.clashes.is_empty() {
-        println!("  clear: no flicker harmonic falls on a carrier line; the decoder models it");
+        println!("  clear: no flicker harmonic falls on a carrier line");
     }
     for c in &report.clashes {
         println!(
-            "  {:.0} Hz family harmonic {} ({:.4} cycles/frame) falls on LED {}'s line ({:.4}):              that LED's gain is unreliable under such a lamp",
+            "  {:.0} Hz family harmonic {} ({:.4} cycles/frame) falls on LED {}'s line ({:.4}): \
+             that LED's gain is unreliable under such a lamp",
             c.family_hz, c.harmonic, c.flicker_cycles_per_frame, c.led, c.line_cycles_per_frame
         );
     }

@@ -173,6 +173,7 @@ pub fn reconstruction_summary(
         measured_share: Some(reconstruction.support.measured_share),
         absolute_depth: Some(reconstruction.support.absolute_depth.describe()),
         implausible: reconstruction.support.verdict.problems.clone(),
+        clipping: decoded.report.clipping.as_ref().map(|c| c.message.clone()),
         ..Summary::default()
     }
 }

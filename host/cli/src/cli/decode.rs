@@ -154,9 +154,6 @@ pub fn decode_capture(
         None => anyhow::Error::new(e).context(format!("cannot decode {}", input.display())),
     })?;
     warn_if_overridden(&decoded.report);
-    if let Some(clipping) = &decoded.report.clipping {
-        eprintln!("note: {}", clipping.message);
-    }
     Ok(decoded)
 }
 
@@ -221,6 +218,11 @@ pub fn check_folder_verdict(report: &DecodeReport, folder: &Path, force: bool) -
 pub fn run(args: &DecodeArgs) -> Result<()> {
     let folder = super::common::output_folder(&args.out, "decode", args.force)?;
     let decoded = decode_capture(&args.input, &args.options, 4, args.force)?;
+    // The exposure advice for clipped pixels (`meb reconstruct` gives it with a result and keeps
+    // it in report.json, so its refusals stay one line).
+    if let Some(clipping) = &decoded.report.clipping {
+        eprintln!("note: {}", clipping.message);
+    }
     write_decode_dir(folder.path(), &decoded)?;
     let out = super::common::commit(folder)?;
     let report = &decoded.report;

@@ -118,8 +118,16 @@ pub fn run(args: &ReconstructArgs) -> Result<()> {
     )?;
     let rig_check = check_decoded_rig(&inputs.decoded, &inputs.rig, &reconstruction);
     let implausible = !reconstruction.support.verdict.is_plausible();
-    super::rig::enforce(&rig_check, &args.rig, args.force, implausible)?;
-    super::common::check_support(&reconstruction, args.force)?;
+    let rig_hint = super::rig::enforce(&rig_check, &args.rig, args.force, implausible)?;
+    super::common::check_support(&reconstruction, args.force).map_err(
+        |refusal| match rig_hint {
+            Some(hint) => anyhow::anyhow!("{refusal}; {hint}"),
+            None => refusal,
+        },
+    )?;
+    if let Some(clipping) = &inputs.decoded.report.clipping {
+        eprintln!("note: {}", clipping.message);
+    }
     let field = &reconstruction.photometric.field;
     let depth = &reconstruction.integration.depth;
     let (depth_errors, angular_errors) = match &inputs.truth {

@@ -131,24 +131,36 @@ fn print_table(check: &RigCheck) {
 }
 
 /// Reports a doubtful or inconsistent rig on stderr and refuses an inconsistent one unless
-/// `force`. A doubtful rig is refused too when the reconstruction is `implausible`
-/// anyway: a rig that fits only roughly is the likelier cause of, e.g., a part that could not
-/// be placed in depth (a nominal rig 35 mm off per LED on the blobby shape: misfit 2.35 times
-/// the noise's, and the offset search ran to its edge).
-pub fn enforce(check: &RigCheck, rig_name: &str, force: bool, implausible: bool) -> Result<()> {
+/// `force`. When the reconstruction is `implausible` anyway and the rig fits only roughly, the
+/// rig may be the cause (a nominal rig 35 mm off per LED on the blobby shape: misfit 2.35 times
+/// the noise's, and the offset search ran to its edge) or a victim (a surface lit mostly by two
+/// LEDs is integrated at a wrong depth, where the right rig fits worse too); the returned hint
+/// names the rig beside the reconstruction's own problem, and nothing is printed, so the
+/// refusal that follows stays one line.
+pub fn enforce(
+    check: &RigCheck,
+    rig_name: &str,
+    force: bool,
+    implausible: bool,
+) -> Result<Option<String>> {
     let line = check.describe(rig_name);
-    let refused =
-        check.fit == RigFit::Inconsistent || (check.fit == RigFit::Doubtful && implausible);
     match check.fit {
-        _ if refused && !force => bail!(
+        RigFit::Inconsistent if !force => bail!(
             "{line} (try: {}; --force writes the reconstruction anyway)",
             check.advice()
         ),
-        _ if refused => eprintln!("warning: kept despite the rig check (--force): {line}"),
-        RigFit::Doubtful | RigFit::Inconsistent => eprintln!("warning: {line}"),
+        RigFit::Inconsistent => eprintln!("warning: kept despite the rig check (--force): {line}"),
+        RigFit::Doubtful if implausible => {
+            return Ok(Some(format!(
+                "the rig may be the cause: {line} (if its LED positions or intensities are \
+                 uncertain: {})",
+                check.advice()
+            )));
+        }
+        RigFit::Doubtful => eprintln!("warning: {line}"),
         // A consistent rig is recorded in report.json only: a refusal that follows for
         // another reason stays one line.
         RigFit::Consistent | RigFit::Unjudged => {}
     }
-    Ok(())
+    Ok(None)
 }

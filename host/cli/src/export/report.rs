@@ -90,6 +90,9 @@ pub struct Summary {
     /// Solved pixels with LEDs rejected as highlights (`highlights.npy`).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub highlights: Option<HighlightShares>,
+    /// The decoder's note on clipped pixels and the exposure that keeps the object usable.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub clipping: Option<String>,
 }
 
 /// Depth accuracy against ground truth (see [`DepthErrors`]).

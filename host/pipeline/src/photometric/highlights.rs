@@ -5,7 +5,7 @@
 //! specular lobe that peaks where the normal n bisects the directions to the LED l̂_i and to the
 //! camera v, i.e. where n lies along the half vector h_i = (l̂_i + v)/|l̂_i + v|. With four or
 //! more LEDs lighting a pixel the Lambertian fit has a spare reading, so such a pixel fails the
-//! solver's χ² consistency test ([`super::solve`], step 4). The solver then predicts each lit
+//! solver's χ² consistency test ([`super::solve`], step 3). The solver then predicts each lit
 //! LED from the others: a highlight reads above its prediction, and the others' normal lies
 //! near its half vector (within [`super::PhotometricConfig::highlight_max_deg`]; a GGX lobe of
 //! roughness 0.4 and weight 0.3 adds less than 3 % of the diffuse level beyond 30°). Of those,
