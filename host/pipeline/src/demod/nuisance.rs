@@ -100,6 +100,10 @@ pub struct RoomReport {
     pub exposure_drift: Option<f64>,
     /// Windows in which some nuisance component was found and projected out.
     pub windows_modelled: usize,
+    /// Frames the camera dropped or repeated, found from the data and re-aligned
+    /// ([`super::timing_break`]).
+    #[serde(default)]
+    pub timing_breaks: Vec<super::timing_break::TimingBreak>,
 }
 
 impl RoomReport {
@@ -312,17 +316,6 @@ pub fn detect(
             let (control, _) = e.energy(&legendre[2..]);
             e.stands_out(low, control, 2)
         };
-        if std::env::var("MEB_NUISANCE_DEBUG").is_ok() {
-            let (low, _) = whole.energy(&legendre[..2]);
-            let (control, _) = whole.energy(&legendre[2..]);
-            if low > 1.5 * whole.noise {
-                eprintln!(
-                    "DBG drift low/noise {:.2} low/control {:.2}",
-                    low / whole.noise,
-                    low / control
-                );
-            }
-        }
         if test(&whole) && consistent(&test) {
             let smooth = drift_series(window, &legendre[..2]);
             nuisance.drift = Some(Drift {
@@ -335,6 +328,9 @@ pub fn detect(
     nuisance.columns = orthonormal(&columns, &[vec![1.0; f]]);
     nuisance
 }
+
+/// Whether a test of a candidate holds in each half of the sample too.
+type Consistent<'c> = dyn FnMut(&dyn Fn(&Evidence) -> bool) -> bool + 'c;
 
 /// A pixel set's energies with the carriers' lines removed, against which candidates are
 /// tested (module docs).
@@ -411,8 +407,11 @@ impl<'a> Evidence<'a> {
     }
 }
 
-/// The fundamental (within the mains tolerance of `nominal` Hz) whose harmonics hold the
-/// most energy in `whole`, and that energy.
+/// The fundamental (within the mains tolerance of `nominal` Hz) whose two lowest harmonics
+/// hold the most energy in `whole`, and that energy. Only the lowest harmonics, where a lamp's
+/// flicker is strongest, are summed: at some camera rates a higher harmonic of one family
+/// aliases onto the other's fundamental (at 720 fps, 600 Hz lands on 120 Hz), and the family
+/// that is there must be tested first.
 fn scan_family(nominal: f64, fps: f64, f: usize, whole: &Evidence<'_>) -> Option<(f64, f64)> {
     let bin = 1.0 / f as f64;
     let mut best: Option<(f64, f64)> = None;
@@ -421,6 +420,7 @@ fn scan_family(nominal: f64, fps: f64, f: usize, whole: &Evidence<'_>) -> Option
         let fundamental = nominal * (1.0 + offset);
         let total: f64 = harmonics_of(fundamental, fps, bin)
             .into_iter()
+            .filter(|&(h, _)| h <= 2)
             .map(|(_, nu)| whole.energy(&pair(nu, f)).0)
             .sum();
         if best.is_none_or(|(_, e)| total > e) {
@@ -458,13 +458,15 @@ fn flicker_at(
     fps: f64,
     f: usize,
     whole: &Evidence<'_>,
-    consistent: &mut dyn FnMut(&dyn Fn(&Evidence) -> bool) -> bool,
+    consistent: &mut Consistent<'_>,
 ) -> Option<(Flicker, Vec<Vec<f64>>)> {
     let bin = 1.0 / f as f64;
     let mut harmonics = Vec::new();
     let mut on_lines = Vec::new();
     let mut columns = Vec::new();
     let mut amplitude = 0.0f64;
+    // Whether a harmonic clear of the carriers' lines was tested yet.
+    let mut tested = false;
     for (h, nu) in harmonics_of(fundamental, fps, bin) {
         let candidate = pair(nu, f);
         let controls: Vec<[Vec<f64>; 2]> = CONTROL_OFFSETS
@@ -485,15 +487,9 @@ fn flicker_at(
             on_lines.push((h, nu));
             continue;
         }
+        let lowest = !tested;
+        tested = true;
         let (energy, control) = judge(whole);
-        if std::env::var("MEB_NUISANCE_DEBUG").is_ok() && energy > 1.5 * whole.noise {
-            eprintln!(
-                "DBG flicker {nominal} h{h} nu {nu:.4} e/noise {:.2} e/control {:.2} share {share:.2} out {}",
-                energy / whole.noise,
-                energy / control,
-                whole.stands_out(energy, control, 2)
-            );
-        }
         if whole.stands_out(energy, control, 2)
             && consistent(&|e: &Evidence| {
                 let (energy, control) = judge(e);
@@ -505,6 +501,11 @@ fn flicker_at(
             // Excess energy per direction of the pair = a²·F/4 per pixel (a the amplitude).
             let excess = whole.excess(energy, control);
             amplitude = amplitude.max((4.0 * excess / (whole.pixels as f64 * f as f64)).sqrt());
+        } else if lowest {
+            // A lamp's flicker is strongest at its lowest harmonics: a family whose lowest
+            // measurable harmonic does not stand out is not there (what stands out higher up is
+            // leakage from a carrier's weaker lines).
+            return None;
         }
     }
     if harmonics.is_empty() {
