@@ -11,6 +11,7 @@
 use meb_core::capture::memory::MemorySource;
 use meb_core::capture::{Frame, FrameFormat};
 use meb_core::rig::Rig;
+use meb_pipeline::demod::timing_break::{BreakKind, TimingBreak};
 use meb_pipeline::demod::{DecodeConfig, Decoded, DemodError, LedCount, decode};
 use meb_sim::capture::{SimConfig, SimulatedCapture};
 use meb_sim::scene::{GroundPlane, Scene, SceneObject};
@@ -285,6 +286,7 @@ fn a_lamp_on_60_hz_mains_on_the_carriers_lines_is_refused_naming_the_flicker() {
             assert!(text.contains("60 Hz mains"), "{text}");
             assert!(text.contains("meb carriers"), "{text}");
             assert!(!text.contains("--leds"), "{text}");
+            assert!(!text.contains("frame timing"), "{text}");
         }
     }
 }
@@ -320,6 +322,53 @@ fn a_lamp_ten_times_the_leds_level_at_a_recommended_chip_rate_is_modelled_or_nam
         assert!(
             families.iter().all(|&f| f == nominal),
             "{mains} Hz: {families:?}"
+        );
+    }
+}
+
+#[test]
+fn a_dropped_or_repeated_frame_is_found_and_the_capture_re_aligned() {
+    // The issue's rows: one frame dropped at 60 of 128, or one repeated (refused before, with
+    // "use --leds 5"); and a frame repeated late in the capture.
+    for (room, seed, frame, kind) in [
+        (vec![60], vec![], 10, 60, BreakKind::Dropped),
+        (vec![], vec![60], 11, 61, BreakKind::Repeated),
+        (vec![], vec![100], 13, 101, BreakKind::Repeated),
+    ]
+    .map(|(dropped, duplicated, seed, frame, kind)| {
+        let room = RoomEffects {
+            dropped,
+            duplicated,
+            ..RoomEffects::default()
+        };
+        (room, seed, frame, kind)
+    }) {
+        let decoded = decoded_within(room, seed, 0.01, false);
+        assert_eq!(
+            decoded.report.room.timing_breaks,
+            vec![TimingBreak { frame, kind }],
+            "{:?}",
+            decoded.report.room
+        );
+    }
+}
+
+#[test]
+#[ignore = "a known silent failure: a frame dropped 13 frames from the start is fitted by one \
+            timing at the noise level, with LEDs 3 and 4 decoded 7 % and 9 % low"]
+fn a_frame_dropped_near_the_start_is_found_or_refused() {
+    let capture = capture(
+        RoomEffects {
+            dropped: vec![13],
+            ..RoomEffects::default()
+        },
+        12,
+    );
+    if let Ok(decoded) = decode_capture(&capture) {
+        let gains = gains(&capture, &decoded);
+        assert!(
+            gains.iter().all(|g| (g - 1.0).abs() < 0.01),
+            "decoded with gains {gains:.4?}"
         );
     }
 }

@@ -80,6 +80,7 @@ mod template;
 #[cfg(test)]
 mod tests;
 pub mod thesis;
+pub mod timing_break;
 pub mod waveform;
 mod window;
 
@@ -120,6 +121,10 @@ const MEDIAN_SAMPLE: usize = 1 << 16;
 const HIDING_CLIPPED_SHARE: f64 = 0.1;
 /// An LED counts as present when its mean on-level exceeds this fraction of the strongest's.
 const SIGNIFICANT_FRACTION: f64 = 0.03;
+/// The fit's unexplained energy per frame over the window's first or last frames above this
+/// multiple of the median frame's sends the window to the timing-break search
+/// ([`WindowDecoder::uneven_residual`]).
+const UNEVEN_RESIDUAL: f64 = 4.0;
 /// Largest phase change, chips, of the rolling-shutter ramp inside one row band.
 const BAND_PHASE_STEP: f64 = 0.004;
 
@@ -247,17 +252,153 @@ pub fn decode_frames(
 
 /// Adds one window of `frames` (cropped to the decoder's region) to `state`: `Ok(false)` when
 /// it holds too few frames for one carrier period after an earlier window (the stream's end),
-/// an error when it is the first.
+/// an error when it is the first. A window refused because the camera dropped or repeated a
+/// frame in it ([`timing_break`]) is re-aligned: decoded without the repeated frame, or as the
+/// pieces either side of the dropped one that hold a carrier period each.
 fn add_window(
     decoder: &WindowDecoder,
     frames: &[Samples],
     config: &DecodeConfig,
     state: &mut Accumulated,
 ) -> Result<bool, DemodError> {
+    let prepared = prepare_window(decoder, frames, config, state);
+    let refused = match &prepared {
+        Ok(Prepared::Window {
+            decoded, uneven, ..
+        }) => !decoded.verdict.is_plausible() || *uneven,
+        Err(DemodError::LedCountMismatch { .. } | DemodError::Implausible { .. }) => true,
+        _ => false,
+    };
+    let leds = state.leds.or(match config.leds {
+        LedCount::Fixed(n) => Some(n),
+        LedCount::Auto => None,
+    });
+    if refused
+        && let Some(leds) = leds
+        && let Some(found) = decoder.find_break(frames, leds)
+    {
+        let offset = state.offset;
+        let need = 1usize << (leds + 1);
+        // Each piece is cut to whole carrier periods, as the window plan cuts windows, keeping
+        // the frames farthest from the break.
+        let whole = |n: usize| n - n % need;
+        let pieces: Vec<Vec<Samples>> = match found.kind {
+            timing_break::BreakKind::Repeated => {
+                let joined: Vec<Samples> = frames[..found.frame]
+                    .iter()
+                    .chain(&frames[found.frame + 1..])
+                    .cloned()
+                    .collect();
+                let keep = whole(joined.len());
+                vec![joined[..keep].to_vec()]
+            }
+            timing_break::BreakKind::Dropped => {
+                let (before, after) = frames.split_at(found.frame);
+                vec![
+                    before[..whole(before.len())].to_vec(),
+                    after[after.len() - whole(after.len())..].to_vec(),
+                ]
+            }
+        };
+        let mut added = 0;
+        for piece in pieces.iter().filter(|p| !p.is_empty()) {
+            if let Ok(Prepared::Window {
+                decoded,
+                counted,
+                found,
+                ..
+            }) = prepare_window(decoder, piece, config, state)
+                && decoded.verdict.is_plausible()
+            {
+                state.commit(*decoded, counted, found.as_ref());
+                added += piece.len();
+            }
+        }
+        let at = timing_break::TimingBreak {
+            frame: offset + found.frame,
+            ..found
+        };
+        if added > 0 {
+            state.offset = offset + frames.len();
+            state.room.timing_breaks.push(at);
+            return Ok(true);
+        }
+        let problem = format!(
+            "the camera's frame timing breaks in the capture ({}): every carrier's phase jumps \
+             at once there, and the frames either side could not be decoded on their own",
+            at.describe()
+        );
+        let advice = format!(
+            "record again with the camera's frame rate fixed (no dropped or repeated frames; on \
+             a phone, a shorter clip or a lower resolution), or decode a range of at least \
+             {need} frames clear of the break (--start, --frames)"
+        );
+        match prepared {
+            Ok(Prepared::Window {
+                mut decoded,
+                counted,
+                found,
+                ..
+            }) => {
+                decoded.verdict.problems.insert(0, problem);
+                decoded.verdict.advice.insert(0, advice);
+                state.offset += frames.len();
+                state.commit(*decoded, counted, found.as_ref());
+                return Ok(true);
+            }
+            _ => {
+                return Err(DemodError::Implausible {
+                    problems: problem,
+                    advice,
+                });
+            }
+        }
+    }
+    state.offset += frames.len();
+    match prepared? {
+        Prepared::Short => Ok(false),
+        Prepared::Window {
+            decoded,
+            counted,
+            found,
+            ..
+        } => {
+            state.commit(*decoded, counted, found.as_ref());
+            Ok(true)
+        }
+    }
+}
+
+/// A window prepared by [`prepare_window`].
+enum Prepared {
+    /// Too few frames for one carrier period after an earlier window (the stream's end).
+    Short,
+    /// The window decoded.
+    Window {
+        /// The decode.
+        decoded: Box<WindowDecode>,
+        /// The LED count and the modulated LEDs seen, when this window's check set them.
+        counted: Option<(usize, Option<usize>)>,
+        /// The room's nuisance components found and projected out.
+        found: Option<nuisance::Nuisance>,
+        /// The fit leaves frames at the window's start or end far less explained than the
+        /// rest ([`WindowDecoder::uneven_residual`]): a timing break is looked for.
+        uneven: bool,
+    },
+}
+
+/// Decodes one window of `frames` as [`add_window`] adds it, without adding it to `state`.
+fn prepare_window(
+    decoder: &WindowDecoder,
+    frames: &[Samples],
+    config: &DecodeConfig,
+    state: &Accumulated,
+) -> Result<Prepared, DemodError> {
     let got = frames.len();
     let mut sample = decoder.sample(frames);
     // Whether the room's components were looked for in a fit of this window.
     let mut looked = false;
+    let mut counted = None;
     let (leds, seed) = match state.leds {
         Some(n) => (n, None),
         None => {
@@ -288,8 +429,7 @@ fn add_window(
                     None => checked?,
                 },
             };
-            state.leds = Some(count.leds);
-            state.detected = count.detected;
+            counted = Some((count.leds, count.detected));
             (count.leds, count.fit)
         }
     };
@@ -308,7 +448,7 @@ fn add_window(
                 leds,
             });
         }
-        return Ok(false);
+        return Ok(Prepared::Short);
     }
     let mut decoded = decoder.decode(frames, &sample, leds, seed.as_ref());
     if !looked
@@ -318,11 +458,13 @@ fn add_window(
         decoded = decoder.decode(frames, &projected, leds, None);
         sample = projected;
     }
-    if let Some(found) = sample.nuisance() {
-        state.room.add(found);
-    }
-    state.add(decoded);
-    Ok(true)
+    let uneven = decoder.uneven_residual(&sample, &decoded.fit);
+    Ok(Prepared::Window {
+        decoded: Box::new(decoded),
+        counted,
+        found: sample.found,
+        uneven,
+    })
 }
 
 /// The stream's format with the configured frame-rate override.
@@ -677,6 +819,111 @@ impl WindowDecoder {
         })
     }
 
+    /// Whether `fit` leaves the frames before or after some frame of the window far less
+    /// explained than the rest: the mean unexplained energy per frame of the sample over the
+    /// first or last k frames (2 ≤ k ≤ F/2) above [`UNEVEN_RESIDUAL`] times the median frame's
+    /// (the noise's share where the timing fits; the window's noise estimate cannot serve, as
+    /// a break spreads signal into the directions it is taken from), the sign of a timing break the quality check may miss when it lies
+    /// near the window's start or end (a few frames out of step barely move the fit).
+    fn uneven_residual(&self, window: &WindowSample, fit: &TimingFit) -> bool {
+        let sample = &window.sample;
+        let f = sample.frames();
+        let leds = fit.model.shifts.len();
+        if sample.is_empty() || f < 8 || leds == 0 {
+            return false;
+        }
+        let waves = ReceivedWaveform::set(leds, sample.nuisance());
+        let rows = sample.rows();
+        let row = (rows[0] + rows[rows.len() - 1]) as f64 / 2.0;
+        let columns = fit.model.columns(&waves, row, f);
+        let design = DMatrix::from_fn(f, columns.len(), |j, c| columns[c][j]);
+        let q = design.qr().q();
+        let keep = DMatrix::identity(f, f) - &q * q.transpose();
+        let residual = &keep * &window.gram * &keep;
+        let diagonal: Vec<f64> = (0..f).map(|j| residual[(j, j)]).collect();
+        // The typical frame's unexplained energy: most frames are on the fitted timing.
+        let mut sorted = diagonal.clone();
+        sorted.sort_by(f64::total_cmp);
+        let per_frame = sorted[f / 2].max(f64::MIN_POSITIVE);
+        let mean = |part: &[f64]| part.iter().sum::<f64>() / part.len() as f64;
+        (2..=f / 2).any(|k| {
+            mean(&diagonal[..k]).max(mean(&diagonal[f - k..])) > UNEVEN_RESIDUAL * per_frame
+        })
+    }
+
+    /// A frame dropped or repeated inside the window of `frames` (cropped to the region) of
+    /// `leds` LEDs ([`timing_break`]), found with the timing of each half of the window; `None`
+    /// when the halves are too short for a fit or no break explains the window.
+    pub fn find_break(&self, frames: &[Samples], leds: usize) -> Option<timing_break::TimingBreak> {
+        let f = frames.len();
+        let half = f / 2;
+        if leds == 0 || leds > MAX_LEDS || half < 1 << (leds + 1) {
+            return None;
+        }
+        let whole = self.raw_sample(frames);
+        if whole.sample.is_empty() {
+            return None;
+        }
+        let waves = ReceivedWaveform::set(leds, None);
+        let fits: Vec<(TimingFit, usize, bool)> = [(0, half, true), (half, f, false)]
+            .into_par_iter()
+            .filter_map(|(start, end, before)| {
+                let part = self.raw_sample(&frames[start..end]);
+                if part.sample.is_empty() {
+                    return None;
+                }
+                let space = SignalSpace::from_spectrum(&part.spectrum, &part.gram, leds);
+                let fit = fit_timing(
+                    &part.sample,
+                    &space,
+                    leds,
+                    self.roi.height,
+                    &self.fit_limits,
+                );
+                Some((fit, start, before))
+            })
+            .collect();
+        let pixels = whole.sample.len();
+        // σ²_G of the whole sample from the halves' fits (the window's own spectrum counts the
+        // signal a break spreads beyond the leading directions as noise).
+        let noise = fits
+            .iter()
+            .map(|(fit, _, _)| fit.pixel_noise)
+            .fold(f64::INFINITY, f64::min)
+            * pixels as f64;
+        if !noise.is_finite() {
+            return None;
+        }
+        let rows = whole.sample.rows();
+        let values = whole.sample.values();
+        let count = if fits.iter().any(|(fit, _, _)| fit.rolling) {
+            3
+        } else {
+            1
+        };
+        let bands: Vec<timing_break::Band> = (0..count)
+            .map(|b| (b * pixels / count, (b + 1) * pixels / count))
+            .filter(|(a, z)| z > a)
+            .map(|(a, z)| {
+                let m = DMatrix::from_row_slice(z - a, f, &values[a * f..z * f]);
+                let row = rows[a..z].iter().map(|&r| r as f64).sum::<f64>() / (z - a) as f64;
+                timing_break::Band {
+                    gram: m.tr_mul(&m),
+                    row,
+                }
+            })
+            .collect();
+        let halves: Vec<timing_break::HalfFit<'_>> = fits
+            .iter()
+            .map(|(fit, start, before)| timing_break::HalfFit {
+                model: &fit.model,
+                start: *start,
+                before: *before,
+            })
+            .collect();
+        timing_break::find(&bands, &halves, &waves, f, noise)
+    }
+
     /// The pixel sample without nuisance components.
     fn raw_sample(&self, frames: &[Samples]) -> WindowSample {
         let grid = RowGrid::new(
@@ -939,11 +1186,31 @@ struct Accumulated {
     /// The verdict over the windows so far.
     verdict: Option<Verdict>,
     variance_factors: Vec<f64>,
-    /// The room's nuisance components found so far.
+    /// The room's nuisance components and timing breaks found so far.
     room: nuisance::RoomReport,
+    /// Frames of the stream's windows seen so far (decoded or not).
+    offset: usize,
 }
 
 impl Accumulated {
+    /// Adds one decoded window with the LED count its check set and the room's components
+    /// found in it.
+    fn commit(
+        &mut self,
+        window: WindowDecode,
+        counted: Option<(usize, Option<usize>)>,
+        found: Option<&nuisance::Nuisance>,
+    ) {
+        if let Some((leds, detected)) = counted {
+            self.leds = Some(leds);
+            self.detected = detected;
+        }
+        if let Some(found) = found {
+            self.room.add(found);
+        }
+        self.add(window);
+    }
+
     /// Adds one decoded window.
     fn add(&mut self, window: WindowDecode) {
         let count = window.frames;
