@@ -1047,17 +1047,6 @@ impl WindowDecoder {
                             ),
                         });
                     }
-                    if detected > n
-                        && let Some(advice) = self.mains_advice(n, fit.model.timing.rate_ratio)
-                    {
-                        return Err(DemodError::Implausible {
-                            problems: format!(
-                                "{n} LEDs requested and the video shows {detected} modulated \
-                                 components"
-                            ),
-                            advice,
-                        });
-                    }
                     return Err(DemodError::LedCountMismatch {
                         requested: n,
                         detected,
