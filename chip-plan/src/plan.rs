@@ -30,9 +30,9 @@
 //! ([`ChipInterrupt`]). The register model runs both modes.
 
 use protocol::carriers::ChipTable;
-use protocol::carriers::MAX_LEDS;
 use protocol::timing::{
-    PWM_STEPS, TimerPeriod, TimingError, chip_timer_period, slot_compare, slot_pattern_period,
+    LedLevels, PWM_STEPS, TimerPeriod, TimingError, chip_timer_period, slot_compare,
+    slot_pattern_period,
 };
 use protocol::wire::OutputFault;
 
@@ -335,14 +335,14 @@ fn write_frames<B: Bus + ?Sized>(
     frames: &FrameMemory,
     bank: Bank,
     table: &ChipTable,
-    brightness_permille: &[u16; MAX_LEDS],
+    levels: &LedLevels,
 ) -> u16 {
     let slots = slots_of(bank);
     // At most 32 chips for TIM3 and 512 for TIM5 whatever the table (see `outputs`).
     let chips = slot_pattern_period(table, &slots).min(bank.max_chips());
     for (chip, &mask) in table.masks()[..chips].iter().enumerate() {
         for (slot, &led) in slots.iter().enumerate() {
-            let value = slot_compare(table, brightness_permille, led, mask);
+            let value = slot_compare(table, levels, led, mask);
             let addr = frames.value(bank, chip, slot);
             if bank.item_bytes() == 2 {
                 bus.write16(addr, value);
@@ -401,13 +401,13 @@ impl ChipEngine {
         self.running
     }
 
-    /// Loads a chip table, per-LED brightness and chip rate; keeps playing (from chip 0) if it
-    /// was. A rate with no timer setting changes nothing.
+    /// Loads a chip table, per-LED on and off levels and chip rate; keeps playing (from chip 0)
+    /// if it was. A rate with no timer setting changes nothing.
     pub fn load<B: Bus + ChipInterruptSlot + ?Sized>(
         &mut self,
         bus: &mut B,
         table: &ChipTable,
-        brightness_permille: &[u16; MAX_LEDS],
+        levels: &LedLevels,
         rate_millihertz: u32,
     ) -> Result<Loaded, ChipError> {
         let period =
@@ -416,7 +416,7 @@ impl ChipEngine {
         self.halt(bus)?;
         let mut bank_chips = [0u16; 2];
         for (chips, bank) in bank_chips.iter_mut().zip(BANKS) {
-            *chips = write_frames(bus, &self.frames, bank, table, brightness_permille);
+            *chips = write_frames(bus, &self.frames, bank, table, levels);
         }
         let loaded = Loaded {
             chips: table.chips(),

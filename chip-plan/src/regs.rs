@@ -179,10 +179,14 @@ impl GpTimer {
 pub mod dma {
     /// DMA1 base address.
     pub const DMA1: u32 = 0x4002_6000;
-    /// DMA_LISR offset (streams 0–3); DMA_HISR is the next word (streams 4–7).
+    /// DMA_LISR offset (streams 0–3).
     pub const LISR: u32 = 0x00;
-    /// DMA_LIFCR offset (streams 0–3); DMA_HIFCR is the next word (streams 4–7).
+    /// DMA_HISR offset (streams 4–7).
+    pub const HISR: u32 = 0x04;
+    /// DMA_LIFCR offset (streams 0–3).
     pub const LIFCR: u32 = 0x08;
+    /// DMA_HIFCR offset (streams 4–7).
+    pub const HIFCR: u32 = 0x0C;
     /// DMA_S0CR offset; stream x's registers are `0x18 · x` further on.
     pub const S0CR: u32 = 0x10;
     /// Distance between two streams' register sets.
@@ -287,12 +291,22 @@ impl DmaStream {
 
     /// Address of the interrupt status register holding this stream's flags (LISR or HISR).
     pub const fn isr(self) -> u32 {
-        dma::DMA1 + dma::LISR + if self.number < 4 { 0 } else { 4 }
+        dma::DMA1
+            + if self.number < 4 {
+                dma::LISR
+            } else {
+                dma::HISR
+            }
     }
 
     /// Address of the flag clear register for this stream (LIFCR or HIFCR).
     pub const fn ifcr(self) -> u32 {
-        dma::DMA1 + dma::LIFCR + if self.number < 4 { 0 } else { 4 }
+        dma::DMA1
+            + if self.number < 4 {
+                dma::LIFCR
+            } else {
+                dma::HIFCR
+            }
     }
 
     /// `flags` (per-stream flag bits such as [`dma::TEIF`]) moved to this stream's position in

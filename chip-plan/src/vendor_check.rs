@@ -384,11 +384,8 @@ fn vendor_dma_offsets_fields_and_values() {
     let d = "DMA1";
     assert_eq!(dma::LISR, offset(d, "isr"));
     assert_eq!(dma::LIFCR, offset(d, "ifcr"));
-    assert_eq!(
-        address(d, &[("isr", 1)]) - address(d, &[("isr", 0)]),
-        4,
-        "HISR follows LISR"
-    );
+    assert_eq!(dma::HISR, address(d, &[("isr", 1)]) - base(d), "HISR");
+    assert_eq!(dma::HIFCR, address(d, &[("ifcr", 1)]) - base(d), "HIFCR");
     for number in 0..8u8 {
         let stream = DmaStream { number };
         let n = u32::from(number);
@@ -621,7 +618,12 @@ fn pa0_is_driven_only_with_eight_leds() {
         let mut engine = ChipEngine::new(&mut chip, 96_000_000, frames, Mode::Dma).unwrap();
         let table = ChipTable::new(leds).unwrap();
         engine
-            .load(&mut chip, &table, &[1000; MAX_LEDS], 4_000_000)
+            .load(
+                &mut chip,
+                &table,
+                &protocol::timing::LedLevels::full_depth(&[1000; MAX_LEDS]),
+                4_000_000,
+            )
             .unwrap();
         engine.start(&mut chip).unwrap();
         chip.run_until(chip.now + 2 * table.chips() as u64 * 24_000);

@@ -27,7 +27,8 @@ use embassy_stm32::timer::simple_pwm::PwmPin;
 use embassy_stm32::timer::{Ch1, Ch2, Ch3, Ch4};
 use embassy_sync::blocking_mutex::Mutex;
 use embassy_sync::blocking_mutex::raw::ThreadModeRawMutex;
-use protocol::carriers::{ChipTable, MAX_CHIPS, MAX_LEDS};
+use protocol::carriers::{ChipTable, MAX_CHIPS};
+use protocol::timing::LedLevels;
 use protocol::wire::OutputFault;
 use static_cell::ConstStaticCell;
 
@@ -242,13 +243,13 @@ fn with_engine<R>(f: impl FnOnce(&mut ChipEngine) -> R) -> Option<R> {
     CARRIERS.lock(|cell| cell.borrow_mut().as_mut().map(|c| f(&mut c.engine)))
 }
 
-/// Loads a chip table, per-LED brightness and chip rate; keeps playing if it was.
+/// Loads a chip table, per-LED on and off levels and chip rate; keeps playing if it was.
 pub fn load(
     table: &ChipTable,
-    brightness_permille: &[u16; MAX_LEDS],
+    levels: &LedLevels,
     rate_millihertz: u32,
 ) -> Option<Result<Loaded, ChipError>> {
-    with_engine(|e| e.load(&mut Mmio, table, brightness_permille, rate_millihertz))
+    with_engine(|e| e.load(&mut Mmio, table, levels, rate_millihertz))
 }
 
 /// Starts playing.

@@ -113,22 +113,19 @@ pub fn apply(effects: &Effects) {
     for effect in effects {
         match *effect {
             Effect::ApplyOutput(plan) => {
-                let loaded = plan.chip_table().map(|table| {
-                    chips::load(
-                        &table,
-                        &plan.brightness_permille,
-                        plan.chip_rate.millihertz(),
-                    )
-                });
+                let loaded = plan
+                    .chip_table()
+                    .map(|table| chips::load(&table, &plan.levels(), plan.chip_rate.millihertz()));
                 match loaded {
                     Ok(Some(Ok(loaded))) => info!(
-                        "output: {} LEDs, {} chips, {} mHz requested, {} uHz played ({} ppb), brightness {}",
+                        "output: {} LEDs, {} chips, {} mHz requested, {} uHz played ({} ppb), brightness {}, off level {}",
                         plan.led_count,
                         loaded.chips,
                         plan.chip_rate.millihertz(),
                         loaded.rate_microhertz,
                         loaded.error_ppb,
-                        plan.brightness_permille
+                        plan.brightness_permille,
+                        plan.off_level_permille
                     ),
                     Ok(Some(Err(e))) => engine_error(e),
                     Ok(None) => error!("output not loaded: no chip engine"),

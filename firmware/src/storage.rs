@@ -68,7 +68,8 @@ impl ConfigStore {
             // An item under our key that does not decode is corruption, even without the magic
             // (the protocol maps a bare BadMagic to Missing for files and raw flash).
             Ok(Some(bytes)) => match decode_record(bytes) {
-                Ok(config) => RestoredConfig::Ok(config),
+                Ok(stored) if stored.without_depth() => RestoredConfig::WithoutDepth(stored.config),
+                Ok(stored) => RestoredConfig::Ok(stored.config),
                 Err(error) => {
                     defmt::warn!("stored config unusable: {}", error);
                     RestoredConfig::Corrupt

@@ -52,13 +52,15 @@ pub fn client(port: &Path) -> DeviceClient {
     }
 }
 
-/// A distinctive valid configuration: 3 LEDs at 959.5 Hz, mixed brightness and phases.
+/// A distinctive valid configuration: 3 LEDs at 959.5 Hz, mixed brightness, phases and
+/// low-risk off levels.
 pub fn sample_config() -> LuminaireConfig {
     let mut config = LuminaireConfig::DEFAULT;
     config.led_count = 3;
     config.chip_rate = ChipRate(959_500);
     config.brightness_permille[..3].copy_from_slice(&[1000, 800, 650]);
     config.phase_chips[..3].copy_from_slice(&[0, 3, 11]);
+    config.off_level_permille[..3].copy_from_slice(&[750, 700, 900]);
     config
 }
 

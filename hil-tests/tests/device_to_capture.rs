@@ -23,6 +23,10 @@ fn configured_timeline(rate_error_ppm: f64) -> Timeline {
     config.led_count = 4;
     config.chip_rate = ChipRate::from_hz(960.0);
     config.phase_chips[..4].copy_from_slice(&PHASES);
+    // The thesis' full on/off carriers, which flicker above IEEE 1789 low risk: accepted on
+    // purpose, as `meb device set --depth 1 --allow-flicker` does.
+    config.off_level_permille = [0; 8];
+    config.allow_flicker = true;
     let mut c = client(emulator.port_path());
     c.set_config(&config).unwrap();
     assert_eq!(c.config().unwrap(), config);

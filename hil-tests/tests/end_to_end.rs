@@ -35,6 +35,10 @@ fn configured_luminaire_to_depth_map_meets_the_target() {
     config.led_count = 4;
     config.chip_rate = ChipRate::from_hz(960.0);
     config.phase_chips[..4].copy_from_slice(&[0, 9, 17, 26]);
+    // The thesis' full on/off carriers, which flicker above IEEE 1789 low risk: accepted on
+    // purpose, as `meb device set --depth 1 --allow-flicker` does.
+    config.off_level_permille = [0; 8];
+    config.allow_flicker = true;
     let mut c = client(emulator.port_path());
     c.set_config(&config).unwrap();
     assert_eq!(c.config().unwrap(), config);

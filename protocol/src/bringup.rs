@@ -18,6 +18,10 @@
 //!    carriers can look alike in these first 32 chips). An LED that stays dark or steady here but lit in step 1 points
 //!    at the carrier chain (timer DMA), not the wiring.
 //! 3. The configuration from before the check.
+//!
+//! The steps play full on/off keying, and the walk flickers at a few hertz on purpose: they
+//! carry `allow_flicker` and are exempt from the IEEE 1789 low-risk check that `SetConfig`
+//! applies otherwise (docs/howto/flicker-safety.md); `meb device blink` says so before it starts.
 
 use heapless::Vec;
 
@@ -55,6 +59,8 @@ pub fn blink_sequence(active: &LuminaireConfig) -> Vec<BlinkStep, { MAX_LEDS + 2
             chip_rate: STEADY_RATE,
             brightness_permille: brightness,
             running: true,
+            off_level_permille: [0; MAX_LEDS],
+            allow_flicker: true,
             ..*active
         };
         push(&mut steps, config, LED_STEP_MS);
@@ -65,6 +71,8 @@ pub fn blink_sequence(active: &LuminaireConfig) -> Vec<BlinkStep, { MAX_LEDS + 2
         chip_rate: WALK_RATE,
         brightness_permille: walk_brightness,
         running: true,
+        off_level_permille: [0; MAX_LEDS],
+        allow_flicker: true,
         ..*active
     };
     push(
@@ -93,6 +101,7 @@ mod tests {
             brightness_permille: [700, 600, 500, 400, 300, 200, 100, 50],
             phase_chips: [0; MAX_LEDS],
             running: false,
+            ..LuminaireConfig::DEFAULT
         }
     }
 

@@ -1,5 +1,6 @@
-//! Luminaire configuration: LED count, chip rate, per-LED brightness and phase, running flag
-//! (docs/maths/carriers.md#playing-the-table-on-a-luminaire).
+//! Luminaire configuration: LED count, chip rate, per-LED brightness, off level and phase,
+//! running flag and the flicker acceptance (docs/maths/carriers.md#playing-the-table-on-a-luminaire,
+//! docs/howto/flicker-safety.md).
 //!
 //! The chip rate is a fixed-point number of millihertz so that fractional rates such as
 //! 959.5 Hz are exact on the wire and in flash. Supported range: [`ChipRate::MIN`] = 1.000 Hz
@@ -83,6 +84,25 @@ pub enum ConfigError {
         /// The rejected value.
         got: u16,
     },
+    /// `off_level_permille[led]` exceeds 1000.
+    OffLevel {
+        /// 0-based LED index.
+        led: u8,
+        /// The rejected value.
+        got: u16,
+    },
+    /// LED `led` plays a modulation depth above IEEE 1789 low risk and `allow_flicker` is not
+    /// set (depths in per mille; [`crate::flicker`]).
+    Flicker {
+        /// 0-based LED index.
+        led: u8,
+        /// The depth it would play, per mille.
+        depth_permille: u16,
+        /// The largest low-risk depth at this chip rate, per mille.
+        max_depth_permille: u16,
+        /// Frequency of the component that sets the limit, in millihertz.
+        frequency_millihertz: u32,
+    },
 }
 
 impl core::fmt::Display for ConfigError {
@@ -105,6 +125,20 @@ impl core::fmt::Display for ConfigError {
                     "phase_chips[{led}] = {got} is not below the frame length"
                 )
             }
+            Self::OffLevel { led, got } => write!(
+                f,
+                "off_level_permille[{led}] = {got} exceeds {FULL_BRIGHTNESS_PERMILLE}"
+            ),
+            Self::Flicker {
+                led,
+                depth_permille,
+                max_depth_permille,
+                frequency_millihertz,
+            } => write!(
+                f,
+                "LED {} flickers above IEEE 1789 low risk: depth {depth_permille}‰ > {max_depth_permille}‰ (line at {frequency_millihertz} mHz)",
+                led + 1
+            ),
         }
     }
 }
@@ -126,16 +160,34 @@ pub struct LuminaireConfig {
     pub phase_chips: [u16; MAX_LEDS],
     /// Whether the carriers are playing.
     pub running: bool,
+    /// Per-LED level of the off chips in per mille of the on level (0 = dark off chips, full
+    /// on/off keying; 900 = a 5.3 % modulation depth); all 8 entries are validated.
+    pub off_level_permille: [u16; MAX_LEDS],
+    /// Whether a configuration above IEEE 1789 low risk was accepted on purpose
+    /// (`--allow-flicker`); without it `SetConfig` refuses one and power-up limits one.
+    pub allow_flicker: bool,
 }
 
 impl LuminaireConfig {
-    /// Factory default: 4 LEDs at 960 Hz, full brightness, no phase offsets, running.
+    /// Factory default: 4 LEDs at 960 Hz, full brightness, no phase offsets, running, each LED
+    /// 2 % below its largest IEEE 1789 low-risk depth at 960 Hz (LED 1 14.8 %, LED 2 17.8 %,
+    /// LED 3 5.8 %, LED 4 5.8 %; LEDs 5–8, not played, as LED 4), a test checks them.
     pub const DEFAULT: LuminaireConfig = LuminaireConfig {
         led_count: 4,
         chip_rate: ChipRate(960_000),
         brightness_permille: [FULL_BRIGHTNESS_PERMILLE; MAX_LEDS],
         phase_chips: [0; MAX_LEDS],
         running: true,
+        off_level_permille: DEFAULT_OFF_LEVELS,
+        allow_flicker: false,
+    };
+
+    /// The default with full on/off keying (every off level 0, `allow_flicker` set): what every
+    /// configuration played before the off level was a setting.
+    pub const FULL_DEPTH: LuminaireConfig = LuminaireConfig {
+        off_level_permille: [0; MAX_LEDS],
+        allow_flicker: true,
+        ..Self::DEFAULT
     };
 
     /// Checks every field; the first offending field is reported.
@@ -155,6 +207,11 @@ impl LuminaireConfig {
                 return Err(ConfigError::Brightness { led, got });
             }
         }
+        for (led, &got) in (0u8..).zip(self.off_level_permille.iter()) {
+            if got > FULL_BRIGHTNESS_PERMILLE {
+                return Err(ConfigError::OffLevel { led, got });
+            }
+        }
         let chips = chips_per_frame(self.led_count);
         for (led, &got) in (0u8..).zip(self.phase_chips.iter()) {
             if usize::from(got) >= chips {
@@ -164,6 +221,24 @@ impl LuminaireConfig {
         Ok(())
     }
 
+    /// [`Self::validate`], then the IEEE 1789 low-risk check unless `allow_flicker` is set:
+    /// what `SetConfig` accepts.
+    pub fn validate_for_people(&self) -> Result<(), ConfigError> {
+        self.validate()?;
+        if self.allow_flicker {
+            return Ok(());
+        }
+        match crate::flicker::first_excess(self, &crate::flicker::LOW_RISK) {
+            None => Ok(()),
+            Some(excess) => Err(ConfigError::Flicker {
+                led: excess.led,
+                depth_permille: permille_up(excess.depth),
+                max_depth_permille: permille(excess.limit.depth),
+                frequency_millihertz: (excess.limit.frequency_hz * 1000.0 + 0.5) as u32,
+            }),
+        }
+    }
+
     /// The chip table this configuration plays (phases applied); `LedCount` error if invalid.
     pub fn chip_table(&self) -> Result<ChipTable, ConfigError> {
         ChipTable::with_phases(self.led_count, &self.phase_chips).map_err(|_| {
@@ -171,6 +246,25 @@ impl LuminaireConfig {
                 got: self.led_count,
             }
         })
+    }
+}
+
+/// Off levels of [`LuminaireConfig::DEFAULT`]: the largest low-risk depths at 960 Hz.
+/// 2 % below the largest, so that nearby rates (959.5 Hz) stay low-risk too.
+const DEFAULT_OFF_LEVELS: [u16; MAX_LEDS] = [743, 698, 891, 890, 890, 890, 890, 890];
+
+/// A fraction in whole per mille, rounded down (0..=1 maps to 0..=1000).
+fn permille(x: f32) -> u16 {
+    (x * 1000.0) as u16
+}
+
+/// A fraction in whole per mille, rounded up: a depth above a limit never prints as equal.
+fn permille_up(x: f32) -> u16 {
+    let down = permille(x);
+    if f32::from(down) < x * 1000.0 {
+        down + 1
+    } else {
+        down
     }
 }
 
@@ -189,6 +283,40 @@ mod tests {
         let config = LuminaireConfig::DEFAULT;
         assert_eq!(config.validate(), Ok(()));
         assert_eq!(config.chip_table().map(|t| t.chips()), Ok(32));
+    }
+
+    #[test]
+    fn default_is_low_risk_at_the_largest_depths() {
+        let config = LuminaireConfig::DEFAULT;
+        assert_eq!(config.validate_for_people(), Ok(()));
+        assert_eq!(crate::flicker::limited_to_low_risk(&config), config);
+        let mut nearby = config;
+        nearby.chip_rate = ChipRate(959_500);
+        assert_eq!(nearby.validate_for_people(), Ok(()));
+        // Each played LED within 3 % of its largest depth: 10 per mille less off light (a
+        // deeper modulation) is refused.
+        for led in 0..usize::from(config.led_count) {
+            let max =
+                crate::flicker::max_depth(led as u8, config.chip_rate, &crate::flicker::LOW_RISK);
+            assert!(
+                crate::flicker::played_depth(&config, led) > 0.97 * max.depth,
+                "LED {led}"
+            );
+            let mut deeper = config;
+            deeper.off_level_permille[led] -= 10;
+            assert!(
+                matches!(deeper.validate_for_people(), Err(ConfigError::Flicker { led: l, .. }) if usize::from(l) == led),
+                "LED {led}"
+            );
+            deeper.allow_flicker = true;
+            assert_eq!(deeper.validate_for_people(), Ok(()));
+        }
+        let mut bad = config;
+        bad.off_level_permille[6] = 1001;
+        assert_eq!(
+            bad.validate(),
+            Err(ConfigError::OffLevel { led: 6, got: 1001 })
+        );
     }
 
     #[test]

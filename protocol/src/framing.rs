@@ -320,6 +320,8 @@ mod tests {
             brightness_permille: [u16::MAX; 8],
             phase_chips: [u16::MAX; 8],
             running: true,
+            off_level_permille: [u16::MAX; 8],
+            allow_flicker: true,
         }
     }
 
@@ -342,6 +344,7 @@ mod tests {
             output_fault: Some(OutputFault::DmaStopTimeout),
             config_source: ConfigSource::CorruptRecordDefaults,
             unsaved_changes: true,
+            flicker_limited: true,
             save: SaveState::Failed,
             identify_active: true,
             rx_frames_ok: u32::MAX,
@@ -356,6 +359,12 @@ mod tests {
             Response::GetStatus(status),
             Response::SetConfig(Err(ConfigError::ChipRate {
                 got_millihertz: u32::MAX,
+            })),
+            Response::SetConfig(Err(ConfigError::Flicker {
+                led: u8::MAX,
+                depth_permille: u16::MAX,
+                max_depth_permille: u16::MAX,
+                frequency_millihertz: u32::MAX,
             })),
             Response::SaveConfig(Err(CommandError::StorageFailed)),
         ];

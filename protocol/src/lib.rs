@@ -6,6 +6,7 @@
 //! * [`wire`]: header, request/response command table and payload types.
 //! * [`framing`]: COBS + CRC-32 framing, the streaming [`framing::FrameReader`].
 //! * [`record`]: the persisted configuration record (flash and emulator file).
+//! * [`flicker`]: IEEE 1789 flicker limits of a configuration, the one acceptance function.
 //! * [`flash`]: how long a save can stall the board; the watchdog and host waits derived from it.
 //! * [`luminaire`]: the hardware-free state machine and [`luminaire::Endpoint`] that both the
 //!   firmware and `meb device emulate` run.
@@ -23,6 +24,7 @@ pub mod carriers;
 pub mod checksum;
 pub mod config;
 pub mod flash;
+pub mod flicker;
 pub mod framing;
 pub mod luminaire;
 pub mod record;

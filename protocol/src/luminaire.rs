@@ -17,10 +17,12 @@ use heapless::{String, Vec};
 
 use crate::carriers::{ChipTable, MAX_LEDS};
 use crate::config::{ChipRate, ConfigError, LuminaireConfig};
+use crate::flicker::{is_low_risk, limited_to_low_risk};
 use crate::framing::{
     FrameError, FrameEvent, MAX_FRAME_LEN, WireFrameReader, decode_request, encode_response,
 };
-use crate::record::RecordError;
+use crate::record::{RecordError, StoredConfig};
+use crate::timing::LedLevels;
 use crate::wire::{
     CommandError, ConfigSource, DeviceInfo, MAX_IDENTIFY_SECONDS, OutputFault, PROTOCOL_VERSION,
     ProtocolError, Request, Response, SEQ_UNKNOWN, SaveOutcome, SaveState, Status,
@@ -38,6 +40,8 @@ pub struct OutputPlan {
     pub brightness_permille: [u16; MAX_LEDS],
     /// Per-LED carrier delay in chips.
     pub phase_chips: [u16; MAX_LEDS],
+    /// Per-LED off level in per mille of the on level.
+    pub off_level_permille: [u16; MAX_LEDS],
 }
 
 impl OutputPlan {
@@ -48,7 +52,13 @@ impl OutputPlan {
             chip_rate: config.chip_rate,
             brightness_permille: config.brightness_permille,
             phase_chips: config.phase_chips,
+            off_level_permille: config.off_level_permille,
         }
+    }
+
+    /// The PWM compare values of each LED's on and off chips.
+    pub fn levels(&self) -> LedLevels {
+        LedLevels::new(&self.brightness_permille, &self.off_level_permille)
     }
 
     /// The chip table to load (phases applied).
@@ -120,18 +130,22 @@ fn truncated<const N: usize>(text: &str) -> String<N> {
 pub enum RestoredConfig {
     /// A valid record was read.
     Ok(LuminaireConfig),
+    /// A valid record of the layout before off levels was read (off levels 0).
+    WithoutDepth(LuminaireConfig),
     /// No record (erased flash, no file).
     Missing,
     /// A record was present but corrupt or invalid.
     Corrupt,
 }
 
-impl From<Result<LuminaireConfig, RecordError>> for RestoredConfig {
+impl From<Result<StoredConfig, RecordError>> for RestoredConfig {
     /// Maps [`decode_record`](crate::record::decode_record)'s result: no magic (erased flash)
     /// is `Missing`, any other error (including an empty or truncated record) is `Corrupt`.
-    fn from(result: Result<LuminaireConfig, RecordError>) -> Self {
+    fn from(result: Result<StoredConfig, RecordError>) -> Self {
         match result {
-            Ok(config) if config.validate().is_ok() => Self::Ok(config),
+            Ok(stored) if stored.config.validate().is_err() => Self::Corrupt,
+            Ok(stored) if stored.without_depth() => Self::WithoutDepth(stored.config),
+            Ok(stored) => Self::Ok(stored.config),
             Err(RecordError::BadMagic) => Self::Missing,
             _ => Self::Corrupt,
         }
@@ -161,6 +175,7 @@ pub struct Luminaire {
     config: LuminaireConfig,
     stored: Option<LuminaireConfig>,
     source: ConfigSource,
+    flicker_limited: bool,
     save: SaveState,
     saving: Option<LuminaireConfig>,
     identify_active: bool,
@@ -171,23 +186,36 @@ pub struct Luminaire {
 
 impl Luminaire {
     /// A luminaire starting from the stored configuration, or the defaults if there is none.
+    /// A stored configuration above IEEE 1789 low risk that was not saved with
+    /// `allow_flicker` starts with its off levels raised to the largest low-risk depths
+    /// ([`limited_to_low_risk`]), reported by [`Status::flicker_limited`].
     pub fn new(board: BoardInfo, restored: RestoredConfig) -> Self {
         let (config, stored, source) = match restored {
             RestoredConfig::Ok(config) if config.validate().is_ok() => {
                 (config, Some(config), ConfigSource::Restored)
             }
-            RestoredConfig::Ok(_) | RestoredConfig::Corrupt => (
+            RestoredConfig::WithoutDepth(config) if config.validate().is_ok() => {
+                (config, Some(config), ConfigSource::RestoredWithoutDepth)
+            }
+            RestoredConfig::Ok(_) | RestoredConfig::WithoutDepth(_) | RestoredConfig::Corrupt => (
                 LuminaireConfig::DEFAULT,
                 None,
                 ConfigSource::CorruptRecordDefaults,
             ),
             RestoredConfig::Missing => (LuminaireConfig::DEFAULT, None, ConfigSource::Defaults),
         };
+        let flicker_limited = !config.allow_flicker && !is_low_risk(&config);
+        let config = if flicker_limited {
+            limited_to_low_risk(&config)
+        } else {
+            config
+        };
         Self {
             board,
             config,
             stored,
             source,
+            flicker_limited,
             save: SaveState::Idle,
             saving: None,
             identify_active: false,
@@ -242,6 +270,7 @@ impl Luminaire {
             output_fault: self.fault,
             config_source: self.source,
             unsaved_changes: self.stored != Some(self.config),
+            flicker_limited: self.flicker_limited,
             save: self.save,
             identify_active: self.identify_active,
             rx_frames_ok: self.counters.frames_ok,
@@ -282,10 +311,11 @@ impl Luminaire {
             Request::Ping(nonce) => Response::Ping(*nonce),
             Request::GetInfo(()) => Response::GetInfo(self.info()),
             Request::GetConfig(()) => Response::GetConfig(self.config),
-            Request::SetConfig(new) => Response::SetConfig(match new.validate() {
+            Request::SetConfig(new) => Response::SetConfig(match new.validate_for_people() {
                 Ok(()) => {
                     self.config = *new;
                     self.fault = None;
+                    self.flicker_limited = false;
                     push(&mut effects, Effect::ApplyOutput(OutputPlan::of(new)));
                     push(&mut effects, self.run_effect());
                     Ok(())
@@ -480,6 +510,7 @@ mod tests {
             led_count: 3,
             chip_rate: ChipRate(959_500),
             phase_chips: [1, 2, 3, 0, 0, 0, 0, 0],
+            off_level_permille: [750, 700, 900, 900, 900, 900, 900, 900],
             ..LuminaireConfig::DEFAULT
         }
     }
@@ -754,5 +785,67 @@ mod tests {
             Response::ProtocolError(ProtocolError::BadCrc)
         );
         assert_eq!(endpoint.luminaire.counters().bad_crc, 1);
+    }
+
+    #[test]
+    fn set_config_refuses_flicker_above_low_risk_unless_accepted() {
+        let mut luminaire = Luminaire::new(board(), RestoredConfig::Missing);
+        let mut full = LuminaireConfig::FULL_DEPTH;
+        full.allow_flicker = false;
+        let (response, effects) = luminaire.handle(1, &Request::SetConfig(full));
+        assert!(
+            matches!(
+                response,
+                Response::SetConfig(Err(ConfigError::Flicker {
+                    led: 0,
+                    depth_permille: 1000,
+                    ..
+                }))
+            ),
+            "{response:?}"
+        );
+        assert!(effects.is_empty());
+        assert_eq!(*luminaire.config(), LuminaireConfig::DEFAULT);
+        full.allow_flicker = true;
+        let (response, effects) = luminaire.handle(2, &Request::SetConfig(full));
+        assert_eq!(response, Response::SetConfig(Ok(())));
+        assert_eq!(
+            effects.first(),
+            Some(&Effect::ApplyOutput(OutputPlan::of(&full)))
+        );
+    }
+
+    #[test]
+    fn power_up_limits_a_stored_flicker_that_was_not_accepted() {
+        let mut full = LuminaireConfig::FULL_DEPTH;
+        full.allow_flicker = false;
+        for restored in [RestoredConfig::Ok(full), RestoredConfig::WithoutDepth(full)] {
+            let luminaire = Luminaire::new(board(), restored);
+            let status = luminaire.status();
+            assert!(status.flicker_limited, "{restored:?}");
+            assert!(crate::flicker::is_low_risk(luminaire.config()));
+            assert_eq!(
+                luminaire.config().off_level_permille[..4],
+                [738, 693, 889, 888]
+            );
+            let Effect::ApplyOutput(plan) = luminaire.startup_effects()[0] else {
+                panic!("no output first");
+            };
+            assert_eq!(
+                plan.off_level_permille,
+                luminaire.config().off_level_permille
+            );
+        }
+        let old = Luminaire::new(board(), RestoredConfig::WithoutDepth(full));
+        assert_eq!(
+            old.status().config_source,
+            ConfigSource::RestoredWithoutDepth
+        );
+        // Saved on purpose: played as saved.
+        let accepted = Luminaire::new(board(), RestoredConfig::Ok(LuminaireConfig::FULL_DEPTH));
+        assert!(!accepted.status().flicker_limited);
+        assert_eq!(*accepted.config(), LuminaireConfig::FULL_DEPTH);
+        let default = Luminaire::new(board(), RestoredConfig::Missing);
+        assert!(!default.status().flicker_limited);
     }
 }

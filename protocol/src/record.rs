@@ -5,6 +5,11 @@
 //! postcard([`LuminaireConfig`]), CRC-32/ISO-HDLC of everything before it. Bytes after the
 //! record (erased flash) are ignored. Decoding yields either a valid configuration or an error,
 //! never a half-valid configuration.
+//!
+//! Versions: 2 (written now) is the configuration with per-LED off levels and the flicker
+//! acceptance; 1, written before the off level was a setting, holds the first five fields only
+//! and is read as off level 0 (full on/off keying, what it played) without the acceptance, and
+//! reported as such ([`StoredConfig::without_depth`]).
 
 use crate::checksum::CRC32;
 use crate::config::{ConfigError, LuminaireConfig};
@@ -12,7 +17,9 @@ use crate::config::{ConfigError, LuminaireConfig};
 /// Record magic.
 pub const RECORD_MAGIC: [u8; 4] = *b"MEBC";
 /// Current record layout version.
-pub const RECORD_VERSION: u16 = 1;
+pub const RECORD_VERSION: u16 = 2;
+/// The layout before off levels: LED count, rate, brightness, phases, running.
+pub const RECORD_VERSION_WITHOUT_DEPTH: u16 = 1;
 /// Bytes before the payload: magic, version, length.
 pub const RECORD_HEADER_LEN: usize = 8;
 /// Largest record in bytes (header, payload, CRC).
@@ -55,9 +62,65 @@ impl core::fmt::Display for RecordError {
 #[cfg(feature = "std")]
 impl std::error::Error for RecordError {}
 
+/// The configuration of a version-1 record (the fields of [`LuminaireConfig`] before off
+/// levels), in its postcard order.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
+pub struct ConfigWithoutDepth {
+    /// Number of LEDs.
+    pub led_count: u8,
+    /// Chip rate.
+    pub chip_rate: crate::config::ChipRate,
+    /// Per-LED brightness in per mille.
+    pub brightness_permille: [u16; crate::carriers::MAX_LEDS],
+    /// Per-LED phase in chips.
+    pub phase_chips: [u16; crate::carriers::MAX_LEDS],
+    /// Whether the carriers were playing.
+    pub running: bool,
+}
+
+impl ConfigWithoutDepth {
+    /// The configuration it played: off chips dark, flicker not accepted.
+    pub fn upgraded(&self) -> LuminaireConfig {
+        LuminaireConfig {
+            led_count: self.led_count,
+            chip_rate: self.chip_rate,
+            brightness_permille: self.brightness_permille,
+            phase_chips: self.phase_chips,
+            running: self.running,
+            off_level_permille: [0; crate::carriers::MAX_LEDS],
+            allow_flicker: false,
+        }
+    }
+}
+
+/// A configuration read from a record and the record's layout version.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub struct StoredConfig {
+    /// The (valid) configuration.
+    pub config: LuminaireConfig,
+    /// [`RECORD_VERSION`] or [`RECORD_VERSION_WITHOUT_DEPTH`].
+    pub version: u16,
+}
+
+impl StoredConfig {
+    /// Whether the record predates off levels (read as off level 0).
+    pub fn without_depth(&self) -> bool {
+        self.version == RECORD_VERSION_WITHOUT_DEPTH
+    }
+}
+
 /// Writes the record for `config` into `buf`; returns the record bytes.
 pub fn encode_record<'a>(
     config: &LuminaireConfig,
+    buf: &'a mut [u8],
+) -> Result<&'a [u8], RecordError> {
+    encode_versioned(RECORD_VERSION, config, buf)
+}
+
+fn encode_versioned<'a, T: serde::Serialize>(
+    version: u16,
+    config: &T,
     buf: &'a mut [u8],
 ) -> Result<&'a [u8], RecordError> {
     if buf.len() < RECORD_HEADER_LEN {
@@ -69,7 +132,7 @@ pub fn encode_record<'a>(
         .len();
     let length = u16::try_from(payload_len).map_err(|_| RecordError::BufferFull)?;
     head[..4].copy_from_slice(&RECORD_MAGIC);
-    head[4..6].copy_from_slice(&RECORD_VERSION.to_le_bytes());
+    head[4..6].copy_from_slice(&version.to_le_bytes());
     head[6..8].copy_from_slice(&length.to_le_bytes());
     let body_end = RECORD_HEADER_LEN + payload_len;
     let end = body_end + 4;
@@ -81,8 +144,16 @@ pub fn encode_record<'a>(
     Ok(&buf[..end])
 }
 
+/// Writes a version-1 record (the layout before off levels), for tests of old flash contents.
+pub fn encode_record_without_depth<'a>(
+    config: &ConfigWithoutDepth,
+    buf: &'a mut [u8],
+) -> Result<&'a [u8], RecordError> {
+    encode_versioned(RECORD_VERSION_WITHOUT_DEPTH, config, buf)
+}
+
 /// Reads a record (trailing bytes ignored); the configuration is returned only if valid.
-pub fn decode_record(bytes: &[u8]) -> Result<LuminaireConfig, RecordError> {
+pub fn decode_record(bytes: &[u8]) -> Result<StoredConfig, RecordError> {
     if bytes.len() >= RECORD_MAGIC.len() && bytes[..RECORD_MAGIC.len()] != RECORD_MAGIC {
         return Err(RecordError::BadMagic);
     }
@@ -90,7 +161,7 @@ pub fn decode_record(bytes: &[u8]) -> Result<LuminaireConfig, RecordError> {
         return Err(RecordError::Truncated);
     }
     let version = u16::from_le_bytes([bytes[4], bytes[5]]);
-    if version != RECORD_VERSION {
+    if version != RECORD_VERSION && version != RECORD_VERSION_WITHOUT_DEPTH {
         return Err(RecordError::UnknownVersion(version));
     }
     let length = usize::from(u16::from_le_bytes([bytes[6], bytes[7]]));
@@ -103,12 +174,20 @@ pub fn decode_record(bytes: &[u8]) -> Result<LuminaireConfig, RecordError> {
     if CRC32.checksum(body) != expected {
         return Err(RecordError::BadCrc);
     }
-    let config = match postcard::take_from_bytes::<LuminaireConfig>(&body[RECORD_HEADER_LEN..]) {
-        Ok((config, [])) => config,
-        _ => return Err(RecordError::Malformed),
+    let payload = &body[RECORD_HEADER_LEN..];
+    let config = if version == RECORD_VERSION {
+        match postcard::take_from_bytes::<LuminaireConfig>(payload) {
+            Ok((config, [])) => config,
+            _ => return Err(RecordError::Malformed),
+        }
+    } else {
+        match postcard::take_from_bytes::<ConfigWithoutDepth>(payload) {
+            Ok((old, [])) => old.upgraded(),
+            _ => return Err(RecordError::Malformed),
+        }
     };
     config.validate().map_err(RecordError::Invalid)?;
-    Ok(config)
+    Ok(StoredConfig { config, version })
 }
 
 #[cfg(test)]
@@ -123,6 +202,15 @@ mod tests {
             brightness_permille: [1000, 900, 800, 700, 600, 500, 0, 0],
             phase_chips: [0, 1, 2, 3, 127, 5, 0, 0],
             running: false,
+            off_level_permille: [0, 100, 900, 1000, 0, 0, 0, 7],
+            allow_flicker: true,
+        }
+    }
+
+    fn stored(config: LuminaireConfig) -> StoredConfig {
+        StoredConfig {
+            config,
+            version: RECORD_VERSION,
         }
     }
 
@@ -131,8 +219,8 @@ mod tests {
         let mut buf = [0xFFu8; MAX_RECORD_LEN];
         let len = encode_record(&sample(), &mut buf).unwrap().len();
         assert!(len < MAX_RECORD_LEN);
-        assert_eq!(decode_record(&buf), Ok(sample()));
-        assert_eq!(decode_record(&buf[..len]), Ok(sample()));
+        assert_eq!(decode_record(&buf), Ok(stored(sample())));
+        assert_eq!(decode_record(&buf[..len]), Ok(stored(sample())));
         assert_eq!(decode_record(&buf[..len - 1]), Err(RecordError::Truncated));
     }
 
@@ -150,8 +238,8 @@ mod tests {
         assert_eq!(decode_record(&[0xFF; 64]), Err(RecordError::BadMagic));
         assert_eq!(decode_record(&[]), Err(RecordError::Truncated));
         let mut bad = record.clone();
-        bad[4] = 2;
-        assert_eq!(decode_record(&bad), Err(RecordError::UnknownVersion(2)));
+        bad[4] = 3;
+        assert_eq!(decode_record(&bad), Err(RecordError::UnknownVersion(3)));
     }
 
     #[test]
@@ -170,6 +258,43 @@ mod tests {
         assert_eq!(
             encode_record(&config, &mut [0u8; 12]),
             Err(RecordError::BufferFull)
+        );
+    }
+
+    /// A version-1 record, byte for byte as the firmware before off levels wrote it (6 LEDs,
+    /// 959.5 Hz, stopped), reads as that configuration with dark off chips, flagged.
+    #[test]
+    fn a_record_without_depth_reads_as_full_on_off_keying() {
+        // Computed independently: postcard varints of the fields, CRC-32/ISO-HDLC (zlib's).
+        let old: [u8; 47] = [
+            0x4D, 0x45, 0x42, 0x43, 0x01, 0x00, 0x1B, 0x00, 0x06, 0x8C, 0xC8, 0x3A, 0xE8, 0x07,
+            0x84, 0x07, 0xA0, 0x06, 0xBC, 0x05, 0xD8, 0x04, 0xF4, 0x03, 0x00, 0x00, 0x00, 0x01,
+            0x02, 0x03, 0x7F, 0x05, 0x00, 0x00, 0x00, 0x4A, 0x1B, 0x02, 0xBE, 0xFF, 0xFF, 0xFF,
+            0xFF, 0xFF, 0xFF, 0xFF, 0xFF,
+        ];
+        let mut expected = sample();
+        expected.off_level_permille = [0; 8];
+        expected.allow_flicker = false;
+        let read = decode_record(&old).unwrap();
+        assert_eq!(read.config, expected);
+        assert!(read.without_depth());
+        // The same bytes from the encoder of the old layout.
+        let mut buf = [0xFFu8; 47];
+        let old_config = ConfigWithoutDepth {
+            led_count: 6,
+            chip_rate: ChipRate(959_500),
+            brightness_permille: [1000, 900, 800, 700, 600, 500, 0, 0],
+            phase_chips: [0, 1, 2, 3, 127, 5, 0, 0],
+            running: false,
+        };
+        let len = encode_record_without_depth(&old_config, &mut buf)
+            .unwrap()
+            .len();
+        assert_eq!(&buf[..len], &old[..len]);
+        assert!(
+            !decode_record(encode_record(&sample(), &mut [0u8; 128]).unwrap())
+                .unwrap()
+                .without_depth()
         );
     }
 }

@@ -14,7 +14,8 @@
 //!
 //! Brightness: each output is a PWM of [`PWM_STEPS`] steps at `f_timer / PWM_STEPS` (96 kHz from
 //! a 96 MHz timer clock), far above any chip rate so that a chip contains ≥ 24 whole PWM periods.
-//! [`fill_compare_frames`] turns a chip table and per-LED brightness into the compare values the
+//! [`fill_compare_frames`] turns a chip table and per-LED [`LedLevels`] (the on level from the
+//! brightness, the off level a fraction of it) into the compare values the
 //! PWM timers load at every chip.
 
 use crate::carriers::{ChipTable, MAX_LEDS};
@@ -191,6 +192,51 @@ pub const fn on_compare(brightness_permille: u16) -> u16 {
     ((permille as u32 * PWM_STEPS as u32 + 500) / 1000) as u16
 }
 
+/// Compare value of an LED's off chips: `off_level_permille` (clamped to 1000) of its on
+/// compare value `on`, rounded up so that the modulation depth played is never above the one
+/// configured (docs/howto/flicker-safety.md).
+pub const fn off_compare(on: u16, off_level_permille: u16) -> u16 {
+    let level = if off_level_permille > 1000 {
+        1000
+    } else {
+        off_level_permille
+    };
+    ((on as u32 * level as u32).div_ceil(1000)) as u16
+}
+
+/// On and off compare values of every LED: what the PWM plays during its on and off chips.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub struct LedLevels {
+    /// Compare value during an LED's on chips ([`on_compare`] of its brightness).
+    pub on: [u16; MAX_LEDS],
+    /// Compare value during its off chips ([`off_compare`] of its off level).
+    pub off: [u16; MAX_LEDS],
+}
+
+impl LedLevels {
+    /// Levels of per-LED brightness and off levels, both in per mille.
+    pub const fn new(
+        brightness_permille: &[u16; MAX_LEDS],
+        off_level_permille: &[u16; MAX_LEDS],
+    ) -> Self {
+        let mut on = [0u16; MAX_LEDS];
+        let mut off = [0u16; MAX_LEDS];
+        let mut led = 0;
+        while led < MAX_LEDS {
+            on[led] = on_compare(brightness_permille[led]);
+            off[led] = off_compare(on[led], off_level_permille[led]);
+            led += 1;
+        }
+        Self { on, off }
+    }
+
+    /// Full on/off keying (off chips dark) at per-LED brightness.
+    pub const fn full_depth(brightness_permille: &[u16; MAX_LEDS]) -> Self {
+        Self::new(brightness_permille, &[0; MAX_LEDS])
+    }
+}
+
 /// Bit mask of the table's LEDs among `led_of_slot` (LEDs beyond the table are ignored).
 fn slot_led_mask(table: &ChipTable, led_of_slot: &[Option<u8>]) -> u8 {
     led_of_slot
@@ -225,11 +271,11 @@ pub fn slot_pattern_period(table: &ChipTable, led_of_slot: &[Option<u8>]) -> usi
 /// Writes the compare values a PWM timer loads at each chip: one frame of `led_of_slot.len()`
 /// values per chip, for the first [`slot_pattern_period`] chips (played cyclically, they repeat
 /// the whole table for these LEDs). Slot s carries LED `led_of_slot[s]`'s compare value: its
-/// [`on_compare`] when on during that chip, 0 when off, 0 for `None` or an LED beyond the
-/// table. Returns the number of values written (`period · slots`).
+/// on level when on during that chip, its off level when off, 0 for `None` or an LED beyond
+/// the table. Returns the number of values written (`period · slots`).
 pub fn fill_compare_frames<W: From<u16> + Copy>(
     table: &ChipTable,
-    brightness_permille: &[u16; MAX_LEDS],
+    levels: &LedLevels,
     led_of_slot: &[Option<u8>],
     out: &mut [W],
 ) -> Result<usize, TimingError> {
@@ -243,23 +289,24 @@ pub fn fill_compare_frames<W: From<u16> + Copy>(
     }
     for (frame, &mask) in out[..needed].chunks_exact_mut(slots).zip(table.masks()) {
         for (value, &led) in frame.iter_mut().zip(led_of_slot) {
-            *value = W::from(slot_compare(table, brightness_permille, led, mask));
+            *value = W::from(slot_compare(table, levels, led, mask));
         }
     }
     Ok(needed)
 }
 
 /// Compare value of a slot playing LED `led` (`None`: no LED) during a chip with on-mask
-/// `mask`: the LED's [`on_compare`] when it is on, 0 when it is off, unused or beyond the table.
-pub fn slot_compare(
-    table: &ChipTable,
-    brightness_permille: &[u16; MAX_LEDS],
-    led: Option<u8>,
-    mask: u8,
-) -> u16 {
+/// `mask`: the LED's on level when it is on, its off level when it is off, 0 when the slot is
+/// unused or its LED beyond the table.
+pub fn slot_compare(table: &ChipTable, levels: &LedLevels, led: Option<u8>, mask: u8) -> u16 {
     match led {
-        Some(led) if led < table.led_count() && mask & (1 << led) != 0 => {
-            on_compare(brightness_permille[usize::from(led)])
+        Some(led) if led < table.led_count() => {
+            let led = usize::from(led);
+            if mask & (1 << led) != 0 {
+                levels.on[led]
+            } else {
+                levels.off[led]
+            }
         }
         _ => 0,
     }
@@ -403,6 +450,7 @@ mod tests {
         let table = ChipTable::new(2).unwrap();
         let mut brightness = [1000u16; MAX_LEDS];
         brightness[1] = 250;
+        let brightness = LedLevels::full_depth(&brightness);
         // Slot 0 plays LED 1 (index 1), slot 1 LED 0, slot 2 nothing, slot 3 an LED beyond N.
         let slots = [Some(1), Some(0), None, Some(5)];
         let mut out = [0xFFFFu16; 8 * 4];
@@ -453,7 +501,7 @@ mod tests {
                 let expected_b = if leds <= 4 { 1 } else { n };
                 assert_eq!(period_b, expected_b, "N = {leds}");
                 // Played cyclically, the short frames reproduce every chip of the table.
-                let brightness = [1000u16; MAX_LEDS];
+                let brightness = LedLevels::full_depth(&[1000u16; MAX_LEDS]);
                 let mut frames = [0u16; 32 * 4];
                 let written = fill_compare_frames(&table, &brightness, &bank_a, &mut frames);
                 assert_eq!(written, Ok(period_a * 4));
@@ -466,5 +514,42 @@ mod tests {
                 }
             }
         }
+    }
+
+    #[test]
+    fn off_chips_play_their_fraction_of_the_on_level() {
+        let table = ChipTable::new(2).unwrap();
+        let mut brightness = [1000u16; MAX_LEDS];
+        brightness[1] = 250;
+        // LED 2 off at 90 % of 250 (225), LED 1 at 88.7 % of 1000; a slot beyond N stays 0.
+        let mut off = [0u16; MAX_LEDS];
+        off[0] = 887;
+        off[1] = 900;
+        off[5] = 500;
+        let levels = LedLevels::new(&brightness, &off);
+        let slots = [Some(1), Some(0), None, Some(5)];
+        let mut out = [0u16; 8 * 4];
+        fill_compare_frames(&table, &levels, &slots, &mut out).unwrap();
+        let s0 = [1, -1, -1, 1, 1, -1, -1, 1];
+        let s1 = [1, -1, 1, -1, -1, 1, -1, 1];
+        for chip in 0..8 {
+            let frame = &out[chip * 4..chip * 4 + 4];
+            assert_eq!(
+                frame[0],
+                if s1[chip] > 0 { 250 } else { 225 },
+                "chip {chip}"
+            );
+            assert_eq!(
+                frame[1],
+                if s0[chip] > 0 { 1000 } else { 887 },
+                "chip {chip}"
+            );
+            assert_eq!(frame[2..], [0, 0]);
+        }
+        // Rounded up: 1 per mille of 7 is 0.007 of a step, played as 1 step.
+        assert_eq!(off_compare(7, 1), 1);
+        assert_eq!(off_compare(7, 0), 0);
+        assert_eq!(off_compare(1000, 1000), 1000);
+        assert_eq!(off_compare(1000, 2000), 1000);
     }
 }

@@ -17,7 +17,7 @@ use serde::{Deserialize, Serialize};
 use crate::config::{ChipRate, ConfigError, LuminaireConfig};
 
 /// Version of this wire protocol, carried in every [`Header`].
-pub const PROTOCOL_VERSION: u16 = 2;
+pub const PROTOCOL_VERSION: u16 = 3;
 
 /// Sequence number meaning "unknown" in a [`Response::ProtocolError`] reply to an unreadable
 /// frame; hosts number their requests from 1 and skip 0 on wrap-around.
@@ -97,6 +97,9 @@ pub enum ConfigSource {
     Restored,
     /// A stored record existed but was corrupt or invalid: factory defaults.
     CorruptRecordDefaults,
+    /// Restored from a record written before off levels were a setting: read as off level 0
+    /// (full on/off keying); see [`Status::flicker_limited`] for what plays.
+    RestoredWithoutDepth,
 }
 
 /// Progress of the last `SaveConfig`.
@@ -167,6 +170,10 @@ pub struct Status {
     pub config_source: ConfigSource,
     /// Whether the active configuration differs from the stored one.
     pub unsaved_changes: bool,
+    /// Whether the stored configuration flickers above IEEE 1789 low risk without
+    /// `allow_flicker`, so that power-up raised its off levels to the largest low-risk depths
+    /// (the stored record is unchanged).
+    pub flicker_limited: bool,
     /// Progress of the last save.
     pub save: SaveState,
     /// Whether an identify blink is in progress.

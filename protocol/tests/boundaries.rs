@@ -8,7 +8,7 @@ use protocol::framing::{
     FrameError, FrameEvent, MAX_COBS_LEN, MAX_FRAME_LEN, WireFrameReader, decode_request,
 };
 use protocol::luminaire::{BoardInfo, Luminaire, RestoredConfig};
-use protocol::timing::{chip_timer_period, slot_compare, slot_pattern_period};
+use protocol::timing::{LedLevels, chip_timer_period, slot_compare, slot_pattern_period};
 use protocol::wire::{CommandError, MAX_IDENTIFY_SECONDS, Request, Response};
 
 #[test]
@@ -59,10 +59,13 @@ fn identify_accepts_the_longest_blink_and_refuses_one_second_more() {
 #[test]
 fn a_slot_beyond_the_table_plays_nothing_whatever_the_mask() {
     let table = ChipTable::new(2).unwrap();
-    let brightness = [1000; MAX_LEDS];
+    let brightness = LedLevels::new(&[1000; MAX_LEDS], &[500; MAX_LEDS]);
     assert_eq!(slot_compare(&table, &brightness, Some(1), 0xFF), 1000);
+    assert_eq!(slot_compare(&table, &brightness, Some(1), 0), 500);
     assert_eq!(slot_compare(&table, &brightness, Some(2), 0xFF), 0);
+    assert_eq!(slot_compare(&table, &brightness, Some(2), 0), 0);
     assert_eq!(slot_compare(&table, &brightness, None, 0xFF), 0);
+    assert_eq!(slot_compare(&table, &brightness, None, 0), 0);
 }
 
 #[test]

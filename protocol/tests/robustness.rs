@@ -32,7 +32,7 @@ fn apply_model(config: &mut LuminaireConfig, piece: &[u8]) -> bool {
     let mut raw = piece.to_vec();
     match decode_request(&mut raw) {
         Ok((_, Request::SetConfig(new))) => {
-            if new.validate().is_ok() {
+            if new.validate_for_people().is_ok() {
                 *config = new;
             }
             true
@@ -135,11 +135,14 @@ fn random_config(rng: &mut Rng) -> LuminaireConfig {
         brightness_permille: [0; 8],
         phase_chips: [0; 8],
         running: rng.below(2) == 0,
+        off_level_permille: [0; 8],
+        allow_flicker: rng.below(2) == 0,
     };
     let chips = 1u64 << (config.led_count + 1);
     for led in 0..8 {
         config.brightness_permille[led] = rng.below(1002) as u16;
         config.phase_chips[led] = rng.below(chips + 1) as u16;
+        config.off_level_permille[led] = rng.below(1002) as u16;
     }
     if rng.below(4) == 0 {
         config.led_count = rng.byte();
@@ -150,6 +153,8 @@ fn random_config(rng: &mut Rng) -> LuminaireConfig {
         config.phase_chips = [0; 8];
         config.led_count = 1 + rng.below(8) as u8;
         config.chip_rate = ChipRate(1_000 + rng.below(3_999_001) as u32);
+        config.off_level_permille = [rng.below(1001) as u16; 8];
+        config.allow_flicker = true;
     }
     config
 }

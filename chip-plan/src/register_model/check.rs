@@ -1,15 +1,16 @@
 //! Reads the model's output log back as "what each chip played" and compares it with the chip
 //! table: during chip k (from its TIM2 update T_k to the next one), from one PWM period after
 //! T_k on, bank slot s must play `brightness[led]` if the table's on-mask of chip k has that LED
-//! on and 0 otherwise, with the PWM at [`PWM_STEPS`] steps and nothing changing until T_{k+1}.
+//! on and its off level ⌈brightness·off_level/1000⌉ otherwise (0 for a slot without an LED of
+//! the table), with the PWM at [`PWM_STEPS`] steps and nothing changing until T_{k+1}.
 //! The one-PWM-period grace is the design's constant lag (the new compare values are preloaded
 //! during the period the chip boundary restarted).
 //!
-//! The expected values come straight from [`ChipTable::masks`] and the brightness, not from
-//! the plan's frame-filling code.
+//! The expected values come straight from [`ChipTable::masks`], the brightness and the off
+//! level, not from the plan's frame-filling code or `protocol::timing`'s level arithmetic.
 
 use protocol::carriers::{ChipTable, MAX_LEDS};
-use protocol::timing::PWM_STEPS;
+use protocol::timing::{LedLevels, PWM_STEPS};
 
 use crate::outputs::{Bank, SLOTS, slots_of};
 
@@ -23,18 +24,55 @@ fn timer_of(bank: Bank) -> TimerId {
     }
 }
 
+/// Brightness and off level of each LED in per mille: what a configuration asks the PWM for.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct Lights {
+    /// On level per LED, per mille of full (the compare value on a 1000-step PWM).
+    pub brightness: [u16; MAX_LEDS],
+    /// Off level per LED, per mille of its on level.
+    pub off_level: [u16; MAX_LEDS],
+}
+
+impl Lights {
+    /// Full on/off keying at `brightness`.
+    pub const fn full_depth(brightness: [u16; MAX_LEDS]) -> Self {
+        Self {
+            brightness,
+            off_level: [0; MAX_LEDS],
+        }
+    }
+
+    /// The levels the engine is given (`protocol::timing`'s arithmetic).
+    pub const fn levels(&self) -> LedLevels {
+        LedLevels::new(&self.brightness, &self.off_level)
+    }
+
+    /// Both arrays in reverse LED order.
+    pub fn reversed(&self) -> Self {
+        let mut out = *self;
+        out.brightness.reverse();
+        out.off_level.reverse();
+        out
+    }
+}
+
 /// The compare values bank `bank` must play during chip `chip` of `table`.
 pub fn expected_levels(
     table: &ChipTable,
-    brightness: &[u16; MAX_LEDS],
+    lights: &Lights,
     bank: Bank,
     chip: usize,
 ) -> [Option<u32>; SLOTS] {
     let mask = table.masks()[chip % table.chips()];
     slots_of(bank).map(|led| {
         Some(match led {
-            Some(led) if led < table.led_count() && mask & (1 << led) != 0 => {
-                u32::from(brightness[usize::from(led)])
+            Some(led) if led < table.led_count() => {
+                let on = u32::from(lights.brightness[usize::from(led)]);
+                if mask & (1 << led) != 0 {
+                    on
+                } else {
+                    (on * u32::from(lights.off_level[usize::from(led)])).div_ceil(1000)
+                }
             }
             _ => 0,
         })
@@ -76,12 +114,12 @@ pub fn chip_boundaries(log: &[LogEntry], from: u64) -> Vec<u64> {
         .collect()
 }
 
-/// Checks chips 0..`chips` of a playback started at `from` against `table` and `brightness`.
+/// Checks chips 0..`chips` of a playback started at `from` against `table` and `lights`.
 pub fn check_playback(
     log: &[LogEntry],
     from: u64,
     table: &ChipTable,
-    brightness: &[u16; MAX_LEDS],
+    lights: &Lights,
     chips: usize,
 ) -> Result<(), String> {
     let boundaries = chip_boundaries(log, from);
@@ -98,7 +136,7 @@ pub fn check_playback(
         let changes = changes(log, timer);
         for chip in 0..chips {
             let (start, end) = (boundaries[chip], boundaries[chip + 1]);
-            let expected = expected_levels(table, brightness, bank, chip);
+            let expected = expected_levels(table, lights, bank, chip);
             let at = start + settle;
             let Some(outputs) = in_effect(&changes, at) else {
                 return Err(format!("chip {chip}: {timer:?} never configured"));

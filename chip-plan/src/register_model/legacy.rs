@@ -7,8 +7,8 @@
 //! plays nothing at all, and with NDTR repaired its halt still loses the DMA burst position in
 //! the halt race. `ndtr_written` repairs only the NDTR bug.
 
-use protocol::carriers::{ChipTable, MAX_LEDS};
-use protocol::timing::{chip_timer_period, fill_compare_frames};
+use protocol::carriers::ChipTable;
+use protocol::timing::{LedLevels, chip_timer_period, fill_compare_frames};
 
 use crate::outputs::{Bank, slots_of};
 use crate::plan::FrameMemory;
@@ -123,7 +123,7 @@ impl LegacyEngine {
         &mut self,
         chip: &mut Chip,
         table: &ChipTable,
-        brightness: &[u16; MAX_LEDS],
+        levels: &LedLevels,
         rate_millihertz: u32,
     ) {
         let period = chip_timer_period(96_000_000, rate_millihertz, 32).expect("rate");
@@ -131,10 +131,10 @@ impl LegacyEngine {
         self.halt(chip);
         let mut tim3 = [0u16; 32 * 4];
         let mut tim5 = [0u32; 512 * 4];
-        let n3 = fill_compare_frames(table, brightness, &slots_of(Bank::Tim3), &mut tim3)
-            .expect("frames");
-        let n5 = fill_compare_frames(table, brightness, &slots_of(Bank::Tim5), &mut tim5)
-            .expect("frames");
+        let n3 =
+            fill_compare_frames(table, levels, &slots_of(Bank::Tim3), &mut tim3).expect("frames");
+        let n5 =
+            fill_compare_frames(table, levels, &slots_of(Bank::Tim5), &mut tim5).expect("frames");
         for (i, &value) in tim3[..n3].iter().enumerate() {
             chip.write16(self.frames.tim3 + 2 * i as u32, value);
         }

@@ -8,7 +8,7 @@ use protocol::carriers::{ChipTable, MAX_LEDS};
 use protocol::timing::chip_timer_period;
 use protocol::wire::OutputFault;
 
-use super::check::{check_all_off, check_playback};
+use super::check::{Lights, check_all_off, check_playback};
 use super::legacy::LegacyEngine;
 use super::{Chip, Timing};
 use crate::outputs::Bank;
@@ -29,13 +29,15 @@ const FRAMES: FrameMemory = FrameMemory {
 };
 /// Chip rates under test (30 Hz to the 4 kHz maximum, a fractional rate), in millihertz.
 const RATES: [u32; 5] = [30_000, 240_000, 959_500, 960_000, 4_000_000];
+/// Full brightness, full on/off keying.
+const FULL: Lights = Lights::full_depth([1000; MAX_LEDS]);
 /// One PWM period in ticks.
 const PWM_PERIOD: u64 = 1000;
 
 /// What the tests drive: the engine under test.
 trait UnderTest: Sized {
     fn boot(chip: &mut Chip, mode: Mode) -> Self;
-    fn load(&mut self, chip: &mut Chip, table: &ChipTable, brightness: &[u16; MAX_LEDS], rate: u32);
+    fn load(&mut self, chip: &mut Chip, table: &ChipTable, brightness: &Lights, rate: u32);
     fn start(&mut self, chip: &mut Chip);
     fn stop(&mut self, chip: &mut Chip);
 }
@@ -47,14 +49,10 @@ impl UnderTest for Planned {
     fn boot(chip: &mut Chip, mode: Mode) -> Self {
         Planned(ChipEngine::new(chip, CLOCK, FRAMES, mode).expect("boot"))
     }
-    fn load(
-        &mut self,
-        chip: &mut Chip,
-        table: &ChipTable,
-        brightness: &[u16; MAX_LEDS],
-        rate: u32,
-    ) {
-        self.0.load(chip, table, brightness, rate).expect("load");
+    fn load(&mut self, chip: &mut Chip, table: &ChipTable, brightness: &Lights, rate: u32) {
+        self.0
+            .load(chip, table, &brightness.levels(), rate)
+            .expect("load");
     }
     fn start(&mut self, chip: &mut Chip) {
         self.0.start(chip).expect("start");
@@ -73,14 +71,8 @@ impl<const NDTR_WRITTEN: bool> UnderTest for Todays<NDTR_WRITTEN> {
         engine.ndtr_written = NDTR_WRITTEN;
         Todays(engine)
     }
-    fn load(
-        &mut self,
-        chip: &mut Chip,
-        table: &ChipTable,
-        brightness: &[u16; MAX_LEDS],
-        rate: u32,
-    ) {
-        self.0.load(chip, table, brightness, rate);
+    fn load(&mut self, chip: &mut Chip, table: &ChipTable, brightness: &Lights, rate: u32) {
+        self.0.load(chip, table, &brightness.levels(), rate);
     }
     fn start(&mut self, chip: &mut Chip) {
         self.0.start(chip);
@@ -93,19 +85,24 @@ impl<const NDTR_WRITTEN: bool> UnderTest for Todays<NDTR_WRITTEN> {
 /// The engine the playback tests run.
 type Engine = Planned;
 
-/// Brightness sets: full, graded, and a seeded pseudo-random one.
-fn brightness_sets() -> [[u16; MAX_LEDS]; 3] {
-    let mut random = [0u16; MAX_LEDS];
+/// Brightness and off-level sets: full brightness at full depth; graded brightness at the
+/// factory default's low-risk off levels and a few others; a seeded pseudo-random set of both.
+fn brightness_sets() -> [Lights; 3] {
+    let mut random = Lights::full_depth([0; MAX_LEDS]);
     let mut state = 0x2545_F491_4F6C_DD1Du64;
-    for value in &mut random {
+    for (value, off) in random.brightness.iter_mut().zip(&mut random.off_level) {
         state ^= state << 13;
         state ^= state >> 7;
         state ^= state << 17;
         *value = (state % 1001) as u16;
+        *off = ((state >> 20) % 1001) as u16;
     }
     [
-        [1000; MAX_LEDS],
-        [1000, 800, 650, 500, 350, 200, 100, 1],
+        Lights::full_depth([1000; MAX_LEDS]),
+        Lights {
+            brightness: [1000, 800, 650, 500, 350, 200, 100, 1],
+            off_level: [738, 693, 889, 888, 1000, 500, 999, 1],
+        },
         random,
     ]
 }
@@ -127,7 +124,7 @@ fn play_and_check(
     chip: &mut Chip,
     from: u64,
     table: &ChipTable,
-    brightness: &[u16; MAX_LEDS],
+    brightness: &Lights,
     rate: u32,
     what: &str,
 ) -> Result<(), String> {
@@ -142,7 +139,7 @@ fn scenario<E: UnderTest>(
     mode: Mode,
     leds: u8,
     rate: u32,
-    brightness: &[u16; MAX_LEDS],
+    brightness: &Lights,
 ) -> Result<(), String> {
     let mut chip = Chip::new();
     let mut engine = E::boot(&mut chip, mode);
@@ -169,8 +166,7 @@ fn scenario<E: UnderTest>(
         *phase = ((i * 37 + 11) % table.chips()) as u16;
     }
     let other = ChipTable::with_phases(leds, &phases).unwrap();
-    let mut other_brightness = *brightness;
-    other_brightness.reverse();
+    let other_brightness = brightness.reversed();
     chip.run_until(last_boundary(&chip) + ticks / 2 + 3);
     let from = chip.now;
     engine.load(&mut chip, &other, &other_brightness, rate);
@@ -337,7 +333,7 @@ fn chip_interrupt_fallback_plays_the_chip_table_for_every_led_count_rate_and_bri
 #[test]
 fn todays_main_plays_nothing() {
     // Today's engine gives both streams NDTR = 0: no request is ever served.
-    let error = scenario::<Todays<false>>(Mode::Dma, 4, 960_000, &[1000; MAX_LEDS]).unwrap_err();
+    let error = scenario::<Todays<false>>(Mode::Dma, 4, 960_000, &FULL).unwrap_err();
     println!("{error}");
     assert!(
         error.contains("chip 0 of 32")
@@ -351,7 +347,7 @@ fn todays_halt_moves_the_channels_even_with_ndtr_written() {
     // Repairing only the NDTR bug leaves the halt race: stopping the DMA mid-burst (or with a
     // trigger pending) leaves the timers' DMA burst state where it was, and the next start
     // plays the frames shifted.
-    scenario::<Todays<true>>(Mode::Dma, 4, 960_000, &[1000; MAX_LEDS])
+    scenario::<Todays<true>>(Mode::Dma, 4, 960_000, &FULL)
         .expect("with NDTR written, today's engine plays away from the race");
     let (failures, _) = halt_race_sweep::<Todays<true>>(Mode::Dma);
     println!(
@@ -371,7 +367,7 @@ fn playing(leds: u8, chips: u64) -> (Chip, ChipEngine, ChipTable) {
     let mut engine = ChipEngine::new(&mut chip, CLOCK, FRAMES, Mode::Dma).unwrap();
     let table = ChipTable::new(leds).unwrap();
     engine
-        .load(&mut chip, &table, &[1000; MAX_LEDS], 960_000)
+        .load(&mut chip, &table, &FULL.levels(), 960_000)
         .unwrap();
     engine.start(&mut chip).unwrap();
     chip.run_until(chip.now + chips * chip_ticks(960_000));
@@ -462,7 +458,7 @@ fn a_stream_that_never_stops_is_an_error_and_the_outputs_still_go_off() {
     let reload = engine.load(
         &mut HungStream(&mut chip, hung_cr),
         &table,
-        &[500; MAX_LEDS],
+        &Lights::full_depth([500; MAX_LEDS]).levels(),
         960_000,
     );
     assert!(
@@ -555,7 +551,7 @@ fn bring_up_values_in_the_firmware_readme_are_the_models() {
     let mut engine = ChipEngine::new(&mut chip, CLOCK, FRAMES, Mode::Dma).unwrap();
     let table = ChipTable::new(4).unwrap();
     engine
-        .load(&mut chip, &table, &[1000; MAX_LEDS], 960_000)
+        .load(&mut chip, &table, &FULL.levels(), 960_000)
         .unwrap();
     engine.start(&mut chip).unwrap();
     let ticks = chip_ticks(960_000);
@@ -620,7 +616,7 @@ fn chip_period_is_the_requested_rate_to_the_timers_resolution() {
         let mut engine = ChipEngine::new(&mut chip, CLOCK, FRAMES, Mode::Dma).unwrap();
         let table = ChipTable::new(4).unwrap();
         let loaded = engine
-            .load(&mut chip, &table, &[1000; MAX_LEDS], rate)
+            .load(&mut chip, &table, &FULL.levels(), rate)
             .unwrap();
         engine.start(&mut chip).unwrap();
         // Independent of the timer arithmetic: the nearest whole number of ticks.
@@ -752,7 +748,7 @@ fn halt_disables_the_chip_interrupt_in_the_nvic() {
         let mut engine = ChipEngine::new(&mut chip, CLOCK, FRAMES, mode).unwrap();
         let table = ChipTable::new(4).unwrap();
         engine
-            .load(&mut chip, &table, &[1000; MAX_LEDS], 960_000)
+            .load(&mut chip, &table, &FULL.levels(), 960_000)
             .unwrap();
         engine.start(&mut chip).unwrap();
         let enabled = chip.peek(nvic::ISER0) & (1 << nvic::TIM2_IRQ) != 0;
@@ -801,7 +797,7 @@ fn engine_reports_its_clock_load_and_running_state() {
     assert!(!engine.is_running());
     let table = ChipTable::new(5).unwrap();
     let loaded = engine
-        .load(&mut chip, &table, &[1000; MAX_LEDS], 960_000)
+        .load(&mut chip, &table, &FULL.levels(), 960_000)
         .unwrap();
     assert_eq!(engine.loaded(), Some(loaded));
     assert_eq!(loaded.chips, 64);
@@ -826,9 +822,9 @@ fn frames_are_written_at_their_width_inside_their_buffers() {
         }
     }
     let table = ChipTable::new(8).unwrap();
-    let brightness = [1000, 800, 650, 500, 350, 200, 100, 1];
+    let brightness = brightness_sets()[1];
     let loaded = engine
-        .load(&mut chip, &table, &brightness, 960_000)
+        .load(&mut chip, &table, &brightness.levels(), 960_000)
         .unwrap();
     for bank in [Bank::Tim3, Bank::Tim5] {
         assert_eq!(

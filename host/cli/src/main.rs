@@ -22,7 +22,8 @@ enum Command {
     Integrate(cli::integrate::IntegrateArgs),
     /// Photometric stereo on an image set with known lights (or a DiLiGenT folder).
     Photometric(cli::photometric::PhotometricArgs),
-    /// Calibrate a rig from its own captures (`meb calibrate lights` with a matte sphere).
+    /// Calibrate a rig from its own captures (`meb calibrate lights` with a matte sphere,
+    /// `meb calibrate camera` with a chequerboard).
     Calibrate(cli::calibrate::CalibrateArgs),
     /// Print the MEB-FDMA chip table, its spectrum and its IEEE 1789 flicker class.
     Carriers(cli::carriers::CarriersArgs),

@@ -19,6 +19,13 @@
 //!
 //! Each Fourier component is checked against these limits and the LED takes the worst class.
 //! Brightness PWM (tens of kHz, far above the limits) does not change the result.
+//!
+//! **Depth.** With off chips at a fraction of the on level (the luminaire's off level) every
+//! component scales by the modulation depth m = (on − off)/(on + off) ([`analyse_at_depth`]).
+//! The demodulated LED images scale with the on − off difference, so at the same mean light
+//! the noise on the LED images, and on the normals, grows as 1/m. The largest depths a rate
+//! and LED count allow come from `protocol::flicker`, the acceptance function the luminaire
+//! runs; [`class_by_every_line`] is an independent check of it in `f64` over every line.
 
 use protocol::carriers::ChipTable;
 use serde::Serialize;
@@ -103,6 +110,15 @@ pub struct LedFlicker {
     pub led: usize,
     /// Percent flicker 100·(max−min)/(max+min) of the whole waveform (100 for on/off keying).
     pub percent_flicker: f64,
+    /// Modulation depth (on − off)/(on + off) analysed (1 for on/off keying).
+    pub depth: f64,
+    /// Largest IEEE 1789 low-risk depth of this LED at this rate (`protocol::flicker`).
+    pub low_risk_depth: f64,
+    /// Largest no-observable-effect depth of this LED at this rate.
+    pub no_observable_effect_depth: f64,
+    /// Noise on the LED image and the normals relative to full depth at the same mean light:
+    /// 1/depth.
+    pub noise_factor: f64,
     /// Lowest frequency present in the light, Hz.
     pub fundamental_hz: f64,
     /// Components up to the reporting limit.
@@ -114,6 +130,17 @@ pub struct LedFlicker {
 /// Spectrum of each LED of `table` played at `rate_hz` chips per second; components at or below
 /// `report_below_hz` are listed, every component up to 3 kHz is classified.
 pub fn analyse(table: &ChipTable, rate_hz: f64, report_below_hz: f64) -> Vec<LedFlicker> {
+    analyse_at_depth(table, rate_hz, report_below_hz, 1.0)
+}
+
+/// [`analyse`] with every LED at modulation depth `depth` in (0, 1].
+pub fn analyse_at_depth(
+    table: &ChipTable,
+    rate_hz: f64,
+    report_below_hz: f64,
+    depth: f64,
+) -> Vec<LedFlicker> {
+    let rate = protocol::config::ChipRate::from_hz(rate_hz);
     let n = table.chips();
     (0..usize::from(table.led_count()))
         .map(|led| {
@@ -131,7 +158,7 @@ pub fn analyse(table: &ChipTable, rate_hz: f64, report_below_hz: f64) -> Vec<Led
                 if f > UNRESTRICTED_HZ && f > report_below_hz {
                     break;
                 }
-                let percent = 100.0 * 2.0 * coefficient(&on, k).abs() / mean;
+                let percent = depth * 100.0 * 2.0 * coefficient(&on, k).abs() / mean;
                 if percent < NEGLIGIBLE_PERCENT {
                     continue;
                 }
@@ -148,15 +175,42 @@ pub fn analyse(table: &ChipTable, rate_hz: f64, report_below_hz: f64) -> Vec<Led
                     });
                 }
             }
+            let max = |limit| f64::from(protocol::flicker::max_depth(led as u8, rate, limit).depth);
             LedFlicker {
                 led: led + 1,
-                percent_flicker: 100.0,
+                percent_flicker: 100.0 * depth,
+                depth,
+                low_risk_depth: max(&protocol::flicker::LOW_RISK),
+                no_observable_effect_depth: max(&protocol::flicker::NO_OBSERVABLE_EFFECT),
+                noise_factor: 1.0 / depth,
                 fundamental_hz,
                 components,
                 class,
             }
         })
         .collect()
+}
+
+/// IEEE 1789 class of LED `led` (0-based) at chip rate `rate_hz` and depth `depth`, from the
+/// closed form Mod%_k = depth · (400/π)·|tan(πk/P)|/k (P = 2^(led+2), odd k;
+/// docs/howto/flicker-safety.md) evaluated in `f64` at every line up to 3 kHz: a check of
+/// `protocol::flicker`'s shortcut and its `f32` arithmetic.
+pub fn class_by_every_line(led: u8, rate_hz: f64, depth: f64) -> RiskClass {
+    let period = f64::from(4u32 << led);
+    let mut class = RiskClass::NoObservableEffect;
+    let mut k = 1u64;
+    loop {
+        let f = k as f64 * rate_hz / period;
+        if f > UNRESTRICTED_HZ {
+            return class;
+        }
+        let percent = depth * 400.0 / PI * (PI * k as f64 / period).tan().abs() / k as f64;
+        class = class.max(classify(f, percent));
+        if class == RiskClass::ElevatedRisk {
+            return class;
+        }
+        k += 2;
+    }
 }
 
 /// |c_k| of the rectangular-chip waveform (module docs).
@@ -227,5 +281,67 @@ mod tests {
         // LED 1 only has bins q ≡ 8 (mod 16): first line at 240 Hz, nothing below 200 Hz.
         assert!(report[0].components.is_empty());
         assert!((report[0].fundamental_hz - 240.0).abs() < 1e-9);
+    }
+
+    #[test]
+    fn depth_scales_every_line_and_the_closed_form_matches_the_dft() {
+        let table = ChipTable::new(4).unwrap();
+        let full = analyse(&table, 960.0, 200.0);
+        let low = analyse_at_depth(&table, 960.0, 200.0, 0.05);
+        for (f, l) in full.iter().zip(&low) {
+            for (a, b) in f.components.iter().zip(&l.components) {
+                assert!((b.modulation_percent - 0.05 * a.modulation_percent).abs() < 1e-9);
+                // The closed form |tan(πk/P)|/k against the DFT.
+                let period = f64::from(4u32 << (f.led - 1));
+                let k = (a.frequency_hz * period / 960.0).round();
+                let closed = 400.0 / PI * (PI * k / period).tan().abs() / k;
+                assert!(
+                    (closed - a.modulation_percent).abs() < 1e-6 * closed,
+                    "{a:?}"
+                );
+            }
+            assert!((l.noise_factor - 20.0).abs() < 1e-9);
+        }
+        assert_eq!(full[3].class, RiskClass::ElevatedRisk);
+        assert_eq!(low[3].class, RiskClass::LowRisk);
+        assert!((full[3].low_risk_depth - 0.75 / 12.54).abs() < 1e-3);
+    }
+
+    /// Every rate 1–4000 Hz (whole hertz) and N = 1..=8 that the luminaire accepts without
+    /// `allow_flicker` is low-risk by every line in `f64`: at each LED's largest depth
+    /// (`--depth auto`), and at full depth wherever the luminaire accepts that.
+    #[test]
+    fn every_configuration_accepted_without_allow_flicker_is_low_risk() {
+        use protocol::config::{ChipRate, LuminaireConfig};
+        use protocol::flicker::{at_largest_low_risk_depths, played_depth};
+        let mut accepted_full = 0;
+        for leds in 1..=protocol::carriers::MAX_LEDS as u8 {
+            for hz in 1..=4000u32 {
+                let rate = ChipRate(hz * 1000);
+                let auto = at_largest_low_risk_depths(&LuminaireConfig {
+                    led_count: leds,
+                    chip_rate: rate,
+                    ..LuminaireConfig::DEFAULT
+                });
+                assert_eq!(auto.validate_for_people(), Ok(()), "{leds} LEDs {hz} Hz");
+                let full = LuminaireConfig {
+                    off_level_permille: [0; 8],
+                    ..auto
+                };
+                let full_ok = full.validate_for_people().is_ok();
+                accepted_full += usize::from(full_ok);
+                for led in 0..leds {
+                    let depth = f64::from(played_depth(&auto, usize::from(led)));
+                    let class = class_by_every_line(led, f64::from(hz), depth);
+                    assert!(class <= RiskClass::LowRisk, "{leds} LEDs {hz} Hz LED {led}");
+                    if full_ok {
+                        assert!(class_by_every_line(led, f64::from(hz), 1.0) <= RiskClass::LowRisk);
+                    }
+                }
+            }
+        }
+        // On/off keying is never low-risk up to 4 kHz: LED 1's fundamental at R/4 ≤ 1 kHz
+        // carries 127 %, above the 0.08·f ≤ 80 % allowed there.
+        assert_eq!(accepted_full, 0);
     }
 }

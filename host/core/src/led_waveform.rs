@@ -10,7 +10,9 @@
 pub trait LedWaveform: Send + Sync {
     /// Number of LEDs the waveform drives.
     fn led_count(&self) -> usize;
-    /// Fraction in [0, 1] of the window [t0, t1) (seconds) during which LED `led` is on.
-    /// For an empty window (t1 ≤ t0) it is LED `led`'s state at t0 (0 or 1).
+    /// Mean light in [0, 1] of LED `led` over the window [t0, t1) (seconds), as a fraction of
+    /// its full on light: the fraction of the window it is on, plus its off level during off
+    /// chips (docs/howto/flicker-safety.md). For an empty window (t1 ≤ t0) it is LED `led`'s
+    /// level at t0.
     fn on_fraction(&self, led: usize, t0: f64, t1: f64) -> f64;
 }

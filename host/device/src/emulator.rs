@@ -361,6 +361,7 @@ mod tests {
         config.led_count = 3;
         config.chip_rate = ChipRate(959_500);
         config.phase_chips[2] = 7;
+        config.off_level_permille[..3].copy_from_slice(&[750, 700, 900]);
         client.set_config(&config).unwrap();
         assert_eq!(client.config().unwrap(), config);
         assert_eq!(client.save_and_wait().unwrap(), SaveOutcome::Deferred);

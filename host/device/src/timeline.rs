@@ -6,7 +6,8 @@
 //! table, rate, brightness, start, stop, identify). Within a segment playback starts at chip 0
 //! of the phase-shifted table at the segment's start and advances at the *effective* chip rate,
 //! nominal × (1 + ppm·10⁻⁶), modelling the board's crystal error. Brightness is PWM far above
-//! the chip rate, so an on chip emits brightness/1000 of full light on average. Identify blinks
+//! the chip rate, so an on chip emits its on compare value/1000 of full light on average and an
+//! off chip its off compare value/1000 (the off level's fraction of it, `protocol::timing`). Identify blinks
 //! every LED at [`IDENTIFY_BLINK_HZ`] with 50 % duty at full brightness.
 //!
 //! [`TimelineWaveform`] reads the timeline in camera time (camera t = 0 at a chosen timeline
@@ -19,6 +20,7 @@ use std::path::{Path, PathBuf};
 use protocol::carriers::{ChipTable, MAX_LEDS};
 use protocol::config::ChipRate;
 use protocol::luminaire::OutputPlan;
+use protocol::timing::{LedLevels, PWM_STEPS};
 use serde::{Deserialize, Serialize};
 
 use meb_core::led_waveform::LedWaveform;
@@ -59,6 +61,10 @@ pub struct TimelineSegment {
     pub brightness_permille: Vec<u16>,
     /// Per-LED carrier delay in chips (N entries).
     pub phase_chips: Vec<u16>,
+    /// Per-LED off level in per mille of the on level (N entries; absent in timelines written
+    /// before off levels, read as dark off chips).
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub off_level_permille: Vec<u16>,
 }
 
 impl TimelineSegment {
@@ -73,6 +79,7 @@ impl TimelineSegment {
             effective_chip_rate_hz: ChipRate::hz(plan.chip_rate) * (1.0 + rate_error_ppm * 1e-6),
             brightness_permille: plan.brightness_permille[..n].to_vec(),
             phase_chips: plan.phase_chips[..n].to_vec(),
+            off_level_permille: plan.off_level_permille[..n].to_vec(),
         }
     }
 }
@@ -231,6 +238,12 @@ impl Timeline {
             if s.brightness_permille.iter().any(|&b| b > 1000) {
                 return Err(bad("brightness above 1000 per mille"));
             }
+            if !(s.off_level_permille.is_empty() || s.off_level_permille.len() == n) {
+                return Err(bad("off_level_permille needs led_count entries or none"));
+            }
+            if s.off_level_permille.iter().any(|&b| b > 1000) {
+                return Err(bad("off level above 1000 per mille"));
+            }
         }
         Ok(())
     }
@@ -267,7 +280,10 @@ struct PlayedSegment {
     mode: OutputMode,
     rate_hz: f64,
     table: ChipTable,
+    /// Light during on chips, fraction of full.
     gain: [f64; MAX_LEDS],
+    /// Light during off chips, fraction of full.
+    off_gain: [f64; MAX_LEDS],
 }
 
 /// A recorded timeline as LED light in camera time: camera t ↦ timeline t + `offset`.
@@ -289,16 +305,21 @@ impl TimelineWaveform {
             phases[..s.phase_chips.len()].copy_from_slice(&s.phase_chips);
             let table = ChipTable::with_phases(s.led_count, &phases)
                 .map_err(|source| TimelineError::Carriers { index, source })?;
-            let mut gain = [0.0; MAX_LEDS];
-            for (g, &b) in gain.iter_mut().zip(&s.brightness_permille) {
-                *g = f64::from(b) / 1000.0;
-            }
+            let mut brightness = [0u16; MAX_LEDS];
+            brightness[..s.brightness_permille.len()].copy_from_slice(&s.brightness_permille);
+            let mut off_level = [0u16; MAX_LEDS];
+            off_level[..s.off_level_permille.len()].copy_from_slice(&s.off_level_permille);
+            let levels = LedLevels::new(&brightness, &off_level);
+            let steps = f64::from(PWM_STEPS);
+            let gain = levels.on.map(|v| f64::from(v) / steps);
+            let off_gain = levels.off.map(|v| f64::from(v) / steps);
             segments.push(PlayedSegment {
                 t: s.t,
                 mode: s.mode,
                 rate_hz: s.effective_chip_rate_hz,
                 table,
                 gain,
+                off_gain,
             });
         }
         let at = segments.partition_point(|s| s.t <= offset);
@@ -411,7 +432,7 @@ impl PlayedSegment {
                 if self.is_on(led, chip) {
                     self.gain[led]
                 } else {
-                    0.0
+                    self.off_gain[led]
                 }
             }
         }
@@ -451,7 +472,8 @@ impl PlayedSegment {
                     }
                     c = end;
                 }
-                on_chips / self.rate_hz * self.gain[led]
+                let off_chips = (c1 - c0) - on_chips;
+                (on_chips * self.gain[led] + off_chips * self.off_gain[led]) / self.rate_hz
             }
         }
     }
@@ -463,7 +485,7 @@ mod tests {
     use protocol::config::LuminaireConfig;
 
     fn plan(leds: u8, rate_mhz: u32) -> OutputPlan {
-        let mut config = LuminaireConfig::DEFAULT;
+        let mut config = LuminaireConfig::FULL_DEPTH;
         config.led_count = leds;
         config.chip_rate = ChipRate(rate_mhz);
         OutputPlan::of(&config)
@@ -520,13 +542,23 @@ mod tests {
         use meb_sim::CarrierWaveform;
         let mut p = plan(4, 960_000);
         p.phase_chips[..4].copy_from_slice(&[0, 5, 0, 17]);
+        // The factory default's off levels at full brightness: off compare = off level.
+        p.off_level_permille = protocol::config::LuminaireConfig::DEFAULT.off_level_permille;
         let mut timeline = Timeline::new(0.0);
         timeline
             .segments
             .push(TimelineSegment::new(3.0, OutputMode::Playing, &p, 0.0));
         let recorded: &dyn LedWaveform = &TimelineWaveform::from_last_change(&timeline).unwrap();
         let table = ChipTable::with_phases(4, &p.phase_chips).unwrap();
-        let model = CarrierWaveform::new(table, &[960.0; 4], &[0.0; 4]).unwrap();
+        let model = CarrierWaveform::new(table, &[960.0; 4], &[0.0; 4])
+            .unwrap()
+            .with_off_levels(
+                &p.off_level_permille[..4]
+                    .iter()
+                    .map(|&l| f64::from(l) / 1000.0)
+                    .collect::<Vec<_>>(),
+            )
+            .unwrap();
         assert_eq!(recorded.led_count(), 4);
         for k in 0..200 {
             let t0 = k as f64 * 0.000_731;

@@ -17,6 +17,7 @@
 
 #![deny(missing_docs)]
 
+pub mod board_view;
 pub mod capture;
 pub mod dataset;
 pub mod exposure;

@@ -9,6 +9,10 @@
 //! `floor(t · rate_i + Δ_i) mod n`. With rate = fps and an exposure of one full frame, frame j
 //! then integrates `(1 − α_i)·s_i[j + k_i] + α_i·s_i[j + k_i + 1]` (Δ_i = k_i + α_i), exactly the
 //! received-signal formula of docs/maths/demodulation.md#the-received-signal.
+//!
+//! An LED whose off chips keep a fraction ℓ_i of its on light ([`CarrierWaveform::with_off_levels`],
+//! the luminaire's off level, docs/howto/flicker-safety.md) shows ℓ_i + (1 − ℓ_i)·w: the
+//! carrier's part of the light, and with it the demodulated LED image, scales with 1 − ℓ_i.
 
 pub use meb_core::led_waveform::LedWaveform;
 use protocol::carriers::ChipTable;
@@ -19,6 +23,7 @@ pub struct CarrierWaveform {
     table: ChipTable,
     rates_hz: Vec<f64>,
     phases_chips: Vec<f64>,
+    off_levels: Vec<f64>,
 }
 
 impl CarrierWaveform {
@@ -35,7 +40,24 @@ impl CarrierWaveform {
             table,
             rates_hz: rates_hz.to_vec(),
             phases_chips: phases_chips.to_vec(),
+            off_levels: vec![0.0; n],
         })
+    }
+
+    /// The same carriers with LED i's off chips at `off_levels[i]` ∈ [0, 1] of its on light
+    /// (0: dark, as [`Self::new`]); `None` unless there is one such entry per LED.
+    pub fn with_off_levels(mut self, off_levels: &[f64]) -> Option<Self> {
+        let ok = off_levels.len() == self.off_levels.len()
+            && off_levels.iter().all(|l| (0.0..=1.0).contains(l));
+        ok.then(|| {
+            self.off_levels = off_levels.to_vec();
+            self
+        })
+    }
+
+    /// Light of LED i during its off chips, as a fraction of its on light.
+    pub fn off_levels(&self) -> &[f64] {
+        &self.off_levels
     }
 
     /// The chip table being played.
@@ -69,6 +91,14 @@ impl LedWaveform for CarrierWaveform {
         if led >= self.led_count() {
             return 0.0;
         }
+        let off = self.off_levels[led];
+        off + (1.0 - off) * self.keyed_fraction(led, t0, t1)
+    }
+}
+
+impl CarrierWaveform {
+    /// Fraction of [t0, t1) that LED `led` spends in on chips (its state at t0 for an empty window).
+    fn keyed_fraction(&self, led: usize, t0: f64, t1: f64) -> f64 {
         let rate = self.rates_hz[led];
         let phase = self.phases_chips[led];
         // Window in chip units of this LED.

@@ -1,5 +1,6 @@
 //! `meb calibrate lights`: a rig's LED positions and relative intensities fitted to captures
-//! of a matte sphere of known diameter ([`meb_pipeline::calibrate`]).
+//! of a matte sphere of known diameter ([`meb_pipeline::calibrate`]); `meb calibrate camera`
+//! ([`super::calibrate_camera`]).
 
 use super::decode::{DecodeOptions, decode_capture};
 use anyhow::{Context, Result, bail};
@@ -21,6 +22,9 @@ enum CalibrateCommand {
     /// diameter (several placements, spread across the view and in depth), starting from a
     /// nominal rig: writes rig.toml and calibration.json.
     Lights(LightsArgs),
+    /// Fit the camera's intrinsics (fx, fy, cx, cy, k1, k2) to photos of a chequerboard:
+    /// writes the rig with them (rig.toml) and calibration.json with the reprojection RMS.
+    Camera(super::calibrate_camera::CameraArgs),
 }
 
 /// Arguments of `meb calibrate lights`.
@@ -49,6 +53,7 @@ struct LightsArgs {
 pub fn run(args: &CalibrateArgs) -> Result<()> {
     match &args.command {
         CalibrateCommand::Lights(lights) => run_lights(lights),
+        CalibrateCommand::Camera(camera) => super::calibrate_camera::run(camera),
     }
 }
 

@@ -22,6 +22,11 @@ pub struct CarriersArgs {
     /// it clear.
     #[arg(long, requires = "rate")]
     fps: Option<f64>,
+    /// Modulation depth (on − off)/(on + off) in (0, 1] of every LED (1: full on/off keying):
+    /// with --rate, the IEEE 1789 class at that depth, each LED's largest low-risk and
+    /// no-observable-effect depth and the noise cost 1/depth (docs/howto/flicker-safety.md).
+    #[arg(long, default_value_t = 1.0, requires = "rate")]
+    depth: f64,
     /// Print JSON instead of a table.
     #[arg(long)]
     json: bool,
@@ -116,9 +121,12 @@ pub fn run(args: &CarriersArgs) -> Result<()> {
     {
         anyhow::bail!("--rate must be a positive number of Hz, got {rate}");
     }
+    if !(args.depth > 0.0 && args.depth <= 1.0) {
+        anyhow::bail!("--depth must lie in (0, 1], got {}", args.depth);
+    }
     let flicker = args
         .rate
-        .map(|rate| flicker::analyse(&table, rate, REPORT_BELOW_HZ));
+        .map(|rate| flicker::analyse_at_depth(&table, rate, REPORT_BELOW_HZ, args.depth));
     if let Some(fps) = args.fps
         && !(fps.is_finite() && fps > 0.0)
     {
@@ -159,8 +167,9 @@ pub fn run(args: &CarriersArgs) -> Result<()> {
     }
     if let (Some(rate), Some(flicker)) = (report.rate_hz, &report.flicker) {
         println!(
-            "\nAt {rate} Hz chip rate (frame period {:.4} s):",
-            report.chips as f64 / rate
+            "\nAt {rate} Hz chip rate (frame period {:.4} s), depth {}:",
+            report.chips as f64 / rate,
+            args.depth
         );
         for led in flicker {
             let lines: Vec<String> = led
@@ -180,6 +189,24 @@ pub fn run(args: &CarriersArgs) -> Result<()> {
                 }
             );
         }
+        let min = |f: fn(&LedFlicker) -> f64| flicker.iter().map(f).fold(1.0, f64::min);
+        let low_risk = min(|l| l.low_risk_depth);
+        let noel = min(|l| l.no_observable_effect_depth);
+        println!(
+            "  largest depth for every LED: low risk {low_risk:.4} (decoding noise ×{:.1} of full depth), no observable effect {noel:.4} (×{:.1}); per LED: {}",
+            1.0 / low_risk,
+            1.0 / noel,
+            flicker
+                .iter()
+                .map(|l| format!("{:.4}", l.low_risk_depth))
+                .collect::<Vec<_>>()
+                .join(", ")
+        );
+        println!(
+            "  at depth {}: noise on LED images and normals ×{:.1} of full depth (same mean light)",
+            args.depth,
+            1.0 / args.depth
+        );
     }
     if let (Some(rate), Some(mains)) = (report.rate_hz, &report.mains) {
         print_mains(mains, rate);

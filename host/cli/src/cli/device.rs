@@ -10,7 +10,8 @@ use meb_device::discovery::{self, DiscoveryError, PortEntry};
 use meb_device::{DeviceClient, Timeouts};
 use protocol::carriers::MAX_LEDS;
 use protocol::config::{ChipRate, FULL_BRIGHTNESS_PERMILLE, LuminaireConfig};
-use protocol::wire::SaveOutcome;
+use protocol::flicker::{self, LOW_RISK, NO_OBSERVABLE_EFFECT};
+use protocol::wire::{ConfigSource, SaveOutcome};
 use serde::Serialize;
 
 /// Arguments of `meb device`.
@@ -42,8 +43,14 @@ enum DeviceAction {
     Get(JsonFlag),
     /// Apply a configuration (takes effect at once; `save` persists it).
     Set(SetArgs),
-    /// Persist the active configuration to the luminaire's flash.
-    Save,
+    /// Persist the active configuration to the luminaire's flash (refused above IEEE 1789 low
+    /// risk unless --allow-flicker).
+    Save {
+        /// Save a configuration that flickers above IEEE 1789 low risk; the luminaire then
+        /// plays it at power-up instead of limiting it.
+        #[arg(long)]
+        allow_flicker: bool,
+    },
     /// Start playing the carriers.
     Start,
     /// Stop playing the carriers (LEDs off).
@@ -56,7 +63,8 @@ enum DeviceAction {
         seconds: u8,
     },
     /// Wiring check without instruments: each LED alone for 1 s, then every carrier at 4 chips
-    /// per second for 8 s, then the configuration back (nothing is saved).
+    /// per second for 8 s, then the configuration back (nothing is saved). Exempt from the
+    /// flicker check: it flickers visibly on purpose.
     Blink,
     /// Check the link and measure the round-trip time.
     Ping(PingArgs),
@@ -88,6 +96,15 @@ struct SetArgs {
     /// Per-LED carrier delay in chips, N comma-separated values (default all 0).
     #[arg(long, value_delimiter = ',')]
     phase: Option<Vec<u16>>,
+    /// Modulation depth (on − off)/(on + off) in (0, 1]: one value for every LED, N
+    /// comma-separated values, or `auto` for each LED's largest IEEE 1789 low-risk depth at
+    /// this rate (default: the luminaire's current off levels).
+    #[arg(long)]
+    depth: Option<String>,
+    /// Apply a configuration that flickers above IEEE 1789 low risk (people in the room may
+    /// see flicker, and below 60 Hz it can trigger seizures).
+    #[arg(long)]
+    allow_flicker: bool,
 }
 
 /// Arguments of `meb device ping`.
@@ -172,7 +189,12 @@ fn talk(client: &mut DeviceClient, action: &DeviceAction) -> Result<()> {
                 Some(fault) => println!("output fault      {fault}"),
                 None => println!("output fault      none"),
             }
-            println!("config source     {:?}", s.config_source);
+            println!("config source     {}", source_text(s.config_source));
+            if s.flicker_limited {
+                println!(
+                    "flicker limited   yes: the saved configuration flickers above IEEE 1789 low risk and was not saved with --allow-flicker; power-up raised its off levels (see `meb device get`)"
+                );
+            }
             println!("unsaved changes   {}", yes_no(s.unsaved_changes));
             println!("save              {:?}", s.save);
             println!("identify active   {}", yes_no(s.identify_active));
@@ -194,15 +216,19 @@ fn talk(client: &mut DeviceClient, action: &DeviceAction) -> Result<()> {
         }
         DeviceAction::Set(set) => {
             let current = client.config()?;
-            let config = config_from_args(set, current.running)?;
+            let config = config_from_args(set, &current)?;
+            check_flicker(&config, set.allow_flicker, "set")?;
             client.set_config(&config)?;
             println!("configuration applied (not yet saved; run `meb device save`)");
             ConfigView::of(&config).print();
         }
-        DeviceAction::Save => match client.save_and_wait()? {
-            SaveOutcome::AlreadySaved => println!("already saved"),
-            SaveOutcome::Deferred => println!("saved"),
-        },
+        DeviceAction::Save { allow_flicker } => {
+            check_flicker(&client.config()?, *allow_flicker, "save")?;
+            match client.save_and_wait()? {
+                SaveOutcome::AlreadySaved => println!("already saved"),
+                SaveOutcome::Deferred => println!("saved"),
+            }
+        }
         DeviceAction::Start => {
             client.start()?;
             println!("started");
@@ -229,6 +255,9 @@ fn talk(client: &mut DeviceClient, action: &DeviceAction) -> Result<()> {
 fn blink(client: &mut DeviceClient) -> Result<()> {
     let active = client.config()?;
     let leds = usize::from(active.led_count);
+    println!(
+        "bring-up blink: full on/off keying and a 4 Hz walk, visible flicker on purpose (exempt from the IEEE 1789 check; avoid it with people sensitive to flicker in the room)"
+    );
     for (i, step) in protocol::bringup::blink_sequence(&active)
         .iter()
         .enumerate()
@@ -286,8 +315,109 @@ fn ping_repeatedly(client: &mut DeviceClient, ping: &PingArgs) -> Result<()> {
     }
 }
 
-/// The full configuration `meb device set` sends.
-fn config_from_args(set: &SetArgs, running: bool) -> Result<LuminaireConfig> {
+/// Refuses `config` above IEEE 1789 low risk unless `allowed`, naming the LED, the line that
+/// sets the limit and the depth and rate that would be low-risk.
+fn check_flicker(config: &LuminaireConfig, allowed: bool, command: &str) -> Result<()> {
+    let Some(excess) = flicker::first_excess(config, &LOW_RISK) else {
+        return Ok(());
+    };
+    if allowed {
+        eprintln!(
+            "warning: LED {} flickers above IEEE 1789 low risk (accepted with --allow-flicker)",
+            excess.led + 1
+        );
+        return Ok(());
+    }
+    let f = excess.limit.frequency_hz;
+    let band = if (flicker::SEIZURE_BAND_HZ.0..=flicker::SEIZURE_BAND_HZ.1).contains(&f) {
+        ", inside the 3–60 Hz band where flicker can trigger seizures"
+    } else {
+        ""
+    };
+    let leds = usize::from(config.led_count);
+    let auto: Vec<String> = (0..leds)
+        .map(|led| {
+            format!(
+                "{:.3}",
+                flicker::max_depth(led as u8, config.chip_rate, &LOW_RISK).depth
+            )
+        })
+        .collect();
+    let depth = excess.depth;
+    let rate = lowest_low_risk_rate(config)
+        .map(|hz| format!("a chip rate of at least {hz} Hz at this depth"))
+        .unwrap_or_else(|| "no chip rate up to 4000 Hz at this depth".into());
+    bail!(
+        "refusing to {command}: LED {} plays its {f:.2} Hz line at {:.2} % modulation (depth {depth:.3}), above IEEE 1789 low risk ({:.2} % at {f:.2} Hz){band}.
+         Low-risk: --depth auto (depths {}; decoding noise ×{:.1} of full depth), or {rate}; or pass --allow-flicker to {command} it anyway.",
+        excess.led + 1,
+        depth * excess.limit.full_depth_percent,
+        LOW_RISK.percent_at(f).unwrap_or(f32::INFINITY),
+        auto.join(","),
+        1.0 / flicker::max_depth(excess.led, config.chip_rate, &LOW_RISK).depth,
+    )
+}
+
+/// The lowest whole chip rate in hertz, from `config`'s up to 4000 Hz, at which its LEDs'
+/// depths are low-risk.
+fn lowest_low_risk_rate(config: &LuminaireConfig) -> Option<u32> {
+    let start = config.chip_rate.hz().ceil() as u32;
+    (start..=4000).find(|&hz| {
+        let mut trial = *config;
+        trial.chip_rate = ChipRate(hz * 1000);
+        flicker::is_low_risk(&trial)
+    })
+}
+
+/// Readable boot source.
+fn source_text(source: ConfigSource) -> &'static str {
+    match source {
+        ConfigSource::Defaults => "factory defaults (no saved configuration)",
+        ConfigSource::Restored => "restored from flash",
+        ConfigSource::CorruptRecordDefaults => "factory defaults (saved configuration corrupt)",
+        ConfigSource::RestoredWithoutDepth => {
+            "restored from flash, an old record without a depth: read as depth 1 (full on/off keying); set a depth and save again"
+        }
+    }
+}
+
+/// Off levels for `--depth`: `auto`, one depth or one per LED.
+fn off_levels_from_arg(
+    arg: &str,
+    n: usize,
+    auto: &LuminaireConfig,
+    out: &mut [u16; MAX_LEDS],
+) -> Result<()> {
+    if arg.trim() == "auto" {
+        *out = auto.off_level_permille;
+        return Ok(());
+    }
+    let depths: Vec<f32> = arg
+        .split(',')
+        .map(|v| {
+            v.trim()
+                .parse::<f32>()
+                .ok()
+                .filter(|d| *d > 0.0 && *d <= 1.0)
+                .ok_or_else(|| anyhow!("--depth {v:?}: a depth in (0, 1] or `auto` expected"))
+        })
+        .collect::<Result<_>>()?;
+    match depths.len() {
+        1 => out[..n].fill(flicker::off_level_for_depth(depths[0])),
+        len if len == n => {
+            for (level, &d) in out.iter_mut().zip(&depths) {
+                *level = flicker::off_level_for_depth(d);
+            }
+        }
+        len => bail!("--depth needs 1 or {n} values (one per LED), got {len}"),
+    }
+    Ok(())
+}
+
+/// The full configuration `meb device set` sends: the flags given, the current off levels
+/// for LEDs without `--depth`.
+fn config_from_args(set: &SetArgs, current: &LuminaireConfig) -> Result<LuminaireConfig> {
+    let running = current.running;
     let n = usize::from(set.leds);
     if n == 0 || n > MAX_LEDS {
         bail!("--leds {} is outside 1..={MAX_LEDS}", set.leds);
@@ -308,13 +438,20 @@ fn config_from_args(set: &SetArgs, running: bool) -> Result<LuminaireConfig> {
     if let Some(values) = &set.phase {
         per_led("--phase", values, n, &mut phases)?;
     }
-    Ok(LuminaireConfig {
+    let mut config = LuminaireConfig {
         led_count: set.leds,
         chip_rate: ChipRate::from_hz(set.rate),
         brightness_permille: brightness,
         phase_chips: phases,
         running,
-    })
+        off_level_permille: current.off_level_permille,
+        allow_flicker: set.allow_flicker,
+    };
+    if let Some(arg) = &set.depth {
+        let auto = flicker::at_largest_low_risk_depths(&config);
+        off_levels_from_arg(arg, n, &auto, &mut config.off_level_permille)?;
+    }
+    Ok(config)
 }
 
 fn per_led(flag: &str, values: &[u16], n: usize, out: &mut [u16; MAX_LEDS]) -> Result<()> {
@@ -337,6 +474,13 @@ struct ConfigView {
     brightness_permille: Vec<u16>,
     phase_chips: Vec<u16>,
     running: bool,
+    off_level_permille: Vec<u16>,
+    /// Modulation depth each LED plays, (on − off)/(on + off).
+    depth: Vec<f32>,
+    /// Largest IEEE 1789 low-risk and no-observable-effect depth of each LED at this rate.
+    low_risk_depth: Vec<f32>,
+    no_observable_effect_depth: Vec<f32>,
+    allow_flicker: bool,
 }
 
 impl ConfigView {
@@ -349,6 +493,19 @@ impl ConfigView {
             brightness_permille: config.brightness_permille[..n].to_vec(),
             phase_chips: config.phase_chips[..n].to_vec(),
             running: config.running,
+            off_level_permille: config.off_level_permille[..n].to_vec(),
+            depth: (0..n)
+                .map(|led| flicker::played_depth(config, led))
+                .collect(),
+            low_risk_depth: (0..n)
+                .map(|led| flicker::max_depth(led as u8, config.chip_rate, &LOW_RISK).depth)
+                .collect(),
+            no_observable_effect_depth: (0..n)
+                .map(|led| {
+                    flicker::max_depth(led as u8, config.chip_rate, &NO_OBSERVABLE_EFFECT).depth
+                })
+                .collect(),
+            allow_flicker: config.allow_flicker,
         }
     }
 
@@ -358,7 +515,26 @@ impl ConfigView {
         println!("chip rate   {:.3} Hz", self.chip_rate_hz);
         println!("brightness  {} per mille", join(&self.brightness_permille));
         println!("phase       {} chips", join(&self.phase_chips));
+        println!(
+            "off level   {} per mille of on",
+            join(&self.off_level_permille)
+        );
+        let fmt = |v: &[f32]| {
+            v.iter()
+                .map(|d| format!("{d:.3}"))
+                .collect::<Vec<_>>()
+                .join(",")
+        };
+        println!(
+            "depth       {} (low-risk up to {}; no observable effect up to {})",
+            fmt(&self.depth),
+            fmt(&self.low_risk_depth),
+            fmt(&self.no_observable_effect_depth)
+        );
         println!("running     {}", yes_no(self.running));
+        if self.allow_flicker {
+            println!("flicker     accepted above IEEE 1789 low risk (--allow-flicker)");
+        }
     }
 }
 

@@ -1,6 +1,7 @@
 //! One module per `meb` subcommand: argument parsing and printing only.
 
 pub mod calibrate;
+pub mod calibrate_camera;
 pub mod camera;
 pub mod carriers;
 pub mod common;

@@ -1,16 +1,21 @@
 //! `meb rig check`: how consistent a rig is with a capture (the rig check every
-//! reconstruction runs, [`meb_pipeline::reconstruct::rig_check`]), and the refusal of an
-//! inconsistent rig that `meb reconstruct` shares.
+//! reconstruction runs, [`meb_pipeline::reconstruct::rig_check`]; with `--sphere-mm`, the
+//! radius and normals recovered for a sphere of known size, [`meb_pipeline::calibrate::
+//! sphere_check`]), and the refusal of an inconsistent rig that `meb reconstruct` shares.
 
 use super::decode::{DecodeOptions, check_folder_verdict, decode_capture};
 use anyhow::{Context, Result, bail, ensure};
 use clap::{Args, Subcommand};
 use meb_core::rig::Rig;
+use meb_pipeline::calibrate::sphere_check::{
+    MAX_NORMAL_ERROR_DEG, MAX_RADIUS_ERROR, SphereCheck, check_sphere,
+};
 use meb_pipeline::demod::Decoded;
 use meb_pipeline::demod::output::read_decode_dir;
 use meb_pipeline::reconstruct::rig_check::{RigCheck, RigFit};
 use meb_pipeline::reconstruct::{
-    ReconstructConfig, Request, Source, check_decoded_rig, reconstruct,
+    ReconstructConfig, Request, Source, check_decoded_rig, level_noise, reconstruct,
+    usable_led_images,
 };
 use std::path::PathBuf;
 
@@ -37,6 +42,10 @@ struct CheckArgs {
     /// Rig: a TOML file or a preset.
     #[arg(long)]
     rig: String,
+    /// The capture shows a matte sphere of this diameter, mm (wholly in view): also check the
+    /// radius and normals the rig recovers for it.
+    #[arg(long)]
+    sphere_mm: Option<f64>,
     /// Decoder settings (only used when INPUT is a capture).
     #[command(flatten)]
     decode: DecodeOptions,
@@ -69,6 +78,29 @@ fn run_check(args: &CheckArgs) -> Result<()> {
     let check = check_decoded_rig(&decoded, &rig, &reconstruction);
     print_table(&check);
     println!("{}", check.describe(&args.rig));
+    if let Some(diameter) = args.sphere_mm {
+        let images = usable_led_images(&decoded);
+        let sphere = check_sphere(
+            &images.images,
+            &level_noise(&decoded),
+            &rig,
+            &reconstruction.photometric.field,
+            &reconstruction.integration.depth,
+            diameter,
+        )
+        .context("the sphere check could not run")?;
+        println!("{}", describe_sphere(&sphere));
+        if !sphere.consistent {
+            bail!(
+                "verdict: inconsistent; the rig does not give back the Ø{diameter} mm sphere \
+                 (a consistent rig: radius within {:.0} %, mean normal error at most {:.0}°); \
+                 try: {}",
+                100.0 * MAX_RADIUS_ERROR,
+                MAX_NORMAL_ERROR_DEG,
+                check.advice()
+            );
+        }
+    }
     match check.fit {
         RigFit::Consistent => println!("verdict: consistent"),
         RigFit::Doubtful => println!("verdict: doubtful (reported, not refused)"),
@@ -111,6 +143,25 @@ fn read_capture(input: &std::path::Path, rig: &Rig, options: &DecodeOptions) -> 
         shape.0
     );
     Ok(decoded)
+}
+
+/// One line on the sphere `check`.
+fn describe_sphere(check: &SphereCheck) -> String {
+    format!(
+        "sphere: radius {:.2} mm recovered for {:.2} mm ({:+.1} %), normal error mean {:.2}°, \
+         95 % below {:.2}°, over {} pixels ({})",
+        check.recovered_radius_mm,
+        check.radius_mm,
+        100.0 * check.radius_error(),
+        check.mean_normal_error_deg,
+        check.p95_normal_error_deg,
+        check.pixels,
+        if check.consistent {
+            "as a consistent rig gives"
+        } else {
+            "not what a consistent rig gives"
+        }
+    )
 }
 
 /// Prints the per-LED figures of `check`.

@@ -417,7 +417,7 @@ pub fn load_calibration(path: &Path) -> Result<Calibration> {
 }
 
 /// A grey image: a 2-D float .npy, or an image file converted to luminance in [0, 1].
-fn read_grey(path: &Path) -> Result<Array2<f32>> {
+pub(super) fn read_grey(path: &Path) -> Result<Array2<f32>> {
     if path
         .extension()
         .is_some_and(|e| e.eq_ignore_ascii_case("npy"))

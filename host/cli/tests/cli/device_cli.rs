@@ -129,12 +129,18 @@ fn blink_lights_each_led_alone_then_the_slow_carriers_then_restores() {
         "30",
         "--brightness",
         "500,600",
+        "--depth",
+        "auto",
     ];
     stdout_of(&emulator.meb(&set));
     let shown = stdout_of(&emulator.meb(&["blink"]));
     let lines: Vec<&str> = shown.lines().collect();
+    assert!(
+        lines[0].contains("exempt from the IEEE 1789 check"),
+        "{shown}"
+    );
     assert_eq!(
-        lines,
+        lines[1..],
         [
             "LED 1 alone",
             "LED 2 alone",
@@ -237,7 +243,54 @@ fn a_rate_beyond_the_limit_is_refused_naming_the_value_and_the_limit() {
     assert!(message.contains("--rate 1000000000 Hz"), "{message}");
     // The edges are accepted.
     stdout_of(&emulator.meb(&["set", "--leds", "4", "--rate", "4000"]));
-    stdout_of(&emulator.meb(&["set", "--leds", "4", "--rate", "1"]));
+    stdout_of(&emulator.meb(&["set", "--leds", "4", "--rate", "1", "--depth", "auto"]));
+    emulator.stop();
+}
+
+/// `meb device set` refuses flicker above IEEE 1789 low risk, naming the line, the 3–60 Hz
+/// band, a low-risk depth and rate; `--depth auto` and `--allow-flicker` are accepted; `save`
+/// asks for the flag again; `blink` says it is exempt.
+#[test]
+fn set_and_save_refuse_flicker_above_low_risk_unless_allowed() {
+    let dir = tempfile::tempdir().unwrap();
+    let emulator = Emulator::start(dir.path());
+    // The thesis' settings at a phone's slow-motion rate: LED 4 at 7.5 Hz.
+    let refused = emulator.meb(&["set", "--leds", "4", "--rate", "240", "--depth", "1"]);
+    assert!(!refused.status.success());
+    let message = String::from_utf8_lossy(&refused.stderr);
+    assert!(message.contains("IEEE 1789 low risk"), "{message}");
+    assert!(message.contains("3–60 Hz"), "{message}");
+    assert!(message.contains("--depth auto"), "{message}");
+    assert!(message.contains("--allow-flicker"), "{message}");
+    // Nothing was applied.
+    let get = stdout_of(&emulator.meb(&["get", "--json"]));
+    assert!(get.contains("\"chip_rate_millihertz\": 960000"), "{get}");
+    // The largest low-risk depths are accepted and reported.
+    let auto =
+        stdout_of(&emulator.meb(&["set", "--leds", "4", "--rate", "240", "--depth", "auto"]));
+    assert!(auto.contains("depth"), "{auto}");
+    let status = stdout_of(&emulator.meb(&["save"]));
+    assert!(status.contains("saved"), "{status}");
+    // On purpose: applied with a warning, then saving needs the flag again.
+    let allowed = emulator.meb(&[
+        "set",
+        "--leds",
+        "4",
+        "--rate",
+        "960",
+        "--depth",
+        "1",
+        "--allow-flicker",
+    ]);
+    assert!(
+        allowed.status.success(),
+        "{}",
+        String::from_utf8_lossy(&allowed.stderr)
+    );
+    let save = emulator.meb(&["save"]);
+    assert!(!save.status.success());
+    assert!(String::from_utf8_lossy(&save.stderr).contains("refusing to save"));
+    stdout_of(&emulator.meb(&["save", "--allow-flicker"]));
     emulator.stop();
 }
 

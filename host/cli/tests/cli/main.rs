@@ -3,6 +3,7 @@
 
 mod analytic_sphere;
 mod bad_input;
+mod camera_calibration;
 mod capture_readers;
 mod common;
 mod decode_moving;
@@ -13,6 +14,7 @@ mod demo_end_to_end;
 mod device_cli;
 mod glossy_surfaces;
 mod integrate_diligent;
+mod light_calibration_sweep;
 mod noise_free;
 mod output_folders;
 mod reconstruct_cli;
@@ -22,6 +24,7 @@ mod report_page;
 mod rig_calibration;
 mod room_effects;
 mod simulate_cli;
+mod sphere_rig_check;
 mod tof_calibration;
 mod tof_cli;
 mod tof_common;

@@ -1,15 +1,20 @@
 //! Calibrating a rig from its own captures: each LED's position and relative intensity from
 //! captures of a matte sphere of known diameter ([`sphere`] finds it, [`lights`] fits the
-//! LEDs on the reconstruction's near-field model).
+//! LEDs on the reconstruction's near-field model), and the camera's intrinsics from photos of
+//! a chequerboard ([`camera`]).
 //!
 //! [`calibrate_lights`] is the one path from decoded sphere captures to a fitted rig: `meb
 //! calibrate lights` and the tests call it.
 
+pub mod camera;
 pub mod lights;
 pub mod sphere;
+pub mod sphere_check;
 
+pub use camera::{CameraCalibration, calibrate_camera};
 pub use lights::{LedFit, LightFit, SphereCapture, fit_lights};
 pub use sphere::{SphereFit, find_sphere};
+pub use sphere_check::{SphereCheck, check_sphere};
 
 use crate::demod::Decoded;
 use crate::photometric::led_noise_gains;
@@ -27,6 +32,12 @@ pub enum CalibrateError {
     /// No sphere of the given size was found in a capture.
     #[error("no sphere found: {0}")]
     NoSphere(String),
+    /// A photo does not show the whole calibration board.
+    #[error("{0}")]
+    NoBoard(String),
+    /// The fitted model does not explain the data.
+    #[error("calibration refused: {0}")]
+    NoFit(String),
     /// An LED lights too little of the sphere in every capture.
     #[error(
         "LED {led} lights only {lit} of the sphere's pixels in all captures: is it on and \
