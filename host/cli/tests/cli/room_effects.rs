@@ -202,6 +202,11 @@ fn a_steady_room_finds_no_flicker_and_no_drift() {
         "{:?}",
         decoded.report.room
     );
+    assert!(
+        decoded.report.room.timing_breaks.is_empty(),
+        "{:?}",
+        decoded.report.room
+    );
 }
 
 #[test]
@@ -353,23 +358,63 @@ fn a_dropped_or_repeated_frame_is_found_and_the_capture_re_aligned() {
 }
 
 #[test]
-#[ignore = "known silent failures: a frame dropped 13 frames from the start, or repeated 28 \
-            from the end, is fitted by one timing at the noise level (LEDs 3 and 4 7 % and 9 % \
-            low; LED 2 3.3 % low), so no break is looked for"]
 fn a_frame_dropped_or_repeated_near_an_end_is_found_or_refused() {
-    for (dropped, duplicated, seed) in [(vec![13], vec![], 12), (vec![], vec![100], 13)] {
-        let room = RoomEffects {
-            dropped,
-            duplicated,
-            ..RoomEffects::default()
+    // A break a few frames from an end barely moves one timing fitted to the whole window
+    // (a drop 13 frames from the start was decoded with LEDs 3 and 4 7 % and 9 % low): each
+    // position near both ends, dropped or repeated, is decoded within 1 % or refused naming
+    // the frame timing.
+    let cases = [
+        (3, BreakKind::Dropped),
+        (8, BreakKind::Dropped),
+        (13, BreakKind::Dropped),
+        (22, BreakKind::Dropped),
+        (109, BreakKind::Dropped),
+        (121, BreakKind::Dropped),
+        (125, BreakKind::Dropped),
+        (5, BreakKind::Repeated),
+        (17, BreakKind::Repeated),
+        (100, BreakKind::Repeated),
+        (115, BreakKind::Repeated),
+        (124, BreakKind::Repeated),
+    ];
+    for (i, (at, kind)) in cases.into_iter().enumerate() {
+        let room = match kind {
+            BreakKind::Dropped => RoomEffects {
+                dropped: vec![at],
+                ..RoomEffects::default()
+            },
+            BreakKind::Repeated => RoomEffects {
+                duplicated: vec![at],
+                ..RoomEffects::default()
+            },
         };
+        let seed = 12 + i as u64;
         let capture = capture(room.clone(), seed);
-        if let Ok(decoded) = decode_capture(&capture) {
-            let gains = gains(&capture, &decoded);
-            assert!(
-                gains.iter().all(|g| (g - 1.0).abs() < 0.01),
-                "{room:?}: decoded with gains {gains:.4?}"
-            );
+        match decode_capture(&capture) {
+            Ok(decoded) => {
+                let gains = gains(&capture, &decoded);
+                eprintln!(
+                    "{room:?} seed {seed}: gains {gains:.4?}, breaks {:?}",
+                    decoded.report.room.timing_breaks
+                );
+                assert!(
+                    gains.iter().all(|g| (g - 1.0).abs() < 0.01),
+                    "{room:?} seed {seed}: decoded with gains {gains:.4?}, breaks {:?}",
+                    decoded.report.room.timing_breaks
+                );
+                // A repeated frame's copy follows it.
+                let frame = at + usize::from(kind == BreakKind::Repeated);
+                assert_eq!(
+                    decoded.report.room.timing_breaks,
+                    vec![TimingBreak { frame, kind }],
+                    "{room:?} seed {seed}"
+                );
+            }
+            Err(e) => {
+                let text = e.to_string();
+                eprintln!("{room:?} seed {seed}: refused: {text}");
+                assert!(text.contains("frame timing"), "{text}");
+            }
         }
     }
 }

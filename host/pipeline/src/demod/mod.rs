@@ -121,10 +121,6 @@ const MEDIAN_SAMPLE: usize = 1 << 16;
 const HIDING_CLIPPED_SHARE: f64 = 0.1;
 /// An LED counts as present when its mean on-level exceeds this fraction of the strongest's.
 const SIGNIFICANT_FRACTION: f64 = 0.03;
-/// The fit's unexplained energy per frame over the window's first or last frames above this
-/// multiple of the median frame's sends the window to the timing-break search
-/// ([`WindowDecoder::uneven_residual`]).
-const UNEVEN_RESIDUAL: f64 = 4.0;
 /// Largest phase change, chips, of the rolling-shutter ramp inside one row band.
 const BAND_PHASE_STEP: f64 = 0.004;
 
@@ -263,9 +259,7 @@ fn add_window(
 ) -> Result<bool, DemodError> {
     let prepared = prepare_window(decoder, frames, config, state);
     let refused = match &prepared {
-        Ok(Prepared::Window {
-            decoded, uneven, ..
-        }) => !decoded.verdict.is_plausible() || *uneven,
+        Ok(Prepared::Window { decoded, .. }) => !decoded.verdict.is_plausible(),
         Err(DemodError::LedCountMismatch { .. } | DemodError::Implausible { .. }) => true,
         _ => false,
     };
@@ -273,9 +267,18 @@ fn add_window(
         LedCount::Fixed(n) => Some(n),
         LedCount::Auto => None,
     });
-    if refused
-        && let Some(leds) = leds
-        && let Some(found) = decoder.find_break(frames, leds)
+    // Every window long enough for two carrier periods is searched, not only a refused one: a
+    // frame dropped or repeated a few frames from an end is absorbed by a plausible but wrong
+    // timing (a rate ratio and exposure off), leaving no misfit the verdict can see.
+    let found = leds.and_then(|leds| match &prepared {
+        _ if refused => decoder.find_break(frames, leds, None),
+        Ok(Prepared::Window { decoded, .. }) if frames.len() >= 1 << (leds + 2) => {
+            decoder.find_break(frames, leds, Some(&decoded.fit.model))
+        }
+        _ => None,
+    });
+    if let Some(leds) = leds
+        && let Some(found) = found
     {
         let offset = state.offset;
         let need = 1usize << (leds + 1);
@@ -290,7 +293,11 @@ fn add_window(
                     .cloned()
                     .collect();
                 let keep = whole(joined.len());
-                vec![joined[..keep].to_vec()]
+                if found.frame < joined.len() / 2 {
+                    vec![joined[joined.len() - keep..].to_vec()]
+                } else {
+                    vec![joined[..keep].to_vec()]
+                }
             }
             timing_break::BreakKind::Dropped => {
                 let (before, after) = frames.split_at(found.frame);
@@ -381,9 +388,6 @@ enum Prepared {
         counted: Option<(usize, Option<usize>)>,
         /// The room's nuisance components found and projected out.
         found: Option<nuisance::Nuisance>,
-        /// The fit leaves frames at the window's start or end far less explained than the
-        /// rest ([`WindowDecoder::uneven_residual`]): a timing break is looked for.
-        uneven: bool,
     },
 }
 
@@ -458,12 +462,10 @@ fn prepare_window(
         decoded = decoder.decode(frames, &projected, leds, None);
         sample = projected;
     }
-    let uneven = decoder.uneven_residual(&sample, &decoded.fit);
     Ok(Prepared::Window {
         decoded: Box::new(decoded),
         counted,
         found: sample.found,
-        uneven,
     })
 }
 
@@ -819,42 +821,15 @@ impl WindowDecoder {
         })
     }
 
-    /// Whether `fit` leaves the frames before or after some frame of the window far less
-    /// explained than the rest: the mean unexplained energy per frame of the sample over the
-    /// first or last k frames (2 ≤ k ≤ F/2) above [`UNEVEN_RESIDUAL`] times the median frame's
-    /// (the noise's share where the timing fits; the window's noise estimate cannot serve, as
-    /// a break spreads signal into the directions it is taken from), the sign of a timing break the quality check may miss when it lies
-    /// near the window's start or end (a few frames out of step barely move the fit).
-    fn uneven_residual(&self, window: &WindowSample, fit: &TimingFit) -> bool {
-        let sample = &window.sample;
-        let f = sample.frames();
-        let leds = fit.model.shifts.len();
-        if sample.is_empty() || f < 8 || leds == 0 {
-            return false;
-        }
-        let waves = ReceivedWaveform::set(leds, sample.nuisance());
-        let rows = sample.rows();
-        let row = (rows[0] + rows[rows.len() - 1]) as f64 / 2.0;
-        let columns = fit.model.columns(&waves, row, f);
-        let design = DMatrix::from_fn(f, columns.len(), |j, c| columns[c][j]);
-        let q = design.qr().q();
-        let keep = DMatrix::identity(f, f) - &q * q.transpose();
-        let residual = &keep * &window.gram * &keep;
-        let diagonal: Vec<f64> = (0..f).map(|j| residual[(j, j)]).collect();
-        // The typical frame's unexplained energy: most frames are on the fitted timing.
-        let mut sorted = diagonal.clone();
-        sorted.sort_by(f64::total_cmp);
-        let per_frame = sorted[f / 2].max(f64::MIN_POSITIVE);
-        let mean = |part: &[f64]| part.iter().sum::<f64>() / part.len() as f64;
-        (2..=f / 2).any(|k| {
-            mean(&diagonal[..k]).max(mean(&diagonal[f - k..])) > UNEVEN_RESIDUAL * per_frame
-        })
-    }
-
     /// A frame dropped or repeated inside the window of `frames` (cropped to the region) of
-    /// `leds` LEDs ([`timing_break`]), found with the timing of each half of the window; `None`
-    /// when the halves are too short for a fit or no break explains the window.
-    pub fn find_break(&self, frames: &[Samples], leds: usize) -> Option<timing_break::TimingBreak> {
+    /// `leds` LEDs ([`timing_break`]), found with the timing fitted to each half of the window;
+    /// `None` when the halves are too short for a fit or no break explains the window.
+    pub fn find_break(
+        &self,
+        frames: &[Samples],
+        leds: usize,
+        single: Option<&fit::TimingModel>,
+    ) -> Option<timing_break::TimingBreak> {
         let f = frames.len();
         let half = f / 2;
         if leds == 0 || leds > MAX_LEDS || half < 1 << (leds + 1) {
@@ -921,7 +896,7 @@ impl WindowDecoder {
                 before: *before,
             })
             .collect();
-        timing_break::find(&bands, &halves, &waves, f, noise)
+        timing_break::find(&bands, &halves, single, &waves, f, noise)
     }
 
     /// The pixel sample without nuisance components.
