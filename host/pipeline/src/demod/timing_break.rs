@@ -23,7 +23,9 @@
 //! position being its one extra parameter). A break a few frames from an end is absorbed by a
 //! whole-window timing with its rate ratio and exposure off: a drop 3 frames from the start of
 //! a 128-frame window left 4.3 σ²_G more with that timing than with the break, and its gains
-//! were up to 8.5 % off. A refused window has no timing to compete with.
+//! were up to 8.5 % off. A refused window has no timing to compete with: there the break
+//! must leave at most 1/[`GAIN_OVER_UNBROKEN`] of what the same half's model leaves without
+//! a break.
 
 use super::fit::TimingModel;
 use super::waveform::ReceivedWaveform;
@@ -32,7 +34,10 @@ use serde::{Deserialize, Serialize};
 
 /// The best break leaves at most this multiple of the noise energy unexplained.
 pub const EXPLAINED_NOISE: f64 = 1.5;
-/// … and, in a window one timing decoded, this many noise variances σ²_G less than that
+/// … and, in a refused window, at most 1/this of what the same model leaves without a break
+/// (the halves' noise counts an LED the count leaves out, so the noise test alone passes);
+pub const GAIN_OVER_UNBROKEN: f64 = 4.0;
+/// … or, in a window one timing decoded, this many noise variances σ²_G less than that
 /// timing. Over the 124 break-free windows of the decode sweep and the steady room the best
 /// break left at most 0.06 σ²_G less; drops 3–109 frames into a 128-frame window left
 /// 4.3–290 σ²_G less.
@@ -112,7 +117,7 @@ pub fn find(
         return None;
     }
     let trace: f64 = bands.iter().map(|b| b.gram.trace()).sum();
-    let mut best: Option<(f64, TimingBreak)> = None;
+    let mut best: Option<(f64, f64, TimingBreak)> = None;
     for half in halves {
         // Templates over frames −1 … F (index + 1), on the window's clock.
         let columns: Vec<Vec<Vec<f64>>> = bands
@@ -136,6 +141,7 @@ pub fn find(
                 .sum();
             trace - explained
         };
+        let unbroken = residual(&|j| j + 1);
         for kind in [BreakKind::Dropped, BreakKind::Repeated] {
             for k in 1..f {
                 let candidate = TimingBreak { frame: k, kind };
@@ -150,13 +156,13 @@ pub fn find(
                     t.clamp(0, f as i64 + 1) as usize
                 };
                 let r = residual(&at);
-                if best.as_ref().is_none_or(|(b, _)| r < *b) {
-                    best = Some((r, candidate));
+                if best.as_ref().is_none_or(|(b, _, _)| r < *b) {
+                    best = Some((r, unbroken, candidate));
                 }
             }
         }
     }
-    let (r, found) = best?;
+    let (r, unbroken, found) = best?;
     let expected = (f.saturating_sub(1 + leds)).max(1) as f64 * noise;
     // What the whole window's timing leaves (its templates over frames 0 … F − 1).
     let whole = single.filter(|m| m.shifts.len() == leds).map(|model| {
@@ -170,7 +176,10 @@ pub fn find(
             })
             .sum::<f64>()
     });
-    let beats = whole.is_none_or(|w| w - r >= BREAK_SIGNIFICANCE * noise);
+    let beats = match whole {
+        Some(w) => w - r >= BREAK_SIGNIFICANCE * noise,
+        None => r * GAIN_OVER_UNBROKEN <= unbroken,
+    };
     (r <= EXPLAINED_NOISE * expected && beats).then_some(found)
 }
 
