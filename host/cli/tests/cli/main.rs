@@ -22,6 +22,7 @@ mod reconstruct_targets;
 mod reference_data;
 mod report_page;
 mod rig_calibration;
+mod room_effects;
 mod simulate_cli;
 mod sphere_rig_check;
 mod tof_calibration;

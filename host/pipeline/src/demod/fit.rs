@@ -315,7 +315,7 @@ pub fn fit_timing(
     limits: &FitLimits,
 ) -> TimingFit {
     let frames = sample.frames();
-    let waves: Vec<ReceivedWaveform> = (0..leds).map(ReceivedWaveform::new).collect();
+    let waves = ReceivedWaveform::set(leds, sample.nuisance());
     let pixel_noise = space.noise / sample.len().max(1) as f64;
     let fitter = Fitter {
         waves: &waves,
@@ -360,7 +360,7 @@ pub fn refit_timing(
     previous: &TimingFit,
 ) -> TimingFit {
     let frames = sample.frames();
-    let waves: Vec<ReceivedWaveform> = (0..leds).map(ReceivedWaveform::new).collect();
+    let waves = ReceivedWaveform::set(leds, sample.nuisance());
     let pixel_noise = space.noise / sample.len().max(1) as f64;
     let fitter = Fitter {
         waves: &waves,

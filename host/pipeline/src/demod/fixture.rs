@@ -39,6 +39,7 @@ pub(crate) fn decoded(levels: Array2<f32>, noise: Array2<f32>) -> Decoded {
             clipping: None,
             per_led: vec![],
             verdict: Default::default(),
+            room: Default::default(),
         },
     }
 }

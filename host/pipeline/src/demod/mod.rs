@@ -66,6 +66,7 @@ pub mod fit;
 pub(crate) mod fixture;
 mod levenberg;
 mod matched;
+pub mod nuisance;
 pub mod output;
 pub mod quality;
 mod report;
@@ -79,6 +80,7 @@ mod template;
 #[cfg(test)]
 mod tests;
 pub mod thesis;
+pub mod timing_break;
 pub mod waveform;
 mod window;
 
@@ -246,21 +248,192 @@ pub fn decode_frames(
 
 /// Adds one window of `frames` (cropped to the decoder's region) to `state`: `Ok(false)` when
 /// it holds too few frames for one carrier period after an earlier window (the stream's end),
-/// an error when it is the first.
+/// an error when it is the first. A window refused because the camera dropped or repeated a
+/// frame in it ([`timing_break`]) is re-aligned: decoded without the repeated frame, or as the
+/// pieces either side of the dropped one that hold a carrier period each.
 fn add_window(
     decoder: &WindowDecoder,
     frames: &[Samples],
     config: &DecodeConfig,
     state: &mut Accumulated,
 ) -> Result<bool, DemodError> {
+    let prepared = prepare_window(decoder, frames, config, state);
+    let refused = match &prepared {
+        Ok(Prepared::Window { decoded, .. }) => !decoded.verdict.is_plausible(),
+        Err(DemodError::LedCountMismatch { .. } | DemodError::Implausible { .. }) => true,
+        _ => false,
+    };
+    let leds = state.leds.or(match config.leds {
+        LedCount::Fixed(n) => Some(n),
+        LedCount::Auto => None,
+    });
+    // Every window long enough for two carrier periods is searched, not only a refused one: a
+    // frame dropped or repeated a few frames from an end is absorbed by a plausible but wrong
+    // timing (a rate ratio and exposure off), leaving no misfit the verdict can see.
+    let found = leds.and_then(|leds| match &prepared {
+        _ if refused => decoder.find_break(frames, leds, None),
+        Ok(Prepared::Window { decoded, .. }) if frames.len() >= 1 << (leds + 2) => {
+            decoder.find_break(frames, leds, Some(&decoded.fit.model))
+        }
+        _ => None,
+    });
+    if let Some(leds) = leds
+        && let Some(found) = found
+    {
+        let offset = state.offset;
+        let need = 1usize << (leds + 1);
+        // Each piece is cut to whole carrier periods, as the window plan cuts windows, keeping
+        // the frames farthest from the break.
+        let whole = |n: usize| n - n % need;
+        let pieces: Vec<Vec<Samples>> = match found.kind {
+            timing_break::BreakKind::Repeated => {
+                let joined: Vec<Samples> = frames[..found.frame]
+                    .iter()
+                    .chain(&frames[found.frame + 1..])
+                    .cloned()
+                    .collect();
+                let keep = whole(joined.len());
+                if found.frame < joined.len() / 2 {
+                    vec![joined[joined.len() - keep..].to_vec()]
+                } else {
+                    vec![joined[..keep].to_vec()]
+                }
+            }
+            timing_break::BreakKind::Dropped => {
+                let (before, after) = frames.split_at(found.frame);
+                vec![
+                    before[..whole(before.len())].to_vec(),
+                    after[after.len() - whole(after.len())..].to_vec(),
+                ]
+            }
+        };
+        let mut added = 0;
+        for piece in pieces.iter().filter(|p| !p.is_empty()) {
+            if let Ok(Prepared::Window {
+                decoded,
+                counted,
+                found,
+                ..
+            }) = prepare_window(decoder, piece, config, state)
+                && decoded.verdict.is_plausible()
+            {
+                state.commit(*decoded, counted, found.as_ref());
+                added += piece.len();
+            }
+        }
+        let at = timing_break::TimingBreak {
+            frame: offset + found.frame,
+            ..found
+        };
+        if added > 0 {
+            state.offset = offset + frames.len();
+            state.room.timing_breaks.push(at);
+            return Ok(true);
+        }
+        let problem = format!(
+            "the camera's frame timing breaks in the capture ({}): every carrier's phase jumps \
+             at once there, and the frames either side could not be decoded on their own",
+            at.describe()
+        );
+        let advice = format!(
+            "record again with the camera's frame rate fixed (no dropped or repeated frames; on \
+             a phone, a shorter clip or a lower resolution), or decode a range of at least \
+             {need} frames clear of the break (--start, --frames)"
+        );
+        match prepared {
+            Ok(Prepared::Window {
+                mut decoded,
+                counted,
+                found,
+                ..
+            }) => {
+                decoded.verdict.problems.insert(0, problem);
+                decoded.verdict.advice.insert(0, advice);
+                state.offset += frames.len();
+                state.commit(*decoded, counted, found.as_ref());
+                return Ok(true);
+            }
+            _ => {
+                return Err(DemodError::Implausible {
+                    problems: problem,
+                    advice,
+                });
+            }
+        }
+    }
+    state.offset += frames.len();
+    match prepared? {
+        Prepared::Short => Ok(false),
+        Prepared::Window {
+            decoded,
+            counted,
+            found,
+            ..
+        } => {
+            state.commit(*decoded, counted, found.as_ref());
+            Ok(true)
+        }
+    }
+}
+
+/// A window prepared by [`prepare_window`].
+enum Prepared {
+    /// Too few frames for one carrier period after an earlier window (the stream's end).
+    Short,
+    /// The window decoded.
+    Window {
+        /// The decode.
+        decoded: Box<WindowDecode>,
+        /// The LED count and the modulated LEDs seen, when this window's check set them.
+        counted: Option<(usize, Option<usize>)>,
+        /// The room's nuisance components found and projected out.
+        found: Option<nuisance::Nuisance>,
+    },
+}
+
+/// Decodes one window of `frames` as [`add_window`] adds it, without adding it to `state`.
+fn prepare_window(
+    decoder: &WindowDecoder,
+    frames: &[Samples],
+    config: &DecodeConfig,
+    state: &Accumulated,
+) -> Result<Prepared, DemodError> {
     let got = frames.len();
-    let sample = decoder.sample(frames);
+    let mut sample = decoder.sample(frames);
+    // Whether the room's components were looked for in a fit of this window.
+    let mut looked = false;
+    let mut counted = None;
     let (leds, seed) = match state.leds {
         Some(n) => (n, None),
         None => {
-            let count = decoder.count_leds(&sample, config.leds, config.check_led_count)?;
-            state.leds = Some(count.leds);
-            state.detected = count.detected;
+            let checked = decoder.count_leds(&sample, config.leds, config.check_led_count);
+            let count = match &checked {
+                // The check's fit shows what the carriers leave; an unchecked count is
+                // looked at after the decode's fit.
+                Ok(LedCountCheck { fit: None, .. }) => checked?,
+                Ok(LedCountCheck { fit: Some(fit), .. }) => {
+                    looked = true;
+                    match decoder.with_nuisance(
+                        &sample,
+                        Some(&fit.timing),
+                        fit.timing.model.shifts.len(),
+                    ) {
+                        Some(projected) => {
+                            sample = projected;
+                            decoder.count_leds(&sample, config.leds, config.check_led_count)?
+                        }
+                        None => checked?,
+                    }
+                }
+                Err(_) => match decoder.with_nuisance(&sample, None, decoder.nuisance_leds) {
+                    Some(projected) => {
+                        sample = projected;
+                        decoder.count_leds(&sample, config.leds, config.check_led_count)?
+                    }
+                    None => checked?,
+                },
+            };
+            counted = Some((count.leds, count.detected));
             (count.leds, count.fit)
         }
     };
@@ -279,10 +452,21 @@ fn add_window(
                 leds,
             });
         }
-        return Ok(false);
+        return Ok(Prepared::Short);
     }
-    state.add(decoder.decode(frames, &sample, leds, seed.as_ref()));
-    Ok(true)
+    let mut decoded = decoder.decode(frames, &sample, leds, seed.as_ref());
+    if !looked
+        && sample.found.is_none()
+        && let Some(projected) = decoder.with_nuisance(&sample, Some(&decoded.fit), leds)
+    {
+        decoded = decoder.decode(frames, &projected, leds, None);
+        sample = projected;
+    }
+    Ok(Prepared::Window {
+        decoded: Box::new(decoded),
+        counted,
+        found: sample.found,
+    })
 }
 
 /// The stream's format with the configured frame-rate override.
@@ -427,6 +611,15 @@ pub struct WindowSample {
     sample: PixelSample,
     gram: DMatrix<f64>,
     spectrum: Spectrum,
+    /// The room's nuisance components found in the window (`None`: not looked for).
+    found: Option<nuisance::Nuisance>,
+}
+
+impl WindowSample {
+    /// The room's nuisance components found in the window, when they were looked for.
+    pub fn nuisance(&self) -> Option<&nuisance::Nuisance> {
+        self.found.as_ref()
+    }
 }
 
 /// The outcome of the LED-count check.
@@ -481,6 +674,12 @@ pub struct WindowDecoder {
     estimator: Estimator,
     /// Most LEDs a window's signal space is analysed for (the count check's probe).
     spectrum_leds: usize,
+    /// LEDs whose carriers are set aside when looking for room nuisances.
+    nuisance_leds: usize,
+    /// Camera frame rate (places the mains flicker in the window).
+    fps: f64,
+    /// Largest rate mismatch searched, and a given rate ratio.
+    rate: (f64, Option<f64>),
 }
 
 impl WindowDecoder {
@@ -505,7 +704,44 @@ impl WindowDecoder {
                 LedCount::Fixed(n) => n,
                 LedCount::Auto => AUTO_MAX_LEDS,
             },
+            nuisance_leds: match config.leds {
+                LedCount::Fixed(n) => n,
+                LedCount::Auto => AUTO_MAX_LEDS,
+            },
+            fps: format.fps,
+            rate: (config.max_rate_mismatch, config.rate_ratio),
         })
+    }
+
+    /// What to try when room-light flicker on 50 or 60 Hz mains falls on a carrier line of
+    /// `leds` LEDs at rate ratio `rate` (where the decoder cannot tell it from the carrier,
+    /// [`meb_core::mains`]); `None` when it falls clear of them.
+    fn mains_advice(&self, leds: usize, rate: f64) -> Option<String> {
+        let chip_rate = rate * self.fps;
+        let window = MAX_WINDOW_FRAMES.min(1 << (leds + 3));
+        let clashes = meb_core::mains::clashes(leds as u8, chip_rate, self.fps, window);
+        let first = clashes.first()?;
+        let clear = meb_core::mains::clear_chip_rates(leds as u8, self.fps, window, self.rate.0, 3);
+        let rates = if clear.is_empty() {
+            "a camera frame rate that `meb carriers` shows clear".to_string()
+        } else {
+            clear
+                .iter()
+                .map(|r| format!("a chip rate of {r:.1} Hz"))
+                .collect::<Vec<_>>()
+                .join(" or ")
+        };
+        Some(format!(
+            "if a room light on the mains is on: its flicker at {:.0} Hz ({} Hz mains) falls on \
+             LED {}'s carrier line at this chip rate ({chip_rate:.1} Hz, camera {} fps), where it \
+             cannot be told from the carrier; switch it off, or use {rates} (`meb carriers \
+             --rate {chip_rate:.1} --fps {}`)",
+            first.family_hz * first.harmonic as f64,
+            first.family_hz / 2.0,
+            first.led,
+            self.fps,
+            self.fps
+        ))
     }
 
     /// The decoded region.
@@ -513,8 +749,158 @@ impl WindowDecoder {
         self.roi
     }
 
-    /// Picks the pixel sample of a window of frames cropped to the region.
+    /// Picks the pixel sample of a window of frames cropped to the region (no nuisance
+    /// component projected out: [`WindowDecoder::with_nuisance`]).
     pub fn sample(&self, frames: &[Samples]) -> WindowSample {
+        self.raw_sample(frames)
+    }
+
+    /// The room's nuisance components ([`nuisance`]) in `raw`, a sample with none projected
+    /// out, and the sample with them projected out; `None` when none is found. They are
+    /// looked for in what `fit` leaves unexplained (its templates and the carriers' strongest
+    /// lines removed) or, without a fit (the LED-count check refused the window), beside the
+    /// carriers' lines at the rate the seeds' scan finds for `leds` LEDs.
+    pub fn with_nuisance(
+        &self,
+        raw: &WindowSample,
+        fit: Option<&TimingFit>,
+        leds: usize,
+    ) -> Option<WindowSample> {
+        let frames = raw.sample.frames();
+        if raw.sample.is_empty() || raw.found.is_some() || frames < 1 << (leds.min(2) + 1) {
+            return None;
+        }
+        let (rate, leds, fitted) = match fit {
+            Some(fit) => {
+                let leds = fit.model.shifts.len();
+                let waves = ReceivedWaveform::set(leds, None);
+                let rows = raw.sample.rows();
+                let rows: Vec<f64> = match (fit.rolling, rows.first(), rows.last()) {
+                    (true, Some(&top), Some(&bottom)) => {
+                        vec![top as f64, (top + bottom) as f64 / 2.0, bottom as f64]
+                    }
+                    _ => vec![0.0],
+                };
+                let fitted = rows
+                    .iter()
+                    .flat_map(|&row| fit.model.columns(&waves, row, frames).split_off(1))
+                    .collect();
+                (fit.model.timing.rate_ratio, leds, fitted)
+            }
+            None => {
+                let rate = self.rate.1.unwrap_or_else(|| {
+                    let space = SignalSpace::from_spectrum(&raw.spectrum, &raw.gram, leds);
+                    let waves = ReceivedWaveform::set(leds, None);
+                    seed::scan_rate_of(&space, &waves, frames, self.rate.0)
+                });
+                (rate, leds, Vec::new())
+            }
+        };
+        let noise = SignalSpace::from_spectrum(&raw.spectrum, &raw.gram, self.spectrum_leds).noise;
+        let window = nuisance::Window {
+            values: raw.sample.values(),
+            means: raw.sample.means(),
+            gram: &raw.gram,
+            frames,
+            noise,
+        };
+        let found = nuisance::detect(&window, self.fps, rate, leds, &fitted);
+        if found.is_empty() {
+            return None;
+        }
+        let found = std::sync::Arc::new(found);
+        let mut sample = raw.sample.clone();
+        let gram = found.project_gram(&raw.gram);
+        sample.project(std::sync::Arc::clone(&found));
+        let spectrum = Spectrum::projected(&gram, self.spectrum_leds, found.columns());
+        Some(WindowSample {
+            sample,
+            gram,
+            spectrum,
+            found: Some((*found).clone()),
+        })
+    }
+
+    /// A frame dropped or repeated inside the window of `frames` (cropped to the region) of
+    /// `leds` LEDs ([`timing_break`]), found with the timing fitted to each half of the window;
+    /// `None` when the halves are too short for a fit or no break explains the window.
+    pub fn find_break(
+        &self,
+        frames: &[Samples],
+        leds: usize,
+        single: Option<&fit::TimingModel>,
+    ) -> Option<timing_break::TimingBreak> {
+        let f = frames.len();
+        let half = f / 2;
+        if leds == 0 || leds > MAX_LEDS || half < 1 << (leds + 1) {
+            return None;
+        }
+        let whole = self.raw_sample(frames);
+        if whole.sample.is_empty() {
+            return None;
+        }
+        let waves = ReceivedWaveform::set(leds, None);
+        let fits: Vec<(TimingFit, usize, bool)> = [(0, half, true), (half, f, false)]
+            .into_par_iter()
+            .filter_map(|(start, end, before)| {
+                let part = self.raw_sample(&frames[start..end]);
+                if part.sample.is_empty() {
+                    return None;
+                }
+                let space = SignalSpace::from_spectrum(&part.spectrum, &part.gram, leds);
+                let fit = fit_timing(
+                    &part.sample,
+                    &space,
+                    leds,
+                    self.roi.height,
+                    &self.fit_limits,
+                );
+                Some((fit, start, before))
+            })
+            .collect();
+        let pixels = whole.sample.len();
+        // σ²_G of the whole sample from the halves' fits (the window's own spectrum counts the
+        // signal a break spreads beyond the leading directions as noise).
+        let noise = fits
+            .iter()
+            .map(|(fit, _, _)| fit.pixel_noise)
+            .fold(f64::INFINITY, f64::min)
+            * pixels as f64;
+        if !noise.is_finite() {
+            return None;
+        }
+        let rows = whole.sample.rows();
+        let values = whole.sample.values();
+        let count = if fits.iter().any(|(fit, _, _)| fit.rolling) {
+            3
+        } else {
+            1
+        };
+        let bands: Vec<timing_break::Band> = (0..count)
+            .map(|b| (b * pixels / count, (b + 1) * pixels / count))
+            .filter(|(a, z)| z > a)
+            .map(|(a, z)| {
+                let m = DMatrix::from_row_slice(z - a, f, &values[a * f..z * f]);
+                let row = rows[a..z].iter().map(|&r| r as f64).sum::<f64>() / (z - a) as f64;
+                timing_break::Band {
+                    gram: m.tr_mul(&m),
+                    row,
+                }
+            })
+            .collect();
+        let halves: Vec<timing_break::HalfFit<'_>> = fits
+            .iter()
+            .map(|(fit, start, before)| timing_break::HalfFit {
+                model: &fit.model,
+                start: *start,
+                before: *before,
+            })
+            .collect();
+        timing_break::find(&bands, &halves, single, &waves, f, noise)
+    }
+
+    /// The pixel sample without nuisance components.
+    fn raw_sample(&self, frames: &[Samples]) -> WindowSample {
         let grid = RowGrid::new(
             self.frame_pixels,
             self.roi.y,
@@ -534,6 +920,7 @@ impl WindowDecoder {
             sample,
             gram,
             spectrum,
+            found: None,
         }
     }
 
@@ -571,7 +958,7 @@ impl WindowDecoder {
         if window.sample.is_empty() {
             return Err(DemodError::NothingToDecode("saturated"));
         }
-        let waves: Vec<ReceivedWaveform> = (0..probe).map(ReceivedWaveform::new).collect();
+        let waves = ReceivedWaveform::set(probe, window.sample.nuisance());
         let space = SignalSpace::from_spectrum(&window.spectrum, &window.gram, probe);
         let fit = fit_timing(
             &window.sample,
@@ -616,6 +1003,25 @@ impl WindowDecoder {
                                 / sample.examined().max(1) as f64,
                         });
                     }
+                    if detected > n
+                        && let Some(found) = window.sample.nuisance()
+                        && let Some(cause) = found.describe()
+                    {
+                        // The room's components were found and projected out, and the window
+                        // still shows more: name what was found rather than advise more LEDs.
+                        return Err(DemodError::Implausible {
+                            problems: format!(
+                                "{n} LEDs requested and the video shows {detected} modulated \
+                                 components after the room's {cause} was projected out"
+                            ),
+                            advice: format!(
+                                "switch the room light off or run it from a steady supply, and \
+                                 lock the camera's exposure; or use a chip rate `meb carriers \
+                                 --fps {}` lists clear of the flicker",
+                                self.fps
+                            ),
+                        });
+                    }
                     return Err(DemodError::LedCountMismatch {
                         requested: n,
                         detected,
@@ -646,7 +1052,7 @@ impl WindowDecoder {
     ) -> WindowDecode {
         let count = frames.len();
         let height = self.roi.height;
-        let waves: Vec<ReceivedWaveform> = (0..leds).map(ReceivedWaveform::new).collect();
+        let waves = ReceivedWaveform::set(leds, window.sample.nuisance());
         let space = SignalSpace::from_spectrum(&window.spectrum, &window.gram, leds);
         let (fit, quality) = match seed {
             Some(same) if same.timing.model.shifts.len() == leds => {
@@ -668,7 +1074,21 @@ impl WindowDecoder {
                 (fit, quality)
             }
         };
-        let verdict = quality::judge(&quality.leds, &fit);
+        let mut verdict = quality::judge(&quality.leds, &fit);
+        if !verdict.is_plausible() {
+            if let Some(cause) = window.sample.nuisance().and_then(|n| n.describe()) {
+                verdict.advice.insert(
+                    0,
+                    format!(
+                        "the window holds the room's {cause}, projected out: switch the room \
+                         light off or run it from a steady supply, and lock the camera's exposure"
+                    ),
+                );
+            }
+            if let Some(advice) = self.mains_advice(leds, fit.model.timing.rate_ratio) {
+                verdict.advice.push(advice);
+            }
+        }
         let bands = if fit.rolling {
             let ramp = fit.model.ramp_chips(height).abs();
             ((ramp / BAND_PHASE_STEP).ceil() as usize).clamp(1, height)
@@ -730,9 +1150,31 @@ struct Accumulated {
     /// The verdict over the windows so far.
     verdict: Option<Verdict>,
     variance_factors: Vec<f64>,
+    /// The room's nuisance components and timing breaks found so far.
+    room: nuisance::RoomReport,
+    /// Frames of the stream's windows seen so far (decoded or not).
+    offset: usize,
 }
 
 impl Accumulated {
+    /// Adds one decoded window with the LED count its check set and the room's components
+    /// found in it.
+    fn commit(
+        &mut self,
+        window: WindowDecode,
+        counted: Option<(usize, Option<usize>)>,
+        found: Option<&nuisance::Nuisance>,
+    ) {
+        if let Some((leds, detected)) = counted {
+            self.leds = Some(leds);
+            self.detected = detected;
+        }
+        if let Some(found) = found {
+            self.room.add(found);
+        }
+        self.add(window);
+    }
+
     /// Adds one decoded window.
     fn add(&mut self, window: WindowDecode) {
         let count = window.frames;
@@ -886,6 +1328,7 @@ fn finish(
         verdict: state
             .verdict
             .unwrap_or_else(|| Verdict::from_findings(Vec::new(), Vec::new())),
+        room: state.room,
     };
     Ok(Decoded {
         leds: LedImages { images },

@@ -575,7 +575,7 @@ fn orthonormal_complement(vectors: &[Vec<f64>], against: &[Vec<f64>]) -> Vec<Vec
 
 /// The centred cosine and sine columns of LED `wave`'s [`HARMONICS`] strongest harmonics at
 /// rate ratio `rate` over `frames` frames (not yet orthonormal).
-fn led_subspace(wave: &ReceivedWaveform, rate: f64, frames: usize) -> Vec<Vec<f64>> {
+pub(super) fn led_subspace(wave: &ReceivedWaveform, rate: f64, frames: usize) -> Vec<Vec<f64>> {
     let period = wave.period();
     let chips: Vec<f64> = (0..period).map(|m| wave.chip(m)).collect();
     // |c_m| of the chip-level carrier: |DFT_m| / P · |sinc(m / P)|, m odd (only odd ones
@@ -606,6 +606,7 @@ fn led_subspace(wave: &ReceivedWaveform, rate: f64, frames: usize) -> Vec<Vec<f6
                 .collect();
             let mean = column.iter().sum::<f64>() / frames.max(1) as f64;
             column.iter_mut().for_each(|v| *v -= mean);
+            wave.project(&mut column);
             columns.push(column);
         }
     }

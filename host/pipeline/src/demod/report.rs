@@ -1,6 +1,7 @@
 //! The decode report written as `decode.json`.
 
 use super::config::Estimator;
+use super::nuisance::RoomReport;
 use super::quality::{LedQuality, Verdict};
 use serde::{Deserialize, Serialize};
 
@@ -85,6 +86,9 @@ pub struct DecodeReport {
     /// Whether the decode can be trusted, what looks wrong and what to try.
     #[serde(default)]
     pub verdict: Verdict,
+    /// Room-light flicker and exposure drift found and modelled ([`super::nuisance`]).
+    #[serde(default)]
+    pub room: RoomReport,
 }
 
 impl DecodeReport {

@@ -21,10 +21,12 @@
 //! a denser grid of its own.
 
 use super::matched::CodeLimits;
+use super::nuisance::Nuisance;
 use super::window::CodeMap;
 use meb_core::capture::Samples;
 use nalgebra::DMatrix;
 use rayon::prelude::*;
+use std::sync::Arc;
 
 /// Candidate pixels examined per frame (rows are strided above this).
 pub const CANDIDATE_PIXELS: usize = 1 << 15;
@@ -49,6 +51,10 @@ pub struct PixelSample {
     clipped: usize,
     /// Candidate pixels examined, clipped or not.
     examined: usize,
+    /// Each pixel's mean before centring, fraction of full scale.
+    means: Vec<f64>,
+    /// Nuisance components projected out of the values ([`super::nuisance`]).
+    nuisance: Option<Arc<Nuisance>>,
 }
 
 /// The candidate rows of a region of a frame (module docs).
@@ -119,10 +125,12 @@ impl PixelSample {
         }
         candidates.sort_unstable_by_key(|c| (c.row, c.col));
         let mut values = vec![0.0; candidates.len() * count];
+        let mut means = vec![0.0; candidates.len()];
         values
             .par_chunks_mut(count.max(1))
+            .zip(means.par_iter_mut())
             .zip(&candidates)
-            .for_each(|(out, c)| {
+            .for_each(|((out, pixel_mean), c)| {
                 let at = c.row * width + c.col;
                 for (v, frame) in out.iter_mut().zip(frames) {
                     let code = match frame {
@@ -133,6 +141,7 @@ impl PixelSample {
                 }
                 let mean = out.iter().sum::<f64>() / count.max(1) as f64;
                 out.iter_mut().for_each(|v| *v -= mean);
+                *pixel_mean = mean;
             });
         Self {
             frames: count,
@@ -140,18 +149,23 @@ impl PixelSample {
             rows: candidates.iter().map(|c| c.row).collect(),
             clipped,
             examined,
+            means,
+            nuisance: None,
         }
     }
 
     /// A sample from centred values (pixel-major, `frames` per pixel) and their rows.
     #[cfg(test)]
     pub fn from_values(frames: usize, values: Vec<f64>, rows: Vec<usize>) -> Self {
+        let means = vec![0.0; rows.len()];
         Self {
             frames,
             values,
             rows,
             clipped: 0,
             examined: 0,
+            means,
+            nuisance: None,
         }
     }
 
@@ -208,6 +222,30 @@ impl PixelSample {
             }
         }
         runs
+    }
+
+    /// Each pixel's mean before centring, fraction of full scale.
+    pub fn means(&self) -> &[f64] {
+        &self.means
+    }
+
+    /// The centred values, pixel-major.
+    pub fn values(&self) -> &[f64] {
+        &self.values
+    }
+
+    /// The nuisance components projected out of the values, if any.
+    pub fn nuisance(&self) -> Option<&Arc<Nuisance>> {
+        self.nuisance.as_ref()
+    }
+
+    /// Projects `nuisance` out of every pixel's values ([`super::nuisance`]).
+    pub fn project(&mut self, nuisance: Arc<Nuisance>) {
+        let f = self.frames.max(1);
+        self.values
+            .par_chunks_mut(f)
+            .for_each(|x| nuisance.project(x));
+        self.nuisance = Some(nuisance);
     }
 
     /// The Gram matrix G = Σ_p x_p x_pᵀ (F × F) of the centred pixels.

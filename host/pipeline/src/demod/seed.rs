@@ -426,6 +426,21 @@ fn circular_distance(a: f64, b: f64, period: f64) -> f64 {
 }
 
 /// The rate ratio whose templates at full exposure the signal space holds best.
+/// The rate ratio whose templates the signal space `space` holds best (the seeds' rate scan),
+/// within `max_mismatch` of 1.
+pub fn scan_rate_of(
+    space: &SignalSpace,
+    waves: &[ReceivedWaveform],
+    frames: usize,
+    max_mismatch: f64,
+) -> f64 {
+    scan_rate(
+        &Scorer::new(space.basis(), waves, frames),
+        frames,
+        max_mismatch,
+    )
+}
+
 fn scan_rate(scorer: &Scorer<'_>, frames: usize, max_mismatch: f64) -> f64 {
     let step = RATE_STEP / frames.max(1) as f64;
     let reach = (max_mismatch / step).floor() as i64;

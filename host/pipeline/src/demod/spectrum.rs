@@ -8,7 +8,8 @@
 //! leading eigenpairs are found by randomised subspace iteration (Halko, Martinsson & Tropp,
 //! "Finding structure with randomness", SIAM Review 2011, Alg. 4.4) with a fixed seed, so a
 //! decode is deterministic; σ²_G is the mean of the trailing eigenvalues (the trace minus the
-//! leading ones), which only noise reaches.
+//! leading ones), which only noise reaches, over the directions left after the constant and
+//! any nuisance components projected out of the sample (\[`super::nuisance`\]).
 
 use nalgebra::{DMatrix, SymmetricEigen};
 use rand::SeedableRng;
@@ -34,12 +35,21 @@ pub struct Spectrum {
     trace: f64,
     /// F.
     frames: usize,
+    /// Directions projected out of the sample before G was formed (the room's nuisance
+    /// components, [`super::nuisance`]): they hold neither signal nor noise.
+    removed: usize,
 }
 
 impl Spectrum {
     /// Enough leading eigenpairs of the F × F Gram matrix of a centred sample for up to
     /// `leds` LEDs.
     pub fn new(gram: &DMatrix<f64>, leds: usize) -> Self {
+        Self::projected(gram, leds, 0)
+    }
+
+    /// [`Spectrum::new`] of a sample with `removed` directions projected out (beyond the
+    /// constant): σ²_G is then the trailing energy over the directions left.
+    pub fn projected(gram: &DMatrix<f64>, leds: usize, removed: usize) -> Self {
         let frames = gram.nrows();
         let (values, vectors) = leading_eigenpairs(gram, leading_count(frames, leds));
         Self {
@@ -47,6 +57,7 @@ impl Spectrum {
             values,
             trace: gram.trace(),
             frames,
+            removed,
         }
     }
 
@@ -91,7 +102,7 @@ impl SignalSpace {
         if spectrum.serves(leds) {
             Self::cut(spectrum, leds)
         } else {
-            Self::new(gram, leds)
+            Self::cut(&Spectrum::projected(gram, leds, spectrum.removed), leds)
         }
     }
 
@@ -102,7 +113,7 @@ impl SignalSpace {
         let values = spectrum.values[..leading].to_vec();
         let vectors = spectrum.vectors.columns(0, leading).into_owned();
         let captured: f64 = values.iter().sum();
-        let rest = f.saturating_sub(1 + leading).max(1) as f64;
+        let rest = f.saturating_sub(1 + leading + spectrum.removed).max(1) as f64;
         let noise = ((spectrum.trace - captured) / rest).max(f64::MIN_POSITIVE);
         let significant = values
             .iter()
@@ -189,5 +200,32 @@ mod tests {
         assert!((space.noise - 0.5).abs() < 1e-6, "{}", space.noise);
         let overlap = (space.basis().transpose() * &v1).norm();
         assert!((overlap - 1.0).abs() < 1e-9);
+    }
+
+    #[test]
+    fn directions_projected_out_hold_no_noise() {
+        // Noise 0.5 per direction with k = 6 further directions projected out of the sample:
+        // σ²_G is taken over the directions left, so it stays 0.5.
+        let f = 40;
+        let ones = DMatrix::from_element(f, 1, 1.0 / (f as f64).sqrt());
+        let mut removed = DMatrix::zeros(f, 0);
+        for k in 0..6 {
+            let mut v = DMatrix::from_fn(f, 1, |j, _| ((j * (k + 2)) as f64 * 0.37).sin());
+            v -= &ones * (ones.transpose() * &v)[(0, 0)];
+            for c in removed.column_iter() {
+                let d = (c.transpose() * &v)[(0, 0)];
+                v -= c * d;
+            }
+            let v = &v / v.norm();
+            removed = removed.insert_column(k, 0.0);
+            removed.set_column(k, &v.column(0));
+        }
+        let keep =
+            DMatrix::identity(f, f) - &ones * ones.transpose() - &removed * removed.transpose();
+        let gram = &keep * 0.5;
+        let space = SignalSpace::from_spectrum(&Spectrum::projected(&gram, 2, 6), &gram, 2);
+        assert!((space.noise - 0.5).abs() < 1e-6, "{}", space.noise);
+        let naive = SignalSpace::new(&gram, 2);
+        assert!(naive.noise < 0.47, "{}", naive.noise);
     }
 }

@@ -49,6 +49,9 @@ pub struct ReceivedWaveform {
     chips: Vec<f64>,
     /// 2^−(led+1): chip index times this, floored, has bit i + 1 of the index as its parity.
     pair_scale: f64,
+    /// The window's nuisance components, projected out of every filled template
+    /// ([`super::nuisance`]).
+    nuisance: Option<std::sync::Arc<super::nuisance::Nuisance>>,
 }
 
 impl ReceivedWaveform {
@@ -69,6 +72,27 @@ impl ReceivedWaveform {
             cumulative,
             chips,
             pair_scale: 0.5f64.powi(led as i32 + 1),
+            nuisance: None,
+        }
+    }
+
+    /// The waveforms of LEDs `0..leds` with the window's nuisance components (none for `None`).
+    pub fn set(
+        leds: usize,
+        nuisance: Option<&std::sync::Arc<super::nuisance::Nuisance>>,
+    ) -> Vec<Self> {
+        (0..leds)
+            .map(|led| Self {
+                nuisance: nuisance.filter(|n| !n.is_empty()).cloned(),
+                ..Self::new(led)
+            })
+            .collect()
+    }
+
+    /// v ← (I − PPᵀ)·v with the window's nuisance columns P (nothing without them).
+    pub fn project(&self, v: &mut [f64]) {
+        if let Some(nuisance) = &self.nuisance {
+            nuisance.project(v);
         }
     }
 
@@ -161,10 +185,18 @@ impl Timing {
 }
 
 impl Timing {
-    /// Writes the template of frames `0..out.len()` (see [`Timing::template`]) into `out`.
-    /// At full exposure frame j's window ends where frame j + 1's starts, so each cumulative
-    /// integral serves two frames.
+    /// Writes the template of frames `0..out.len()` (see [`Timing::template`]) into `out`,
+    /// with the window's nuisance components projected out ([`super::nuisance`]).
     pub fn fill_template(&self, wave: &ReceivedWaveform, shift: f64, out: &mut [f64]) {
+        self.fill_carrier(wave, shift, out);
+        if let Some(nuisance) = &wave.nuisance {
+            nuisance.project_template(out);
+        }
+    }
+
+    /// [`Timing::fill_template`] without the nuisance projection. At full exposure frame j's
+    /// window ends where frame j + 1's starts, so each cumulative integral serves two frames.
+    fn fill_carrier(&self, wave: &ReceivedWaveform, shift: f64, out: &mut [f64]) {
         let rate = self.rate_ratio;
         let width = self.exposure * rate;
         if width <= 1e-9 {
