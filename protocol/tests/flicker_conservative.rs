@@ -14,6 +14,8 @@
 //!
 //! with m = (on − off)/(on + off) from the PWM compare values the luminaire loads.
 
+mod common;
+use common::Rng;
 use protocol::carriers::{MAX_LEDS, chip_is_on};
 use protocol::config::{ChipRate, LuminaireConfig};
 use protocol::flicker::{self, LOW_RISK, Limit, NO_OBSERVABLE_EFFECT};
@@ -22,24 +24,6 @@ use protocol::timing::{off_compare, on_compare};
 
 /// Configurations per sweep.
 const CASES: usize = 400;
-
-/// Small deterministic generator (xorshift64*).
-struct Rng(u64);
-
-impl Rng {
-    fn next(&mut self) -> u64 {
-        self.0 ^= self.0 >> 12;
-        self.0 ^= self.0 << 25;
-        self.0 ^= self.0 >> 27;
-        self.0.wrapping_mul(0x2545_F491_4F6C_DD1D)
-    }
-    fn below(&mut self, n: u64) -> u64 {
-        self.next() % n
-    }
-    fn unit(&mut self) -> f64 {
-        (self.next() >> 11) as f64 / (1u64 << 53) as f64
-    }
-}
 
 /// A chip rate: log-uniform over the supported range, or next to a knee or top frequency of
 /// some harmonic of some LED (where the slope segment changes).

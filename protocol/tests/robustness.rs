@@ -11,6 +11,8 @@
 //! Case counts: `MEB_FUZZ_CASES` (default 20 000 deterministic mixed streams) plus the
 //! proptest cases (raise `MEB_FUZZ_CASES` for a long run).
 
+mod common;
+use common::Rng;
 use proptest::prelude::*;
 use protocol::config::{ChipRate, LuminaireConfig};
 use protocol::framing::{
@@ -107,24 +109,6 @@ fn check_stream(stream: &[u8], chunk_sizes: &[usize], save_ok: bool) {
         assert_eq!(ok_replies, expected_ok, "good frames at byte {end}");
         assert_eq!(*endpoint.luminaire.config(), model, "config at byte {end}");
         pos = end;
-    }
-}
-
-/// Small deterministic generator (xorshift64*), so the long loop needs no extra dependency.
-struct Rng(u64);
-
-impl Rng {
-    fn next(&mut self) -> u64 {
-        self.0 ^= self.0 >> 12;
-        self.0 ^= self.0 << 25;
-        self.0 ^= self.0 >> 27;
-        self.0.wrapping_mul(0x2545_F491_4F6C_DD1D)
-    }
-    fn below(&mut self, n: u64) -> u64 {
-        self.next() % n
-    }
-    fn byte(&mut self) -> u8 {
-        self.next() as u8
     }
 }
 
