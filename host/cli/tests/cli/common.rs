@@ -160,3 +160,36 @@ pub fn ply_points(path: &Path) -> Vec<[f32; 3]> {
         .map(|v| [float(v, "x"), float(v, "y"), float(v, "z")])
         .collect()
 }
+
+/// Least-squares gain of each decoded LED image against the capture's truth at `time`
+/// (seconds), over the pixels the decoder kept (neither saturated nor underexposed) that the
+/// LED lights (above a tenth of its brightest truth pixel).
+pub fn gains_against_truth(
+    decoded: &meb_pipeline::demod::Decoded,
+    capture: &meb_sim::capture::SimulatedCapture,
+    time: f64,
+) -> Vec<f64> {
+    let truth = capture.truth_at(time).led_true;
+    decoded
+        .leds
+        .images
+        .iter()
+        .zip(&truth.images)
+        .map(|(image, truth)| {
+            let top = truth.iter().copied().fold(0.0f32, f32::max);
+            let (mut dt, mut tt) = (0.0, 0.0);
+            for (((d, t), s), u) in image
+                .iter()
+                .zip(truth)
+                .zip(&decoded.saturated)
+                .zip(&decoded.underexposed)
+            {
+                if !s && !u && *t > 0.1 * top {
+                    dt += f64::from(*d) * f64::from(*t);
+                    tt += f64::from(*t) * f64::from(*t);
+                }
+            }
+            dt / tt
+        })
+        .collect()
+}

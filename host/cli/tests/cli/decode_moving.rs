@@ -17,6 +17,8 @@ use meb_sim::capture::{SimConfig, SimulatedCapture};
 use meb_sim::scene::{Scene, SceneObject, Spin};
 use nalgebra::Vector3;
 
+use crate::common::gains_against_truth;
+
 const WIDTH: usize = 320;
 const HEIGHT: usize = 180;
 const FRAMES: usize = 32;
@@ -42,36 +44,6 @@ fn capture(start_s: f64, chip_rate_hz: Option<f64>, exposure: f64) -> SimulatedC
     SimulatedCapture::new(rig, Scene::single(ellipsoid), config).unwrap()
 }
 
-/// Least-squares gain of each decoded LED image against the truth at the window's middle,
-/// over the pixels the decoder kept that the LED lights.
-fn gains(decoded: &Decoded, capture: &SimulatedCapture) -> Vec<f64> {
-    let middle = capture.frame_time(FRAMES / 2);
-    let truth = capture.truth_at(middle).led_true;
-    let keep: Vec<bool> = decoded
-        .saturated
-        .iter()
-        .zip(decoded.underexposed.iter())
-        .map(|(s, u)| !s && !u)
-        .collect();
-    decoded
-        .leds
-        .images
-        .iter()
-        .zip(&truth.images)
-        .map(|(image, truth)| {
-            let top = truth.iter().copied().fold(0.0f32, f32::max);
-            let (mut dt, mut tt) = (0.0, 0.0);
-            for ((d, t), k) in image.iter().zip(truth).zip(&keep) {
-                if *k && *t > 0.1 * top {
-                    dt += f64::from(*d) * f64::from(*t);
-                    tt += f64::from(*t) * f64::from(*t);
-                }
-            }
-            dt / tt
-        })
-        .collect()
-}
-
 /// Decodes the window, refusing an implausible fit.
 fn decode_window(capture: &mut SimulatedCapture) -> Decoded {
     let config = DecodeConfig {
@@ -92,7 +64,7 @@ fn turning_ellipsoid_window_decodes_at_the_chip_rate() {
         let mut cap = capture(start_s, None, 1.0);
         let decoded = decode_window(&mut cap);
         let report = &decoded.report;
-        let gains = gains(&decoded, &cap);
+        let gains = gains_against_truth(&decoded, &cap, cap.frame_time(FRAMES / 2));
         eprintln!(
             "start {start_s} s: exposure {:.3} ± {:.3}, rate ratio {:.5}, gains {gains:.4?}, \
              unexplained {:.1?}",
@@ -134,7 +106,7 @@ fn turning_ellipsoid_window_decodes_off_the_chip_rate() {
     let mut cap = capture(0.2, Some(980.0), 0.6);
     let decoded = decode_window(&mut cap);
     let report = &decoded.report;
-    let gains = gains(&decoded, &cap);
+    let gains = gains_against_truth(&decoded, &cap, cap.frame_time(FRAMES / 2));
     eprintln!(
         "ρ 0.98: exposure {:.3} ± {:.3}, rate ratio {:.5}, gains {gains:.4?}",
         report.exposure, report.exposure_std, report.rate_ratio

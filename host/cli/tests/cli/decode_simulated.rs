@@ -216,26 +216,8 @@ fn sphere_capture(rig: Rig, config: SimConfig) -> SimulatedCapture {
 /// Decodes `capture` as `meb decode --leds 4` does and returns it with each LED's gain over
 /// the lit pixels the decoder kept.
 fn decode_default(capture: &mut SimulatedCapture, config: &DecodeConfig) -> (Decoded, Vec<f64>) {
-    let truth = capture.truth_at(0.0).led_true;
     let decoded = decode(capture, config, &mut |_, _| {}).unwrap_or_else(|e| panic!("{e}"));
-    let gains = (0..truth.images.len())
-        .map(|i| {
-            let top = truth.images[i].iter().copied().fold(0.0f32, f32::max);
-            let (mut dt, mut tt) = (0.0, 0.0);
-            for (((d, t), s), u) in decoded.leds.images[i]
-                .iter()
-                .zip(&truth.images[i])
-                .zip(&decoded.saturated)
-                .zip(&decoded.underexposed)
-            {
-                if !s && !u && *t > 0.1 * top {
-                    dt += f64::from(*d) * f64::from(*t);
-                    tt += f64::from(*t) * f64::from(*t);
-                }
-            }
-            dt / tt
-        })
-        .collect();
+    let gains = common::gains_against_truth(&decoded, capture, 0.0);
     (decoded, gains)
 }
 

@@ -18,7 +18,7 @@ use meb_sim::scene::{GroundPlane, Scene, SceneObject};
 use meb_sim::sensor::NoiseModel;
 use meb_sim::{LampWaveform, RoomEffects, RoomLamp};
 
-use crate::common::rig_toml;
+use crate::common::{gains_against_truth, rig_toml};
 
 const WIDTH: usize = 320;
 const HEIGHT: usize = 180;
@@ -83,29 +83,6 @@ fn decode_capture(capture: &SimulatedCapture) -> Result<Decoded, DemodError> {
     decode(&mut source, &config, &mut |_, _| {})
 }
 
-/// Each LED's gain against the truth over the lit pixels the decoder kept.
-fn gains(capture: &SimulatedCapture, decoded: &Decoded) -> Vec<f64> {
-    let truth = capture.truth_at(0.0).led_true;
-    (0..4)
-        .map(|i| {
-            let top = truth.images[i].iter().copied().fold(0.0f32, f32::max);
-            let (mut dt, mut tt) = (0.0, 0.0);
-            for (((d, t), s), u) in decoded.leds.images[i]
-                .iter()
-                .zip(&truth.images[i])
-                .zip(&decoded.saturated)
-                .zip(&decoded.underexposed)
-            {
-                if !s && !u && *t > 0.1 * top {
-                    dt += f64::from(*d) * f64::from(*t);
-                    tt += f64::from(*t) * f64::from(*t);
-                }
-            }
-            dt / tt
-        })
-        .collect()
-}
-
 /// Decodes a capture of `room` and checks it is decoded with every gain within 1 % of the
 /// truth, or refused with a reason that names the flicker found and never advises more LEDs;
 /// returns the flicker families reported (empty when refused).
@@ -117,7 +94,7 @@ fn decoded_or_refused_naming_flicker(
     let capture = capture_at(room.clone(), seed, rates);
     match decode_capture(&capture) {
         Ok(decoded) => {
-            let gains = gains(&capture, &decoded);
+            let gains = gains_against_truth(&decoded, &capture, 0.0);
             eprintln!(
                 "{room:?} {rates:?} seed {seed}: gains {gains:.4?}, room {:?}",
                 decoded.report.room
@@ -168,7 +145,7 @@ fn decoded_within_at(
     let capture = capture_at(room.clone(), seed, rates);
     let decoded =
         decode_capture(&capture).unwrap_or_else(|e| panic!("{room:?} seed {seed}: refused: {e}"));
-    let gains = gains(&capture, &decoded);
+    let gains = gains_against_truth(&decoded, &capture, 0.0);
     let reference = if relative {
         gains.iter().sum::<f64>() / gains.len() as f64
     } else {
@@ -279,7 +256,7 @@ fn a_lamp_on_60_hz_mains_on_the_carriers_lines_is_refused_naming_the_flicker() {
     match decode_capture(&capture) {
         Ok(decoded) => {
             // Decoded only if right.
-            let gains = gains(&capture, &decoded);
+            let gains = gains_against_truth(&decoded, &capture, 0.0);
             assert!(
                 gains.iter().all(|g| (g - 1.0).abs() < 0.01),
                 "decoded with gains {gains:.4?}"
@@ -392,7 +369,7 @@ fn a_frame_dropped_or_repeated_near_an_end_is_found_or_refused() {
         let capture = capture(room.clone(), seed);
         match decode_capture(&capture) {
             Ok(decoded) => {
-                let gains = gains(&capture, &decoded);
+                let gains = gains_against_truth(&decoded, &capture, 0.0);
                 eprintln!(
                     "{room:?} seed {seed}: gains {gains:.4?}, breaks {:?}",
                     decoded.report.room.timing_breaks
