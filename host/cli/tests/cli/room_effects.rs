@@ -1,7 +1,8 @@
 //! Captures from real rooms: a lamp flickering on the mains and an auto-exposure that drifts,
 //! added by the simulator's `room` module to the issue's capture (4 LEDs at 960 fps, exposure
 //! 0.6, read noise 1 %, steady background 0.15 of full scale, LED levels on the object a few
-//! percent of full scale), here at 320×180. Each is decoded with every gain within 1 % of the
+//! percent of full scale), here at 320×180 (and at the issue's 640×360 for a frame dropped or
+//! repeated in the middle). Each is decoded with every gain within 1 % of the
 //! truth (relative to the gains' mean for the exposure ramp, whose mean gain the LEDs share), or
 //! refused; `decode.json`'s `room` section names what was found.
 //!
@@ -20,8 +21,12 @@ use meb_sim::{LampWaveform, RoomEffects, RoomLamp};
 
 use crate::common::{gains_against_truth, rig_toml};
 
-const WIDTH: usize = 320;
-const HEIGHT: usize = 180;
+/// The camera: width, height (px) and pixel pitch (mm) of an orthographic camera.
+type Camera = (usize, usize, f64);
+/// The tests' camera.
+const SMALL: Camera = (320, 180, 0.5);
+/// The issue's camera.
+const ISSUE: Camera = (640, 360, 0.25);
 const FPS: f64 = 960.0;
 const LEDS: [[f64; 3]; 4] = [
     [-270.0, 420.0, 100.0],
@@ -40,9 +45,20 @@ fn capture(room: RoomEffects, seed: u64) -> SimulatedCapture {
 /// [`capture`] by a camera at `rates.0` fps with every LED at a chip rate of `rates.1` Hz
 /// (960 fps and chips when `None`).
 fn capture_at(room: RoomEffects, seed: u64, rates: Option<(f64, f64)>) -> SimulatedCapture {
+    capture_by(SMALL, room, seed, rates)
+}
+
+/// [`capture_at`] by `camera`.
+fn capture_by(
+    camera: Camera,
+    room: RoomEffects,
+    seed: u64,
+    rates: Option<(f64, f64)>,
+) -> SimulatedCapture {
     let (fps, chip_rate_hz) = rates.unwrap_or((FPS, FPS));
+    let (width, height, pitch) = camera;
     let toml =
-        rig_toml(WIDTH, HEIGHT, 0.5, &LEDS).replace("fps = 960.0", &format!("fps = {fps:?}"));
+        rig_toml(width, height, pitch, &LEDS).replace("fps = 960.0", &format!("fps = {fps:?}"));
     let rig = Rig::from_toml_str(&toml, "room").unwrap();
     let mut scene = Scene::single(SceneObject::sphere(60.0));
     scene.ground = Some(GroundPlane {
@@ -74,7 +90,8 @@ fn decode_capture(capture: &SimulatedCapture) -> Result<Decoded, DemodError> {
     let frames: Vec<Frame> = (0..capture.config().frames)
         .map(|j| capture.render_frame(j))
         .collect();
-    let format = FrameFormat::full_range(WIDTH, HEIGHT, 8, capture.info().fps);
+    let camera = &capture.rig().camera;
+    let format = FrameFormat::full_range(camera.width, camera.height, 8, capture.info().fps);
     let mut source = MemorySource::new(format, frames).unwrap();
     let config = DecodeConfig {
         leds: LedCount::Fixed(4),
@@ -134,6 +151,12 @@ fn decoded_within(room: RoomEffects, seed: u64, tolerance: f64, relative: bool) 
     decoded_within_at(room, seed, None, tolerance, relative)
 }
 
+/// [`decoded_within`] of a capture by `camera`, absolute gains.
+fn decoded_within_by(camera: Camera, room: RoomEffects, seed: u64, tolerance: f64) -> Decoded {
+    let capture = capture_by(camera, room.clone(), seed, None);
+    checked_gains(&capture, &room, seed, tolerance, false)
+}
+
 /// [`decoded_within`] with the camera's and the chips' rates `rates` ([`capture_at`]).
 fn decoded_within_at(
     room: RoomEffects,
@@ -143,9 +166,20 @@ fn decoded_within_at(
     relative: bool,
 ) -> Decoded {
     let capture = capture_at(room.clone(), seed, rates);
+    checked_gains(&capture, &room, seed, tolerance, relative)
+}
+
+/// Decodes `capture` (of `room`, `seed`) and checks its gains as [`decoded_within`] does.
+fn checked_gains(
+    capture: &SimulatedCapture,
+    room: &RoomEffects,
+    seed: u64,
+    tolerance: f64,
+    relative: bool,
+) -> Decoded {
     let decoded =
-        decode_capture(&capture).unwrap_or_else(|e| panic!("{room:?} seed {seed}: refused: {e}"));
-    let gains = gains_against_truth(&decoded, &capture, 0.0);
+        decode_capture(capture).unwrap_or_else(|e| panic!("{room:?} seed {seed}: refused: {e}"));
+    let gains = gains_against_truth(&decoded, capture, 0.0);
     let reference = if relative {
         gains.iter().sum::<f64>() / gains.len() as f64
     } else {
@@ -311,24 +345,28 @@ fn a_lamp_ten_times_the_leds_level_at_a_recommended_chip_rate_is_modelled_or_nam
 #[test]
 fn a_dropped_or_repeated_frame_is_found_and_the_capture_re_aligned() {
     // The issue's rows: one frame dropped at 60 of 128, or one repeated (refused before, with
-    // "use --leds 5").
-    for (room, seed, frame, kind) in [
-        (vec![60], vec![], 10, 60, BreakKind::Dropped),
-        (vec![], vec![60], 11, 61, BreakKind::Repeated),
+    // "use --leds 5"). At 640×360 a timing with a near-instant exposure and a rate ratio of
+    // 1.013 explained these captures within 1.1 σ²_G of the break and was kept, with LED 2
+    // 5 % low.
+    for (camera, room, seed, frame, kind) in [
+        (SMALL, vec![60], vec![], 10, 60, BreakKind::Dropped),
+        (SMALL, vec![], vec![60], 11, 61, BreakKind::Repeated),
+        (ISSUE, vec![60], vec![], 7, 60, BreakKind::Dropped),
+        (ISSUE, vec![], vec![60], 7, 61, BreakKind::Repeated),
     ]
-    .map(|(dropped, duplicated, seed, frame, kind)| {
+    .map(|(camera, dropped, duplicated, seed, frame, kind)| {
         let room = RoomEffects {
             dropped,
             duplicated,
             ..RoomEffects::default()
         };
-        (room, seed, frame, kind)
+        (camera, room, seed, frame, kind)
     }) {
-        let decoded = decoded_within(room, seed, 0.01, false);
+        let decoded = decoded_within_by(camera, room, seed, 0.01);
         assert_eq!(
             decoded.report.room.timing_breaks,
             vec![TimingBreak { frame, kind }],
-            "{:?}",
+            "{camera:?}: {:?}",
             decoded.report.room
         );
     }
