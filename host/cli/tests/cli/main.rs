@@ -6,6 +6,7 @@ mod bad_input;
 mod camera_calibration;
 mod capture_readers;
 mod common;
+mod compressed_video;
 mod decode_moving;
 mod decode_simulated;
 mod decode_start;

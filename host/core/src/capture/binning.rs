@@ -259,6 +259,10 @@ impl FrameSource for BinnedSource {
         self.inner.frame_count_hint()
     }
 
+    fn lossy_compression(&self) -> Option<super::LossyCompression> {
+        self.inner.lossy_compression()
+    }
+
     fn read_frame_into(&mut self, samples: &mut Samples) -> Result<Option<usize>, CaptureError> {
         let Some(index) = self.inner.read_frame_into(&mut self.full)? else {
             return Ok(None);

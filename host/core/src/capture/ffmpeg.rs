@@ -8,7 +8,7 @@
 //! ("tv") range video keeps its codes; its black and white levels (16·2^(b−8) and
 //! 235·2^(b−8)) go into the [`FrameFormat`], so decoded images do not depend on the range.
 
-use super::{CaptureError, Frame, FrameFormat, FrameSource, Samples};
+use super::{CaptureError, Frame, FrameFormat, FrameSource, LossyCompression, Samples};
 use std::io::{BufReader, Read};
 use std::path::{Path, PathBuf};
 use std::process::{Child, ChildStdout, Command, Stdio};
@@ -29,6 +29,34 @@ pub struct VideoInfo {
     pub fps: f64,
     /// Frame count when the container states it.
     pub frames: Option<usize>,
+    /// Codec name (`h264`, `hevc`, `ffv1`, …).
+    pub codec: String,
+    /// The stream's bit rate (bits/s) when the container states it.
+    pub bit_rate: Option<u64>,
+}
+
+/// FFmpeg's names of the lossless video codecs a capture may come in; every other codec is
+/// taken as lossy.
+const LOSSLESS_CODECS: [&str; 14] = [
+    "rawvideo", "ffv1", "huffyuv", "ffvhuff", "png", "apng", "utvideo", "magicyuv", "qtrle",
+    "v210", "v410", "r210", "tiff", "zlib",
+];
+
+impl VideoInfo {
+    /// The stream's lossy compression (`None` for a lossless codec).
+    pub fn lossy_compression(&self) -> Option<LossyCompression> {
+        if LOSSLESS_CODECS.contains(&self.codec.as_str()) {
+            return None;
+        }
+        let pixels = (self.width * self.height) as f64 * self.fps;
+        Some(LossyCompression {
+            codec: self.codec.clone(),
+            bits_per_pixel: self
+                .bit_rate
+                .filter(|_| pixels > 0.0)
+                .map(|rate| rate as f64 / pixels),
+        })
+    }
 }
 
 /// Error for a missing FFmpeg tool.
@@ -123,6 +151,15 @@ pub fn probe(path: &Path) -> Result<VideoInfo, CaptureError> {
     let fps = parse_rate(stream.get("avg_frame_rate"))
         .or_else(|| parse_rate(stream.get("r_frame_rate")))
         .unwrap_or(0.0);
+    let codec = stream
+        .get("codec_name")
+        .and_then(|v| v.as_str())
+        .unwrap_or("unknown")
+        .to_string();
+    let bit_rate = stream
+        .get("bit_rate")
+        .and_then(|v| v.as_str())
+        .and_then(|s| s.parse().ok());
     Ok(VideoInfo {
         width,
         height,
@@ -130,6 +167,8 @@ pub fn probe(path: &Path) -> Result<VideoInfo, CaptureError> {
         limited_range,
         fps,
         frames,
+        codec,
+        bit_rate,
     })
 }
 
@@ -284,6 +323,10 @@ impl FrameSource for FfmpegSource {
 
     fn frame_count_hint(&self) -> Option<usize> {
         self.info.frames.map(|n| n.saturating_sub(self.index))
+    }
+
+    fn lossy_compression(&self) -> Option<LossyCompression> {
+        self.info.lossy_compression()
     }
 }
 

@@ -7,6 +7,28 @@
 
 use thiserror::Error;
 
+/// Lossy compression of a stored capture, as its container states it: the codec's
+/// quantisation removes part of the camera's noise and can bend a modulation of a few code
+/// values, so the decoder's noise estimate no longer bounds its error.
+#[derive(Debug, Clone, PartialEq, serde::Serialize, serde::Deserialize)]
+pub struct LossyCompression {
+    /// Codec name as FFmpeg reports it (`h264`, `hevc`, `vp9`, `av1`, `mjpeg`, …).
+    pub codec: String,
+    /// Coded bits per pixel and frame (the stream's bit rate over width·height·fps), when the
+    /// container states a bit rate.
+    pub bits_per_pixel: Option<f64>,
+}
+
+impl LossyCompression {
+    /// The compression in words, e.g. "h264 at 0.0046 bits per pixel".
+    pub fn describe(&self) -> String {
+        match self.bits_per_pixel {
+            Some(bpp) => format!("{} at {bpp:.2e} bits per pixel", self.codec),
+            None => format!("{} (lossy)", self.codec),
+        }
+    }
+}
+
 /// Geometry, depth and timing of a frame stream.
 #[derive(Debug, Clone, PartialEq, serde::Serialize, serde::Deserialize)]
 pub struct FrameFormat {
@@ -197,6 +219,11 @@ pub trait FrameSource: Send {
     fn next_frame(&mut self) -> Result<Option<Frame>, CaptureError>;
     /// Number of frames not yet read, when the source knows it.
     fn frame_count_hint(&self) -> Option<usize> {
+        None
+    }
+    /// The lossy compression the frames went through, when the source knows it (`None` for
+    /// uncompressed and losslessly compressed sources).
+    fn lossy_compression(&self) -> Option<LossyCompression> {
         None
     }
     /// Reads the next frame into `samples`, reusing its storage where the source can (a y4m

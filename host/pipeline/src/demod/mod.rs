@@ -59,6 +59,7 @@
 
 mod basis;
 pub mod clipping;
+pub mod compression;
 pub mod config;
 mod error;
 pub mod fit;
@@ -170,11 +171,19 @@ pub fn decode(
             progress(read, plan.progress_total.max(read));
         })?;
         let got = window.frames.len();
-        if !add_window(&decoder, &window.frames, config, &mut state)? || got < want {
+        let added = add_window(&decoder, &window.frames, config, &mut state);
+        let added = match (added, source.lossy_compression()) {
+            (Err(e), Some(compression)) => Err(compression::explain(e, &compression)),
+            (added, _) => added,
+        };
+        if !added? || got < want {
             break;
         }
     }
-    let decoded = finish(config, &format, decoder.roi, state)?;
+    let mut decoded = finish(config, &format, decoder.roi, state)?;
+    if let Some(compression) = source.lossy_compression() {
+        compression::check(&mut decoded.report, &format, &compression);
+    }
     apply_verdict(decoded, config.on_implausible)
 }
 
@@ -1329,6 +1338,7 @@ fn finish(
             .verdict
             .unwrap_or_else(|| Verdict::from_findings(Vec::new(), Vec::new())),
         room: state.room,
+        compression: None,
     };
     Ok(Decoded {
         leds: LedImages { images },

@@ -89,6 +89,10 @@ pub struct DecodeReport {
     /// Room-light flicker and exposure drift found and modelled ([`super::nuisance`]).
     #[serde(default)]
     pub room: RoomReport,
+    /// The lossy compression the video went through, as its container states it
+    /// ([`super::compression`]); absent for uncompressed and lossless sources.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub compression: Option<meb_core::capture::LossyCompression>,
 }
 
 impl DecodeReport {
