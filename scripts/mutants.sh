@@ -23,6 +23,10 @@ while IFS= read -r re; do
 done < <(sed -n '/^## Equivalent/,/^## /p' chip-plan/MUTANTS.md | sed -n 's/^| `\([^`]*\)`.*/\1/p')
 out=target/mutants
 mkdir -p "$out"
+# Each mutant rebuilds and relinks the mutated crate's tests: without optimisation and debug
+# information that takes about half the time, and the tests check the same values. Only the
+# workspace's own crates take these settings (dependencies keep theirs, already built).
+export CARGO_PROFILE_DEV_OPT_LEVEL=0 CARGO_PROFILE_DEV_DEBUG=false
 case "${1:-}" in
     --full)
         cargo mutants --no-shuffle -j 2 -p meb-chip-plan -o "$out/chip-plan" "${excludes[@]}"
