@@ -87,11 +87,16 @@ fn capture_by(
 
 /// Decodes `capture` as 4 LEDs the way `meb decode` does.
 fn decode_capture(capture: &SimulatedCapture) -> Result<Decoded, DemodError> {
+    decode_capture_at(capture, capture.info().fps)
+}
+
+/// [`decode_capture`] with the frame rate the frames come with (0: unknown, as for images).
+fn decode_capture_at(capture: &SimulatedCapture, fps: f64) -> Result<Decoded, DemodError> {
     let frames: Vec<Frame> = (0..capture.config().frames)
         .map(|j| capture.render_frame(j))
         .collect();
     let camera = &capture.rig().camera;
-    let format = FrameFormat::full_range(camera.width, camera.height, 8, capture.info().fps);
+    let format = FrameFormat::full_range(camera.width, camera.height, 8, fps);
     let mut source = MemorySource::new(format, frames).unwrap();
     let config = DecodeConfig {
         leds: LedCount::Fixed(4),
@@ -238,6 +243,26 @@ fn a_lamp_on_50_hz_mains_is_modelled_and_reported() {
             "level {level}: {flicker:?}"
         );
     }
+}
+
+#[test]
+fn a_lamp_in_frames_without_a_frame_rate_asks_for_the_rate_not_more_leds() {
+    // Image files carry no frame rate, so the lamp's flicker cannot be modelled: at 2 % of
+    // full scale it shows as a fifth component (refused with "use --leds 5" before).
+    let capture = capture(lamp(50.1, 0.02, LampWaveform::SinSquared), 3);
+    match decode_capture_at(&capture, 0.0) {
+        Err(DemodError::Implausible { problems, advice }) => {
+            assert!(problems.contains("frame rate is unknown"), "{problems}");
+            assert!(advice.contains("--fps"), "{advice}");
+        }
+        Err(e) => panic!("refused for another reason: {e}"),
+        Ok(decoded) => panic!(
+            "decoded without the rate: {:?}",
+            gains_against_truth(&decoded, &capture, 0.0)
+        ),
+    }
+    // With the rate, the same frames decode (a_lamp_on_50_hz_mains_is_modelled_and_reported).
+    assert!(decode_capture(&capture).is_ok());
 }
 
 #[test]

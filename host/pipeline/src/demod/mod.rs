@@ -174,6 +174,7 @@ pub fn decode(
         let added = add_window(&decoder, &window.frames, config, &mut state);
         let added = match (added, source.lossy_compression()) {
             (Err(e), Some(compression)) => Err(compression::explain(e, &compression)),
+            (Err(e), None) if format.fps <= 0.0 => Err(without_frame_rate(e)),
             (added, _) => added,
         };
         if !added? || got < want {
@@ -185,6 +186,31 @@ pub fn decode(
         compression::check(&mut decoded.report, &format, &compression);
     }
     apply_verdict(decoded, config.on_implausible)
+}
+
+/// The error an LED count mismatch of a capture without a frame rate is reported as: room
+/// lights flickering at mains harmonics are modelled only at known frequencies in frames, so
+/// without the rate their flicker shows as an extra component (a 50 Hz lamp at 2 % of full
+/// scale on 4 LEDs at 960 fps: "5 modulated LEDs") and the frame rate is what to give first.
+fn without_frame_rate(error: DemodError) -> DemodError {
+    match error {
+        DemodError::LedCountMismatch {
+            requested,
+            detected,
+        } if detected > requested => DemodError::Implausible {
+            problems: format!(
+                "{requested} LEDs requested and the video shows {detected} modulated \
+                 components; its frame rate is unknown (image files carry none), so flicker of \
+                 room lights on the mains, the usual cause, could not be modelled"
+            ),
+            advice: format!(
+                "give the camera's frame rate (--fps, or fps= in Python) so mains flicker is \
+                 found and projected out; decode {detected} LEDs only if the luminaire really \
+                 plays that many"
+            ),
+        },
+        other => other,
+    }
 }
 
 /// Decodes `frames` already in memory (each of `format`'s size) as one window with `config`,
