@@ -232,7 +232,8 @@ pub struct Window<'a> {
     pub noise: f64,
 }
 
-/// Finds mains flicker and exposure drift in `window` (module docs): `fps` the camera rate,
+/// Finds mains flicker and exposure drift in `window` (module docs): `fps` the camera rate
+/// (0 when unknown: then the drift only),
 /// `rate` the chips per frame, `leds` the LEDs whose carriers' strongest lines are removed
 /// before testing, and `fitted` further columns removed with them (a timing fit's templates).
 pub fn detect(
@@ -244,9 +245,12 @@ pub fn detect(
 ) -> Nuisance {
     let f = window.frames;
     let pixels = window.means.len();
-    if f < 16 || pixels < 2 || !(fps.is_finite() && fps > 0.0) {
+    if f < 16 || pixels < 2 {
         return Nuisance::default();
     }
+    // Mains flicker lies at known frequencies in Hz, so only at a known frame rate; a drift
+    // is smooth in frames and is looked for either way.
+    let rate_known = fps.is_finite() && fps > 0.0;
     let mut carriers = carrier_columns(rate, leds, f);
     carriers = orthonormal(
         &fitted
@@ -279,6 +283,7 @@ pub fn detect(
     // alias onto the same frequencies).
     let mut families: Vec<(f64, f64, f64)> = FLICKER_FAMILIES_HZ
         .iter()
+        .filter(|_| rate_known)
         .filter_map(|&nominal| {
             scan_family(nominal, fps, f, &whole).map(|(at, total)| (nominal, at, total))
         })
