@@ -40,6 +40,7 @@ pub(crate) fn decoded(levels: Array2<f32>, noise: Array2<f32>) -> Decoded {
             per_led: vec![],
             verdict: Default::default(),
             room: Default::default(),
+            modulation: Default::default(),
         },
     }
 }

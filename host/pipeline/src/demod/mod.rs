@@ -60,6 +60,7 @@
 mod basis;
 pub mod clipping;
 pub mod config;
+pub mod depth;
 mod error;
 pub mod fit;
 #[cfg(test)]
@@ -85,6 +86,7 @@ pub mod waveform;
 mod window;
 
 pub use config::{DecodeConfig, Estimator, LedCount, Linearize, OnImplausible, Roi, SeedMethod};
+pub use depth::{ModulationDepths, ModulationReport};
 pub use error::DemodError;
 pub use matched::WindowAmplitudes;
 pub use quality::{FitQuality, LedQuality, Verdict, VerdictStatus};
@@ -175,7 +177,10 @@ pub fn decode(
         }
     }
     let decoded = finish(config, &format, decoder.roi, state)?;
-    apply_verdict(decoded, config.on_implausible)
+    apply_verdict(
+        to_full_depth(decoded, &config.depths)?,
+        config.on_implausible,
+    )
 }
 
 /// Decodes `frames` already in memory (each of `format`'s size) as one window with `config`,
@@ -243,7 +248,28 @@ pub fn decode_frames(
     };
     add_window(&decoder, &cropped, &config, &mut state)?;
     let decoded = finish(&config, &format, decoder.roi, state)?;
-    apply_verdict(decoded, config.on_implausible)
+    apply_verdict(
+        to_full_depth(decoded, &config.depths)?,
+        config.on_implausible,
+    )
+}
+
+/// `decoded` with each LED image (and its mean level) divided by 1 − ℓ_i, LED i's off chips'
+/// share of its on light, as `depths` gives them ([`depth`]); the scales in its report.
+fn to_full_depth(mut decoded: Decoded, depths: &ModulationDepths) -> Result<Decoded, DemodError> {
+    let report = &mut decoded.report;
+    let modulation = depth::resolve(depths, report.leds, report.chip_rate_hz)?;
+    for (i, image) in decoded.leds.images.iter_mut().enumerate() {
+        let scale = modulation.scale(i);
+        if scale != 1.0 {
+            image.mapv_inplace(|v| v * scale as f32);
+        }
+        if let Some(led) = report.per_led.get_mut(i) {
+            led.mean_level *= scale;
+        }
+    }
+    report.modulation = modulation;
+    Ok(decoded)
 }
 
 /// Adds one window of `frames` (cropped to the decoder's region) to `state`: `Ok(false)` when
@@ -561,6 +587,13 @@ fn validate(config: &DecodeConfig, format: &FrameFormat) -> Result<Roi, DemodErr
     {
         return invalid(format!("LED count {n} is outside 1..={MAX_LEDS}"));
     }
+    depth::check(
+        &config.depths,
+        match config.leds {
+            LedCount::Fixed(n) => Some(n),
+            LedCount::Auto => None,
+        },
+    )?;
     if let Some(r) = config.rate_ratio
         && !(r.is_finite() && r > 0.0)
     {
@@ -1329,6 +1362,7 @@ fn finish(
             .verdict
             .unwrap_or_else(|| Verdict::from_findings(Vec::new(), Vec::new())),
         room: state.room,
+        modulation: ModulationReport::default(),
     };
     Ok(Decoded {
         leds: LedImages { images },

@@ -1,6 +1,7 @@
 //! The decode report written as `decode.json`.
 
 use super::config::Estimator;
+use super::depth::ModulationReport;
 use super::nuisance::RoomReport;
 use super::quality::{LedQuality, Verdict};
 use serde::{Deserialize, Serialize};
@@ -89,6 +90,10 @@ pub struct DecodeReport {
     /// Room-light flicker and exposure drift found and modelled ([`super::nuisance`]).
     #[serde(default)]
     pub room: RoomReport,
+    /// The modulation depths assumed and the scale each LED image was brought to full depth
+    /// with ([`super::depth`]; absent in older decodes: full depth).
+    #[serde(default)]
+    pub modulation: ModulationReport,
 }
 
 impl DecodeReport {
