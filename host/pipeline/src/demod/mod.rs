@@ -1294,6 +1294,13 @@ fn finish(
     let noise_power = stats.noise_power / valid_count;
     let median_noise = median_of_valid(&noise_values, valid);
     let (first_fit, first_quality, _) = &state.fits[0];
+    let gain_uncertainty = quality::combined_gain_uncertainty(
+        &state
+            .fits
+            .iter()
+            .map(|(_, q, _)| q.leds.iter().map(|l| l.gain_uncertainty).collect())
+            .collect::<Vec<_>>(),
+    );
     let per_led = (0..leds)
         .map(|i| {
             let mean_level = stats.level_sums[i] / valid_count;
@@ -1304,7 +1311,10 @@ fn finish(
                 phase_chips: first_fit.model.shifts[i],
                 mean_level,
                 snr_db: 20.0 * (mean_level.abs().max(1e-12) / amplitude_noise.max(1e-12)).log10(),
-                quality: first_quality.leds[i].clone(),
+                quality: LedQuality {
+                    gain_uncertainty: gain_uncertainty.get(i).copied().unwrap_or(0.0),
+                    ..first_quality.leds[i].clone()
+                },
             }
         })
         .collect();
@@ -1360,7 +1370,8 @@ fn finish(
         per_led,
         verdict: state
             .verdict
-            .unwrap_or_else(|| Verdict::from_findings(Vec::new(), Vec::new())),
+            .unwrap_or_else(|| Verdict::from_findings(Vec::new(), Vec::new()))
+            .merge(&quality::judge_gains(&gain_uncertainty)),
         room: state.room,
         modulation: ModulationReport::default(),
     };

@@ -17,7 +17,8 @@ pub struct LedReport {
     pub mean_level: f64,
     /// Signal-to-noise ratio of the LED image, 20·log10(mean level / RMS noise of A_i), dB.
     pub snr_db: f64,
-    /// How well the fitted waveform explains this LED (first window; the verdict covers all).
+    /// How well the fitted waveform explains this LED (first window, but the gain uncertainty
+    /// of the average over the windows; the verdict covers all).
     #[serde(default)]
     pub quality: LedQuality,
 }
