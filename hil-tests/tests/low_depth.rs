@@ -90,7 +90,7 @@ fn predicted_normal_error_deg(
     for ((row, col), &use_it) in pixels.indexed_iter() {
         let rho = f64::from(truth.albedo[(row, col)]);
         let n = Vector3::from_fn(|k, _| f64::from(truth.normals[(row, col, k)]));
-        if !use_it || !(rho > 0.0) || !n.iter().all(|v| v.is_finite()) {
+        if !use_it || rho.is_nan() || rho <= 0.0 || !n.iter().all(|v| v.is_finite()) {
             continue;
         }
         let mut information = Matrix3::zeros();
