@@ -689,6 +689,8 @@ pub struct WindowDecode {
     pub quality: FitQuality,
     /// The window's verdict.
     pub verdict: Verdict,
+    /// The room's cause and the mains advice a refusal of this window names (first and last).
+    pub room_advice: (Option<String>, Option<String>),
     /// Row bands of the per-pixel fit.
     pub bands: usize,
     /// var(A_i) / σ² of the per-pixel fit, per LED (first band).
@@ -1108,18 +1110,27 @@ impl WindowDecoder {
             }
         };
         let mut verdict = quality::judge(&quality.leds, &fit);
-        if !verdict.is_plausible() {
-            if let Some(cause) = window.sample.nuisance().and_then(|n| n.describe()) {
-                verdict.advice.insert(
-                    0,
+        // What the room adds to the advice of a refusal (this window's, or the gains' over the
+        // windows, `finish`): its cause first, the mains advice last.
+        let room_advice = (
+            window
+                .sample
+                .nuisance()
+                .and_then(|n| n.describe())
+                .map(|cause| {
                     format!(
                         "the window holds the room's {cause}, projected out: switch the room \
-                         light off or run it from a steady supply, and lock the camera's exposure"
-                    ),
-                );
+                     light off or run it from a steady supply, and lock the camera's exposure"
+                    )
+                }),
+            self.mains_advice(leds, fit.model.timing.rate_ratio),
+        );
+        if !verdict.is_plausible() {
+            if let Some(advice) = &room_advice.0 {
+                verdict.advice.insert(0, advice.clone());
             }
-            if let Some(advice) = self.mains_advice(leds, fit.model.timing.rate_ratio) {
-                verdict.advice.push(advice);
+            if let Some(advice) = &room_advice.1 {
+                verdict.advice.push(advice.clone());
             }
         }
         let bands = if fit.rolling {
@@ -1155,6 +1166,7 @@ impl WindowDecoder {
             fit,
             quality,
             verdict,
+            room_advice,
             bands,
             variance_factors,
         }
@@ -1182,6 +1194,8 @@ struct Accumulated {
     fits: Vec<(TimingFit, FitQuality, usize)>,
     /// The verdict over the windows so far.
     verdict: Option<Verdict>,
+    /// The room advice of the windows so far ([`WindowDecode::room_advice`]), each once.
+    room_advice: (Vec<String>, Vec<String>),
     variance_factors: Vec<f64>,
     /// The room's nuisance components and timing breaks found so far.
     room: nuisance::RoomReport,
@@ -1244,6 +1258,14 @@ impl Accumulated {
             Some(v) => v.merge(&window.verdict),
             None => window.verdict,
         });
+        for (list, advice) in [
+            (&mut self.room_advice.0, window.room_advice.0),
+            (&mut self.room_advice.1, window.room_advice.1),
+        ] {
+            if let Some(advice) = advice.filter(|a| !list.contains(a)) {
+                list.push(advice);
+            }
+        }
         self.windows += 1;
         self.frames += count;
         self.fits.push((window.fit, window.quality, window.bands));
@@ -1371,7 +1393,15 @@ fn finish(
         verdict: state
             .verdict
             .unwrap_or_else(|| Verdict::from_findings(Vec::new(), Vec::new()))
-            .merge(&quality::judge_gains(&gain_uncertainty)),
+            .merge(&{
+                let mut gains = quality::judge_gains(&gain_uncertainty);
+                if !gains.is_plausible() {
+                    let (first, last) = &state.room_advice;
+                    gains.advice.splice(0..0, first.iter().cloned());
+                    gains.advice.extend(last.iter().cloned());
+                }
+                gains
+            }),
         room: state.room,
         modulation: ModulationReport::default(),
     };
