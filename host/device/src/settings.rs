@@ -7,6 +7,7 @@
 use protocol::carriers::MAX_LEDS;
 use protocol::config::{ChipRate, ConfigError, FULL_BRIGHTNESS_PERMILLE, LuminaireConfig};
 use protocol::flicker::{self, LOW_RISK};
+use protocol::timing::LedLevels;
 
 /// How a front end spells the options a message names.
 #[derive(Clone, Copy, Debug)]
@@ -199,6 +200,18 @@ pub fn configure(
     }
     config.validate()?;
     Ok(config)
+}
+
+/// Each LED's off-chip light as a fraction ℓ_i of its on light, as `config` plays it (its PWM
+/// compare values; 0 for a dark LED): what the camera sees of the off level.
+pub fn off_fractions(config: &LuminaireConfig) -> Vec<f64> {
+    let levels = LedLevels::new(&config.brightness_permille, &config.off_level_permille);
+    (0..usize::from(config.led_count).min(MAX_LEDS))
+        .map(|i| match levels.on[i] {
+            0 => 0.0,
+            on => f64::from(levels.off[i]) / f64::from(on),
+        })
+        .collect()
 }
 
 /// `values` (one per LED) in an 8-entry table, the rest `default`.

@@ -18,7 +18,7 @@ use std::io::{self, Write};
 use std::path::{Path, PathBuf};
 
 use protocol::carriers::{ChipTable, MAX_LEDS};
-use protocol::config::ChipRate;
+use protocol::config::{ChipRate, LuminaireConfig};
 use protocol::luminaire::OutputPlan;
 use protocol::timing::{LedLevels, PWM_STEPS};
 use serde::{Deserialize, Serialize};
@@ -81,6 +81,22 @@ impl TimelineSegment {
             phase_chips: plan.phase_chips[..n].to_vec(),
             off_level_permille: plan.off_level_permille[..n].to_vec(),
         }
+    }
+}
+
+impl TimelineSegment {
+    /// Each LED's off-chip light as a fraction ℓ_i of its on light, from the compare values
+    /// the PWM plays (0 for a dark LED, and for a segment written before off levels).
+    pub fn off_fractions(&self) -> Vec<f64> {
+        let mut config = LuminaireConfig {
+            led_count: self.led_count,
+            ..LuminaireConfig::FULL_DEPTH
+        };
+        let n = self.brightness_permille.len().min(MAX_LEDS);
+        config.brightness_permille[..n].copy_from_slice(&self.brightness_permille[..n]);
+        let m = self.off_level_permille.len().min(MAX_LEDS);
+        config.off_level_permille[..m].copy_from_slice(&self.off_level_permille[..m]);
+        crate::settings::off_fractions(&config)
     }
 }
 
@@ -265,6 +281,22 @@ impl Timeline {
                         ..a.clone()
                     } == *b
             })
+    }
+
+    /// The segment playing at timeline time `t` (the last one for `None`, what
+    /// [`TimelineWaveform::load`] starts from).
+    pub fn segment_at(&self, t: Option<f64>) -> Result<&TimelineSegment, TimelineError> {
+        let first = self.segments.first().ok_or(TimelineError::Empty)?;
+        let Some(t) = t else {
+            return self.segments.last().ok_or(TimelineError::Empty);
+        };
+        let at = self.segments.partition_point(|s| s.t <= t);
+        at.checked_sub(1).and_then(|i| self.segments.get(i)).ok_or(
+            TimelineError::BeforeFirstSegment {
+                offset: t,
+                first: first.t,
+            },
+        )
     }
 
     /// Start time of the last segment: from then on the luminaire's output is steady.

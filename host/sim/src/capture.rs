@@ -60,6 +60,10 @@ pub struct SimConfig {
     pub phases_chips: Option<Vec<f64>>,
     /// Per-LED chip rates in Hz (one value = all LEDs); `None` = the camera's fps.
     pub chip_rates_hz: Option<Vec<f64>>,
+    /// Per-LED off-chip light as a fraction ℓ_i ∈ [0, 1) of the on light (one value = all
+    /// LEDs; the luminaire's off level, [`CarrierWaveform::with_off_levels`]); `None` = dark
+    /// off chips (full depth).
+    pub off_levels: Option<Vec<f64>>,
     /// Seed of the phases and the noise.
     pub seed: u64,
     /// The objects' material (matte unless set; the ground plane is always matte).
@@ -87,6 +91,7 @@ impl Default for SimConfig {
             peak: lighting::DEFAULT_PEAK,
             phases_chips: None,
             chip_rates_hz: None,
+            off_levels: None,
             seed: 0,
             material: Material::MATTE,
             room: RoomEffects::default(),
@@ -105,6 +110,8 @@ pub struct TruthInfo {
     pub phases_chips: Vec<f64>,
     /// Chip rate of each LED in Hz.
     pub chip_rates_hz: Vec<f64>,
+    /// Off-chip light of each LED as a fraction of its on light (0: full depth).
+    pub off_levels: Vec<f64>,
     /// Camera frame rate.
     pub fps: f64,
     /// Number of frames.
@@ -229,6 +236,29 @@ impl SimulatedCapture {
                 "rates must be positive and phases finite".into(),
             )
         })?;
+        let off_levels = match &config.off_levels {
+            None => vec![0.0; leds],
+            Some(l) if l.len() == 1 => vec![l[0]; leds],
+            Some(l) if l.len() == leds => l.clone(),
+            Some(l) => {
+                return Err(bad(
+                    "off-levels",
+                    format!(
+                        "{} values given for {leds} LEDs (give 1 or {leds})",
+                        l.len()
+                    ),
+                ));
+            }
+        };
+        if off_levels.iter().any(|l| !(0.0..1.0).contains(l)) {
+            return Err(bad(
+                "off-levels",
+                format!("{off_levels:?}: each must lie in [0, 1)"),
+            ));
+        }
+        let waveform = waveform
+            .with_off_levels(&off_levels)
+            .ok_or_else(|| bad("off-levels", "one per LED in [0, 1]".into()))?;
         let gain = config
             .gain
             .unwrap_or_else(|| lighting::default_gain(&rig, config.peak));
@@ -247,6 +277,7 @@ impl SimulatedCapture {
             chips_per_frame: n,
             phases_chips: phases,
             chip_rates_hz: rates,
+            off_levels,
             fps: rig.camera.fps,
             frames: config.frames,
             exposure: config.exposure,

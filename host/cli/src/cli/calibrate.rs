@@ -21,7 +21,7 @@ enum CalibrateCommand {
     /// Fit each LED's position and relative intensity to captures of a matte sphere of known
     /// diameter (several placements, spread across the view and in depth), starting from a
     /// nominal rig: writes rig.toml and calibration.json.
-    Lights(LightsArgs),
+    Lights(Box<LightsArgs>),
     /// Fit the camera's intrinsics (fx, fy, cx, cy, k1, k2) to photos of a chequerboard:
     /// writes the rig with them (rig.toml) and calibration.json with the reprojection RMS.
     Camera(super::calibrate_camera::CameraArgs),

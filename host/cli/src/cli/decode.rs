@@ -1,15 +1,17 @@
 //! `meb decode`: demodulate a capture into one image per LED and write the output directory.
 
 use super::parse;
-use anyhow::{Context, Result};
+use anyhow::{Context, Result, bail};
 use clap::Args;
 use indicatif::{ProgressBar, ProgressStyle};
 use meb_core::capture::raw::RawLayout;
 use meb_core::capture::{OpenOptions, open};
+use meb_device::Timeline;
+use meb_device::timeline::OutputMode;
 use meb_pipeline::demod::output::write_decode_dir;
 use meb_pipeline::demod::{
-    DecodeConfig, DecodeReport, Decoded, DemodError, Estimator, LedCount, Linearize, OnImplausible,
-    Roi, VerdictStatus, decode,
+    DecodeConfig, DecodeReport, Decoded, DemodError, Estimator, LedCount, Linearize,
+    ModulationDepths, OnImplausible, Roi, VerdictStatus, decode,
 };
 use meb_pipeline::reconstruct::acceptance;
 use std::path::{Path, PathBuf};
@@ -74,6 +76,21 @@ pub struct DecodeOptions {
     /// Decode even when the video shows a different LED count than --leds.
     #[arg(long)]
     no_led_check: bool,
+    /// The luminaire's modulation depths, as `meb device set --depth` takes them: `auto`
+    /// (each LED's largest IEEE 1789 low-risk depth at the decoded chip rate), one depth in
+    /// (0, 1] for every LED or one per LED, or `factory` (the factory default's off levels).
+    /// Each LED image is divided by 1 − its off chips' share of its on light, to the image
+    /// full on/off keying gives [default: 1, off chips dark].
+    #[arg(long, value_parser = parse::depth, allow_hyphen_values = true)]
+    depth: Option<ModulationDepths>,
+    /// Read the depths from a luminaire timeline (`meb device emulate --timeline`): the off
+    /// levels and brightness its segment at --timeline-start plays.
+    #[arg(long, conflicts_with = "depth")]
+    timeline: Option<PathBuf>,
+    /// Timeline time (s) whose segment gives the depths (default: the timeline's last output
+    /// change, as `meb simulate --timeline`).
+    #[arg(long, requires = "timeline")]
+    timeline_start: Option<f64>,
 }
 
 /// The amplitude estimators `--estimator` accepts.
@@ -98,7 +115,13 @@ impl From<EstimatorArg> for Estimator {
 /// a result the quality verdict finds implausible (recorded as overridden).
 pub fn config(args: &DecodeOptions, default_leds: usize, force: bool) -> Result<DecodeConfig> {
     let leds = args.leds.unwrap_or(LedCount::Fixed(default_leds));
+    let depths = match (&args.depth, &args.timeline) {
+        (_, Some(path)) => timeline_depths(path, args.timeline_start)?,
+        (Some(depths), None) => depths.clone(),
+        (None, None) => ModulationDepths::Full,
+    };
     Ok(DecodeConfig {
+        depths,
         leds,
         frames: args.frames.map(|f| f as usize),
         start: args.start,
@@ -118,6 +141,23 @@ pub fn config(args: &DecodeOptions, default_leds: usize, force: bool) -> Result<
         },
         ..DecodeConfig::default()
     })
+}
+
+/// The off fractions a luminaire timeline's segment at `start` (the last for `None`) plays.
+fn timeline_depths(path: &Path, start: Option<f64>) -> Result<ModulationDepths> {
+    let timeline = Timeline::read(path)?;
+    let segment = timeline
+        .segment_at(start)
+        .with_context(|| format!("no depths in {}", path.display()))?;
+    if segment.mode != OutputMode::Playing {
+        bail!(
+            "the luminaire of {} is not playing its carriers at that time ({:?}): give \
+             --timeline-start inside a playing segment",
+            path.display(),
+            segment.mode
+        );
+    }
+    Ok(ModulationDepths::OffFractions(segment.off_fractions()))
 }
 
 /// How to open the input: frame rate override and raw layout.
@@ -173,6 +213,12 @@ fn flag_hint(error: &DemodError) -> Option<String> {
              verdict recorded)"
             .into(),
         DemodError::NoModulation => "(check --leds, --fps and --max-rate-mismatch)".into(),
+        DemodError::DepthCount { .. } => "(--depth takes one depth for every LED or one per \
+             LED)"
+            .into(),
+        DemodError::DepthNeedsChipRate { .. } => "(give --fps, or --depth with the depths \
+             `meb device get` shows)"
+            .into(),
         DemodError::StartBeyondEnd { .. } => "(lower --start)".into(),
         _ => return None,
     })
@@ -235,9 +281,17 @@ pub fn run(args: &DecodeArgs) -> Result<()> {
         report.median_noise,
         report.verdict.status
     );
+    let modulation = &report.modulation;
     for led in &report.per_led {
+        let depth = match modulation.depths.get(led.led - 1) {
+            Some(&m) if m < 1.0 => format!(
+                ", depth {m:.3} (image ×{:.2})",
+                modulation.scale(led.led - 1)
+            ),
+            _ => String::new(),
+        };
         println!(
-            "  LED {}: phase {:.3} chips, mean level {:.4}, SNR {:.1} dB, gain ±{:.2} %",
+            "  LED {}: phase {:.3} chips, mean level {:.4}, SNR {:.1} dB, gain ±{:.2} %{depth}",
             led.led,
             led.phase_chips,
             led.mean_level,

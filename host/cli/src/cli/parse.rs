@@ -2,7 +2,8 @@
 //! value is a usage error (exit 2) that says what is wanted, before any work starts.
 
 use meb_core::capture::raw::RawLayout;
-use meb_pipeline::demod::{LedCount, Linearize, Roi};
+use meb_device::settings::{DepthRequest, Spelling};
+use meb_pipeline::demod::{LedCount, Linearize, ModulationDepths, Roi};
 use meb_pipeline::tof::chequerboard::BoardSize;
 
 /// Parses `--leds`: 1..=8 or `auto`.
@@ -13,6 +14,20 @@ pub fn leds(text: &str) -> Result<LedCount, String> {
     match text.parse::<usize>() {
         Ok(n) if (1..=8).contains(&n) => Ok(LedCount::Fixed(n)),
         _ => Err("a number of LEDs from 1 to 8, or `auto`".into()),
+    }
+}
+
+/// Parses `--depth` of a capture: `auto`, one depth or one per LED in (0, 1] as
+/// `meb device set --depth` takes them, or `factory` (the factory default's off levels).
+pub fn depth(text: &str) -> Result<ModulationDepths, String> {
+    if text.trim() == "factory" {
+        return Ok(ModulationDepths::Factory);
+    }
+    match DepthRequest::parse(text, &Spelling::CLI).map_err(|e| e.to_string())? {
+        DepthRequest::Auto => Ok(ModulationDepths::LowRiskAuto),
+        DepthRequest::Depths(depths) => Ok(ModulationDepths::Depths(
+            depths.into_iter().map(f64::from).collect(),
+        )),
     }
 }
 

@@ -4,6 +4,8 @@ use anyhow::{Context, Result, bail};
 use clap::{Args, Subcommand, ValueEnum};
 use indicatif::{ProgressBar, ProgressStyle};
 use meb_core::rig::Rig;
+use meb_device::settings::{self, DepthRequest, Spelling};
+use meb_pipeline::demod::ModulationDepths;
 use meb_sim::dataset::{DatasetConfig, write_dataset};
 use meb_sim::exposure::expose_without_clipping;
 use meb_sim::output::{OutputOptions, VideoFormat, write_capture};
@@ -14,6 +16,7 @@ use meb_sim::{
     ToneCurve, TriMesh,
 };
 use nalgebra::{Unit, UnitQuaternion, Vector3};
+use protocol::config::LuminaireConfig;
 use std::path::PathBuf;
 use std::sync::Arc;
 use std::time::Instant;
@@ -178,6 +181,13 @@ struct CaptureArgs {
     /// decoder).
     #[arg(long, conflicts_with = "gain")]
     auto_exposure: bool,
+    /// The luminaire's modulation depths, as `meb device set --depth` takes them: `auto`
+    /// (each LED's largest IEEE 1789 low-risk depth at the chip rate), one depth in (0, 1] for
+    /// every LED or one per LED, or `factory` (the factory default's off levels); the off
+    /// chips then keep the share of the on light the luminaire's PWM would
+    /// [default: 1, off chips dark].
+    #[arg(long, value_parser = super::parse::depth, conflicts_with = "timeline")]
+    depth: Option<ModulationDepths>,
     /// Per-LED time shifts in chips, comma-separated (default: random from --seed).
     #[arg(long, value_delimiter = ',', allow_hyphen_values = true)]
     phases: Option<Vec<f64>>,
@@ -316,6 +326,11 @@ fn run_capture(args: &CaptureArgs) -> Result<()> {
         }),
         phases_chips: args.phases.clone(),
         chip_rates_hz: args.chip_rate.clone(),
+        off_levels: args
+            .depth
+            .as_ref()
+            .map(|depth| luminaire_off_fractions(depth, &rig, args.chip_rate.as_deref()))
+            .transpose()?,
         seed: args.seed,
         material: meb_sim::Material::glossy(args.gloss, args.roughness),
         room: args.room.effects()?,
@@ -414,6 +429,50 @@ fn run_capture(args: &CaptureArgs) -> Result<()> {
         );
     }
     Ok(())
+}
+
+/// The off fractions a luminaire driving the rig's LEDs at full brightness plays for `depth`
+/// (configured as `meb device set --depth` configures it, at the first chip rate or the
+/// camera's frame rate).
+fn luminaire_off_fractions(
+    depth: &ModulationDepths,
+    rig: &Rig,
+    chip_rates: Option<&[f64]>,
+) -> Result<Vec<f64>> {
+    let leds = u8::try_from(rig.leds.len())
+        .ok()
+        .filter(|&n| (1..=8).contains(&n))
+        .with_context(|| {
+            format!(
+                "--depth: a luminaire drives 1 to 8 LEDs, the rig has {}",
+                rig.leds.len()
+            )
+        })?;
+    let request = match depth {
+        ModulationDepths::Factory => None,
+        ModulationDepths::LowRiskAuto => Some(DepthRequest::Auto),
+        ModulationDepths::Depths(d) => {
+            Some(DepthRequest::Depths(d.iter().map(|&v| v as f32).collect()))
+        }
+        ModulationDepths::Full => Some(DepthRequest::Depths(vec![1.0])),
+        ModulationDepths::OffFractions(l) => return Ok(l.clone()),
+    };
+    let rate_hz = chip_rates
+        .and_then(|r| r.first().copied())
+        .unwrap_or(rig.camera.fps);
+    let config = settings::configure(
+        &settings::SettingsRequest {
+            leds,
+            rate_hz,
+            brightness: None,
+            phase: None,
+            depth: request.as_ref(),
+            allow_flicker: true,
+        },
+        &LuminaireConfig::DEFAULT,
+        &Spelling::CLI,
+    )?;
+    Ok(settings::off_fractions(&config))
 }
 
 /// Sets the rig camera's size to (width, height), keeping its field of view.

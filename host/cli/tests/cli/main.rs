@@ -12,6 +12,7 @@ mod decode_simulated;
 mod decode_start;
 mod decode_sweep;
 mod demo_end_to_end;
+mod depth_cli;
 mod device_cli;
 mod glossy_surfaces;
 mod integrate_diligent;

@@ -98,7 +98,12 @@ pub fn calibrate_lights(
         }
         let images = usable_led_images(d);
         let noise = level_noise(d);
-        let gains = led_noise_gains(&images, Some(&noise));
+        // An image brought to full depth carries its scale in its noise (crate::demod::depth).
+        let gains: Vec<f64> = led_noise_gains(&images, Some(&noise))
+            .into_iter()
+            .enumerate()
+            .map(|(i, g)| g.max(d.report.modulation.scale(i)))
+            .collect();
         let (sphere, region) = find_sphere(&images.images, &noise, nominal, diameter_mm / 2.0)
             .map_err(|e| match e {
                 CalibrateError::NoSphere(why) => {

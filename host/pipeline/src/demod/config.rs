@@ -85,6 +85,10 @@ pub struct DecodeConfig {
     /// How the timing fit finds its starting points.
     #[serde(default)]
     pub seeds: SeedMethod,
+    /// The modulation depths the luminaire played: each LED image is divided by 1 − ℓ_i
+    /// (its off chips' share of its on light) to its full-depth equivalent ([`super::depth`]).
+    #[serde(default)]
+    pub depths: super::depth::ModulationDepths,
 }
 
 /// How the timing fit finds its starting points.
@@ -129,6 +133,7 @@ impl Default for DecodeConfig {
             check_led_count: true,
             on_implausible: OnImplausible::Refuse,
             seeds: SeedMethod::Grid,
+            depths: super::depth::ModulationDepths::Full,
         }
     }
 }

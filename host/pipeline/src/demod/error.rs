@@ -76,6 +76,38 @@ pub enum DemodError {
         /// What to try.
         advice: String,
     },
+    /// A modulation depth outside (0, 1].
+    #[error("modulation depth {value} is outside (0, 1]")]
+    InvalidDepth {
+        /// The depth given.
+        value: f64,
+    },
+    /// An off fraction outside [0, 1).
+    #[error("off-chip light fraction {value} is outside [0, 1) (1 would leave no modulation)")]
+    InvalidOffFraction {
+        /// The fraction given.
+        value: f64,
+    },
+    /// Per-LED depths that do not match the LED count.
+    #[error(
+        "{given} modulation depths given for {leds} LEDs (give one for every LED or one per LED)"
+    )]
+    DepthCount {
+        /// Values given.
+        given: usize,
+        /// LEDs decoded.
+        leds: usize,
+    },
+    /// The largest low-risk depths need the chip rate, which the capture did not give.
+    #[error(
+        "the largest low-risk depths depend on the chip rate, and the decoded chip rate \
+         {chip_rate_hz} Hz is not one a luminaire plays (give the camera's frame rate, or the \
+         depths themselves)"
+    )]
+    DepthNeedsChipRate {
+        /// The chip rate the decode found (frame rate × rate ratio).
+        chip_rate_hz: f64,
+    },
     /// An image could not be assembled from the decoded values.
     #[error("cannot assemble the decoded images")]
     Shape(#[from] ndarray::ShapeError),

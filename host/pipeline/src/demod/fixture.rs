@@ -41,6 +41,7 @@ pub(crate) fn decoded(levels: Array2<f32>, noise: Array2<f32>) -> Decoded {
             verdict: Default::default(),
             room: Default::default(),
             compression: None,
+            modulation: Default::default(),
         },
     }
 }

@@ -61,6 +61,7 @@ mod basis;
 pub mod clipping;
 pub mod compression;
 pub mod config;
+pub mod depth;
 mod error;
 pub mod fit;
 #[cfg(test)]
@@ -86,6 +87,7 @@ pub mod waveform;
 mod window;
 
 pub use config::{DecodeConfig, Estimator, LedCount, Linearize, OnImplausible, Roi, SeedMethod};
+pub use depth::{ModulationDepths, ModulationReport};
 pub use error::DemodError;
 pub use matched::WindowAmplitudes;
 pub use quality::{FitQuality, LedQuality, Verdict, VerdictStatus};
@@ -182,10 +184,14 @@ pub fn decode(
         }
     }
     let mut decoded = finish(config, &format, decoder.roi, state)?;
+    // The compression is judged on the swing the video carries, before the depths scale it.
     if let Some(compression) = source.lossy_compression() {
         compression::check(&mut decoded.report, &format, &compression);
     }
-    apply_verdict(decoded, config.on_implausible)
+    apply_verdict(
+        to_full_depth(decoded, &config.depths)?,
+        config.on_implausible,
+    )
 }
 
 /// The error an LED count mismatch of a capture without a frame rate is reported as: room
@@ -278,7 +284,28 @@ pub fn decode_frames(
     };
     add_window(&decoder, &cropped, &config, &mut state)?;
     let decoded = finish(&config, &format, decoder.roi, state)?;
-    apply_verdict(decoded, config.on_implausible)
+    apply_verdict(
+        to_full_depth(decoded, &config.depths)?,
+        config.on_implausible,
+    )
+}
+
+/// `decoded` with each LED image (and its mean level) divided by 1 − ℓ_i, LED i's off chips'
+/// share of its on light, as `depths` gives them ([`depth`]); the scales in its report.
+fn to_full_depth(mut decoded: Decoded, depths: &ModulationDepths) -> Result<Decoded, DemodError> {
+    let report = &mut decoded.report;
+    let modulation = depth::resolve(depths, report.leds, report.chip_rate_hz)?;
+    for (i, image) in decoded.leds.images.iter_mut().enumerate() {
+        let scale = modulation.scale(i);
+        if scale != 1.0 {
+            image.mapv_inplace(|v| v * scale as f32);
+        }
+        if let Some(led) = report.per_led.get_mut(i) {
+            led.mean_level *= scale;
+        }
+    }
+    report.modulation = modulation;
+    Ok(decoded)
 }
 
 /// Adds one window of `frames` (cropped to the decoder's region) to `state`: `Ok(false)` when
@@ -596,6 +623,13 @@ fn validate(config: &DecodeConfig, format: &FrameFormat) -> Result<Roi, DemodErr
     {
         return invalid(format!("LED count {n} is outside 1..={MAX_LEDS}"));
     }
+    depth::check(
+        &config.depths,
+        match config.leds {
+            LedCount::Fixed(n) => Some(n),
+            LedCount::Auto => None,
+        },
+    )?;
     if let Some(r) = config.rate_ratio
         && !(r.is_finite() && r > 0.0)
     {
@@ -691,6 +725,8 @@ pub struct WindowDecode {
     pub quality: FitQuality,
     /// The window's verdict.
     pub verdict: Verdict,
+    /// The room's cause and the mains advice a refusal of this window names (first and last).
+    pub room_advice: (Option<String>, Option<String>),
     /// Row bands of the per-pixel fit.
     pub bands: usize,
     /// var(A_i) / σ² of the per-pixel fit, per LED (first band).
@@ -1110,18 +1146,27 @@ impl WindowDecoder {
             }
         };
         let mut verdict = quality::judge(&quality.leds, &fit);
-        if !verdict.is_plausible() {
-            if let Some(cause) = window.sample.nuisance().and_then(|n| n.describe()) {
-                verdict.advice.insert(
-                    0,
+        // What the room adds to the advice of a refusal (this window's, or the gains' over the
+        // windows, `finish`): its cause first, the mains advice last.
+        let room_advice = (
+            window
+                .sample
+                .nuisance()
+                .and_then(|n| n.describe())
+                .map(|cause| {
                     format!(
                         "the window holds the room's {cause}, projected out: switch the room \
-                         light off or run it from a steady supply, and lock the camera's exposure"
-                    ),
-                );
+                     light off or run it from a steady supply, and lock the camera's exposure"
+                    )
+                }),
+            self.mains_advice(leds, fit.model.timing.rate_ratio),
+        );
+        if !verdict.is_plausible() {
+            if let Some(advice) = &room_advice.0 {
+                verdict.advice.insert(0, advice.clone());
             }
-            if let Some(advice) = self.mains_advice(leds, fit.model.timing.rate_ratio) {
-                verdict.advice.push(advice);
+            if let Some(advice) = &room_advice.1 {
+                verdict.advice.push(advice.clone());
             }
         }
         let bands = if fit.rolling {
@@ -1157,6 +1202,7 @@ impl WindowDecoder {
             fit,
             quality,
             verdict,
+            room_advice,
             bands,
             variance_factors,
         }
@@ -1184,6 +1230,8 @@ struct Accumulated {
     fits: Vec<(TimingFit, FitQuality, usize)>,
     /// The verdict over the windows so far.
     verdict: Option<Verdict>,
+    /// The room advice of the windows so far ([`WindowDecode::room_advice`]), each once.
+    room_advice: (Vec<String>, Vec<String>),
     variance_factors: Vec<f64>,
     /// The room's nuisance components and timing breaks found so far.
     room: nuisance::RoomReport,
@@ -1246,6 +1294,14 @@ impl Accumulated {
             Some(v) => v.merge(&window.verdict),
             None => window.verdict,
         });
+        for (list, advice) in [
+            (&mut self.room_advice.0, window.room_advice.0),
+            (&mut self.room_advice.1, window.room_advice.1),
+        ] {
+            if let Some(advice) = advice.filter(|a| !list.contains(a)) {
+                list.push(advice);
+            }
+        }
         self.windows += 1;
         self.frames += count;
         self.fits.push((window.fit, window.quality, window.bands));
@@ -1296,6 +1352,13 @@ fn finish(
     let noise_power = stats.noise_power / valid_count;
     let median_noise = median_of_valid(&noise_values, valid);
     let (first_fit, first_quality, _) = &state.fits[0];
+    let gain_uncertainty = quality::combined_gain_uncertainty(
+        &state
+            .fits
+            .iter()
+            .map(|(_, q, _)| q.leds.iter().map(|l| l.gain_uncertainty).collect())
+            .collect::<Vec<_>>(),
+    );
     let per_led = (0..leds)
         .map(|i| {
             let mean_level = stats.level_sums[i] / valid_count;
@@ -1306,7 +1369,10 @@ fn finish(
                 phase_chips: first_fit.model.shifts[i],
                 mean_level,
                 snr_db: 20.0 * (mean_level.abs().max(1e-12) / amplitude_noise.max(1e-12)).log10(),
-                quality: first_quality.leds[i].clone(),
+                quality: LedQuality {
+                    gain_uncertainty: gain_uncertainty.get(i).copied().unwrap_or(0.0),
+                    ..first_quality.leds[i].clone()
+                },
             }
         })
         .collect();
@@ -1362,9 +1428,19 @@ fn finish(
         per_led,
         verdict: state
             .verdict
-            .unwrap_or_else(|| Verdict::from_findings(Vec::new(), Vec::new())),
+            .unwrap_or_else(|| Verdict::from_findings(Vec::new(), Vec::new()))
+            .merge(&{
+                let mut gains = quality::judge_gains(&gain_uncertainty);
+                if !gains.is_plausible() {
+                    let (first, last) = &state.room_advice;
+                    gains.advice.splice(0..0, first.iter().cloned());
+                    gains.advice.extend(last.iter().cloned());
+                }
+                gains
+            }),
         room: state.room,
         compression: None,
+        modulation: ModulationReport::default(),
     };
     Ok(Decoded {
         leds: LedImages { images },

@@ -27,7 +27,8 @@
 //!   again on the pixels kept. `changing_share` records what was set aside.
 //!
 //! A decode is implausible when an LED has no signal above noise, leaves a significant part of
-//! its modulation unexplained, or has a gain uncertain by more than [`MAX_GAIN_UNCERTAINTY`] (1σ), or when a fitted rolling-shutter line
+//! its modulation unexplained, or has a gain uncertain by more than [`MAX_GAIN_UNCERTAINTY`] (1σ,
+//! of the average over the decoding windows, [`judge_gains`]), or when a fitted rolling-shutter line
 //! delay is not supported by the data (it lowers the cost by fewer than [`RAMP_SIGNIFICANCE`]
 //! noise variances against the fit without it: a line delay can absorb a wrong exposure's
 //! misfit, which the unexplained energy alone does not reveal).
@@ -458,7 +459,46 @@ impl Parts {
     }
 }
 
-/// The verdict for one window's LED qualities and timing fit.
+/// Each LED's relative 1σ gain uncertainty of the average over windows whose own are
+/// `windows` (one entry per window, one value per LED): every window's timing is fitted on its
+/// own frames, so their gain errors are independent and the average's is √(Σ u_w²)/W.
+pub fn combined_gain_uncertainty(windows: &[Vec<f64>]) -> Vec<f64> {
+    let count = windows.len().max(1) as f64;
+    let leds = windows.iter().map(Vec::len).max().unwrap_or(0);
+    (0..leds)
+        .map(|i| {
+            let sum: f64 = windows
+                .iter()
+                .map(|w| w.get(i).copied().unwrap_or(0.0).powi(2))
+                .sum();
+            sum.sqrt() / count
+        })
+        .collect()
+}
+
+/// The verdict on the LEDs' gains of a decode averaged over windows: implausible when an LED's
+/// combined uncertainty ([`combined_gain_uncertainty`]) exceeds [`MAX_GAIN_UNCERTAINTY`].
+pub fn judge_gains(combined: &[f64]) -> Verdict {
+    let mut problems = Vec::new();
+    for (i, &u) in combined.iter().enumerate() {
+        if u > MAX_GAIN_UNCERTAINTY {
+            problems.push(format!(
+                "LED {}'s gain is only determined to ±{:.2} % (1σ) by this capture",
+                i + 1,
+                100.0 * u
+            ));
+        }
+    }
+    let advice = if problems.is_empty() {
+        Vec::new()
+    } else {
+        vec!["decode more frames, expose brighter or with less noise, or give the exposure".into()]
+    };
+    Verdict::from_findings(problems, advice)
+}
+
+/// The verdict for one window's LED qualities and timing fit (the gains are judged over the
+/// windows, [`judge_gains`]).
 pub fn judge(quality: &[LedQuality], fit: &TimingFit) -> Verdict {
     let mut problems = Vec::new();
     let mut advice = Vec::new();
@@ -488,13 +528,6 @@ pub fn judge(quality: &[LedQuality], fit: &TimingFit) -> Verdict {
                 "give the chip rate / rate ratio, exposure or rolling-shutter line time if known, \
                  and check the code-value linearisation (gamma)",
             );
-        }
-        if q.gain_uncertainty > MAX_GAIN_UNCERTAINTY {
-            problems.push(format!(
-                "LED {led}'s gain is only determined to ±{:.2} % (1σ) by this capture",
-                100.0 * q.gain_uncertainty
-            ));
-            advise("decode more frames, expose brighter or with less noise, or give the exposure");
         }
     }
     if fit.rate_at_limit {

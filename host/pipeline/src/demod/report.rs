@@ -1,6 +1,7 @@
 //! The decode report written as `decode.json`.
 
 use super::config::Estimator;
+use super::depth::ModulationReport;
 use super::nuisance::RoomReport;
 use super::quality::{LedQuality, Verdict};
 use serde::{Deserialize, Serialize};
@@ -16,7 +17,8 @@ pub struct LedReport {
     pub mean_level: f64,
     /// Signal-to-noise ratio of the LED image, 20·log10(mean level / RMS noise of A_i), dB.
     pub snr_db: f64,
-    /// How well the fitted waveform explains this LED (first window; the verdict covers all).
+    /// How well the fitted waveform explains this LED (first window, but the gain uncertainty
+    /// of the average over the windows; the verdict covers all).
     #[serde(default)]
     pub quality: LedQuality,
 }
@@ -93,6 +95,10 @@ pub struct DecodeReport {
     /// ([`super::compression`]); absent for uncompressed and lossless sources.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub compression: Option<meb_core::capture::LossyCompression>,
+    /// The modulation depths assumed and the scale each LED image was brought to full depth
+    /// with ([`super::depth`]; absent in older decodes: full depth).
+    #[serde(default)]
+    pub modulation: ModulationReport,
 }
 
 impl DecodeReport {

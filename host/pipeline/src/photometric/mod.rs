@@ -46,6 +46,12 @@ pub struct PhotometricConfig {
     pub min_lit_leds: usize,
     /// Automatic object mask settings (used when no mask is given).
     pub mask: MaskConfig,
+    /// Least noise gain of each LED image (empty: 1 for every LED, [`led_noise_gains`]): an
+    /// image brought to full depth by a factor 1/(1 − ℓ_i) carries at least that many times
+    /// the level noise. A reconstruction of a decoded capture sets it from the decode's
+    /// image scales.
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub noise_gain_floors: Vec<f64>,
 }
 
 impl Default for PhotometricConfig {
@@ -58,6 +64,7 @@ impl Default for PhotometricConfig {
             highlight_max_deg: default_highlight_max_deg(),
             min_lit_leds: 3,
             mask: MaskConfig::default(),
+            noise_gain_floors: Vec::new(),
         }
     }
 }

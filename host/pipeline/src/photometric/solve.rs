@@ -448,7 +448,11 @@ pub fn estimate_normals(
     config: &PhotometricConfig,
 ) -> Result<PhotometricResult, PhotometricError> {
     check_inputs(images, lights, mask, noise)?;
-    let gains = led_noise_gains(images, noise);
+    let gains: Vec<f64> = led_noise_gains(images, noise)
+        .into_iter()
+        .enumerate()
+        .map(|(i, g)| g.max(config.noise_gain_floors.get(i).copied().unwrap_or(1.0)))
+        .collect();
     let solver = PixelSolver::new(lights, config, gains.clone(), noise.is_some());
     let solved = solve_all(images, lights, mask, noise, &solver);
     let region = object_region(

@@ -40,6 +40,18 @@ impl<'a> Source<'a> {
         }
     }
 
+    /// Each LED image's least noise gain when a decode brought it to full depth (its image
+    /// scale 1/(1 − ℓ_i), `crate::demod::depth`); empty for LED images given as such or decoded
+    /// at full depth.
+    pub(super) fn noise_gain_floors(&self) -> Vec<f64> {
+        match self {
+            Source::Decoded(decoded) if !decoded.report.modulation.is_full_depth() => {
+                decoded.report.modulation.image_scale.clone()
+            }
+            _ => Vec::new(),
+        }
+    }
+
     /// The full frame's LED images and noise (borrowed where they are given).
     pub(super) fn full(&self) -> FullFrame<'a> {
         match *self {

@@ -376,6 +376,21 @@ pub fn reconstruct_extent(
     config: &ReconstructConfig,
     request: Request<'_>,
 ) -> Result<Extent, ReconstructError> {
+    // A decode brought to full depth carries its image scale in its noise.
+    let floors = source.noise_gain_floors();
+    let scaled;
+    let config = if floors.is_empty() {
+        config
+    } else {
+        scaled = ReconstructConfig {
+            photometric: PhotometricConfig {
+                noise_gain_floors: floors,
+                ..config.photometric.clone()
+            },
+            ..config.clone()
+        };
+        &scaled
+    };
     match request.region {
         Some(region) => region::in_region(source, region, rig, config, request).map(Extent::Region),
         None => reconstruct_inputs(
