@@ -195,7 +195,6 @@ pub fn decode_capture(
         None => anyhow::Error::new(e).context(format!("cannot decode {}", input.display())),
     })?;
     warn_if_overridden(&decoded.report);
-    note_if_rate_unknown(&decoded.report);
     Ok(decoded)
 }
 
@@ -300,5 +299,7 @@ pub fn run(args: &DecodeArgs) -> Result<()> {
         );
     }
     println!("wrote {}", out.display());
+    // After the folder is in place: a command that fails later keeps its one-line error.
+    note_if_rate_unknown(report);
     Ok(())
 }
