@@ -11,6 +11,7 @@
 //! * [`flicker`]: what the carriers do to the eye (IEEE 1789); [`led_waveform`]: the light an
 //!   LED emits over time, shared by the simulator and the virtual luminaire; [`mains`]: where
 //!   room-light flicker on 50/60 Hz mains falls among the carriers' lines.
+//! * [`stop`]: a stop request shared between threads (a live stream ended by an interrupt).
 //!
 //! Nothing here decodes, reconstructs or simulates: those are `meb-pipeline` and `meb-sim`,
 //! which both depend on this crate and never on each other.
@@ -30,5 +31,6 @@ pub mod mesh;
 pub mod metrics;
 pub mod rig;
 pub mod stats;
+pub mod stop;
 pub mod timing;
 pub mod types;

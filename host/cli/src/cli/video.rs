@@ -1,5 +1,15 @@
 //! `meb video`: a long or live capture → a 3-D frame per window (thesis Ch. 5), written as
 //! per-frame arrays, a colour-mapped depth video, a shaded-render video and `video.json`.
+//!
+//! A live input (`-`, a device, a FIFO: anything but a regular file or a frame folder) has no
+//! end of its own, so while its frames are processed the first SIGINT or SIGTERM ends the
+//! stream instead of discarding the run ([`meb_core::io::folder::on_first_interrupt`] sets a
+//! [`StopSignal`] that the pipeline's reader obeys): the windows already read are finished and
+//! the folder is written and committed as after a natural end, with `"end": "interrupted"`,
+//! and the command exits with status 0 when the result is otherwise accepted (a stop before the
+//! first whole window, or with every window failed, is an error as for any run). A second
+//! interrupt, an interrupt after the stream has ended, SIGHUP, and any interrupt of a file input
+//! discard the output as for every command.
 
 use super::decode::{DecodeOptions, open_options};
 use super::integrate::IntegratorArg;
@@ -7,7 +17,9 @@ use anyhow::{Context, Result, bail};
 use clap::{Args, ValueEnum};
 use indicatif::{ProgressBar, ProgressStyle};
 use meb_core::capture::open;
+use meb_core::io::on_first_interrupt;
 use meb_core::rig::Rig;
+use meb_core::stop::StopSignal;
 use meb_pipeline::reconstruct::LightModel;
 use meb_pipeline::video::encode::VideoContainer;
 use meb_pipeline::video::output::{OutputOptions, VideoOutput};
@@ -15,9 +27,9 @@ use meb_pipeline::video::truth::TruthFolder;
 use meb_pipeline::video::writer::OutputThread;
 use meb_pipeline::video::{
     EndKind, FrameStatus, MotionConfig, MotionPolicy, TruthSource, VideoConfig, VideoFrame,
-    WindowSchedule, process,
+    WindowSchedule, process_until,
 };
-use std::path::PathBuf;
+use std::path::{Path, PathBuf};
 
 /// Arguments of `meb video`.
 #[derive(Args)]
@@ -67,8 +79,9 @@ pub struct VideoArgs {
     /// Write animated PNGs instead of MP4 (the default when FFmpeg is missing).
     #[arg(long)]
     apng: bool,
-    /// Stop after this many camera frames (a live stream: the output folder is put in place
-    /// when the stream ends; an interrupt discards it, as for every command).
+    /// Stop after this many camera frames. A live stream (`-`, a device, a FIFO) may also be
+    /// ended with Ctrl-C: the first interrupt ends the stream and the output folder is written
+    /// and put in place as at its end; a second one discards it (as any interrupt of a file).
     #[arg(long)]
     max_frames: Option<usize>,
     /// Bin every camera frame into BIN×BIN pixel blocks before decoding: 3-D frames of 1/BIN
@@ -176,11 +189,26 @@ pub fn run(args: &VideoArgs) -> Result<()> {
     );
     let started = std::time::Instant::now();
     let mut done = 0usize;
-    let summary = process(
+    // While a live stream runs, its first interrupt ends it (module docs).
+    let stop = StopSignal::new();
+    let interrupt_hook = is_live(&args.input).then(|| {
+        let (stop, bar) = (stop.clone(), bar.clone());
+        on_first_interrupt(move |_| {
+            bar.suspend(|| {
+                eprintln!(
+                    "interrupted: the stream ends here and what was read is written; a second \
+                     interrupt discards the output"
+                );
+            });
+            stop.stop();
+        })
+    });
+    let summary = process_until(
         source,
         &rig,
         &config,
         truth.as_mut().map(|t| t as &mut dyn TruthSource),
+        &stop,
         &mut |frame: &VideoFrame| {
             output.add(frame)?;
             done += 1;
@@ -194,6 +222,8 @@ pub fn run(args: &VideoArgs) -> Result<()> {
             Ok(())
         },
     );
+    // The stream has ended: from here on an interrupt discards the output.
+    drop(interrupt_hook);
     bar.finish_and_clear();
     let summary =
         summary.with_context(|| format!("cannot make a 3-D video of {}", args.input.display()))?;
@@ -256,6 +286,14 @@ pub fn run(args: &VideoArgs) -> Result<()> {
         );
     }
     Ok(())
+}
+
+/// Whether `input` is a live stream, which an interrupt ends instead of discarding the run:
+/// standard input, or anything that is neither a regular file nor a frame folder (a device, a
+/// FIFO, a socket).
+fn is_live(input: &Path) -> bool {
+    meb_core::capture::stdin::is_stdin(input)
+        || std::fs::metadata(input).is_ok_and(|m| !m.is_file() && !m.is_dir())
 }
 
 /// The progress bar's message: 3-D frames done and their rate, and the last one's state.

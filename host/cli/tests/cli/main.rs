@@ -34,3 +34,4 @@ mod tof_hybrid;
 mod tof_range;
 mod video_cli;
 mod video_fallback;
+mod video_interrupt;

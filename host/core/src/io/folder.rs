@@ -19,6 +19,14 @@
 //!    for SIGINT, SIGTERM and SIGHUP, leaving the previous output untouched. A process killed
 //!    outright leaves its temporary folder behind, unlocked: the next run into the same
 //!    destination deletes it.
+//!
+//! One exception, for a command that records a live stream (`meb video -`): while it holds an
+//! [`InterruptHook`] from [`on_first_interrupt`], the first SIGINT or SIGTERM does not delete
+//! anything; the signal thread calls the hook instead (which ends the stream, e.g. through a
+//! [`crate::stop::StopSignal`]) and the command goes on to finish and commit its folder as after
+//! a natural end. A second SIGINT or SIGTERM, or any SIGHUP, deletes the temporary folders and
+//! ends the process as before; so does the first interrupt once the hook is dropped (the stream
+//! has ended). The hook is the one place that decides: no stage polls for signals.
 
 use super::FilesError;
 use std::fs::File;
@@ -373,9 +381,72 @@ fn exchange_in_two_steps(a: &Path, b: &Path) -> std::io::Result<()> {
     std::fs::rename(&aside, a)
 }
 
+/// What the first SIGINT or SIGTERM calls instead of ending the process ([`on_first_interrupt`]).
+type FirstInterrupt = Box<dyn FnOnce(i32) + Send>;
+
+/// The registered first-interrupt hook and the id of its [`InterruptHook`].
+static FIRST_INTERRUPT: Mutex<Option<(u64, FirstInterrupt)>> = Mutex::new(None);
+
+/// Ids of [`InterruptHook`]s.
+static NEXT_HOOK: std::sync::atomic::AtomicU64 = std::sync::atomic::AtomicU64::new(0);
+
+fn first_interrupt() -> MutexGuard<'static, Option<(u64, FirstInterrupt)>> {
+    FIRST_INTERRUPT
+        .lock()
+        .unwrap_or_else(std::sync::PoisonError::into_inner)
+}
+
+/// A registered first-interrupt hook ([`on_first_interrupt`]); dropping it unregisters the hook
+/// if it has not run, so the next interrupt deletes the temporary folders again.
+#[derive(Debug)]
+#[must_use = "the hook is unregistered when this is dropped"]
+pub struct InterruptHook {
+    id: u64,
+}
+
+impl Drop for InterruptHook {
+    fn drop(&mut self) {
+        let mut slot = first_interrupt();
+        if slot.as_ref().is_some_and(|(id, _)| *id == self.id) {
+            *slot = None;
+        }
+    }
+}
+
+/// Makes the next SIGINT or SIGTERM call `hook` (with the signal's number, on the signal
+/// thread) instead of deleting the temporary folders and ending the process (module docs); the
+/// interrupt after it does both as usual. The hook runs at most once, must not block, and is
+/// registered until the returned [`InterruptHook`] is dropped; a later registration replaces
+/// an earlier one. Without [`remove_temporaries_on_signal`] installed it is never called.
+pub fn on_first_interrupt(hook: impl FnOnce(i32) + Send + 'static) -> InterruptHook {
+    let id = NEXT_HOOK.fetch_add(1, std::sync::atomic::Ordering::Relaxed);
+    *first_interrupt() = Some((id, Box::new(hook)));
+    InterruptHook { id }
+}
+
+/// Runs and unregisters the first-interrupt hook for `signal` when there is one and the signal
+/// is SIGINT or SIGTERM; whether it did (else the signal ends the process).
+#[cfg(unix)]
+fn divert_to_hook(signal: i32) -> bool {
+    use signal_hook::consts::{SIGINT, SIGTERM};
+    if signal != SIGINT && signal != SIGTERM {
+        return false;
+    }
+    // Taken out before it runs: a hook that blocks cannot hold up the next signal's lock.
+    let hook = first_interrupt().take();
+    match hook {
+        Some((_, hook)) => {
+            hook(signal);
+            true
+        }
+        None => false,
+    }
+}
+
 /// Installs a handler that deletes this process's uncommitted output folders on SIGINT,
 /// SIGTERM and SIGHUP and then lets the signal take its default effect (the process ends with
-/// it). Call once, early in `main`.
+/// it, i.e. exit status 128 + the signal in a shell), except for a first interrupt that an
+/// [`on_first_interrupt`] hook takes. Call once, early in `main`.
 pub fn remove_temporaries_on_signal() -> std::io::Result<()> {
     #[cfg(unix)]
     {
@@ -384,7 +455,10 @@ pub fn remove_temporaries_on_signal() -> std::io::Result<()> {
         std::thread::Builder::new()
             .name("meb-signal-cleanup".into())
             .spawn(move || {
-                if let Some(signal) = signals.forever().next() {
+                for signal in signals.forever() {
+                    if divert_to_hook(signal) {
+                        continue;
+                    }
                     let mut pending = pending();
                     for path in pending.drain(..) {
                         let _ = std::fs::remove_dir_all(&path);
@@ -491,6 +565,41 @@ mod tests {
         other.commit().unwrap();
         live.commit().unwrap();
         assert_eq!(names(tmp.path()), ["out"]);
+    }
+
+    #[cfg(unix)]
+    #[test]
+    fn a_first_interrupt_hook_takes_one_interrupt_until_dropped() {
+        use signal_hook::consts::{SIGHUP, SIGINT, SIGTERM};
+        use std::sync::Arc;
+        use std::sync::atomic::{AtomicI32, Ordering};
+        assert!(
+            !divert_to_hook(SIGINT),
+            "no hook: the signal ends the process"
+        );
+        let seen = Arc::new(AtomicI32::new(0));
+        let hook = {
+            let seen = seen.clone();
+            on_first_interrupt(move |signal| seen.store(signal, Ordering::SeqCst))
+        };
+        assert!(!divert_to_hook(SIGHUP), "a hang-up is never diverted");
+        assert!(divert_to_hook(SIGTERM));
+        assert_eq!(seen.load(Ordering::SeqCst), SIGTERM);
+        assert!(
+            !divert_to_hook(SIGINT),
+            "the second interrupt ends the process"
+        );
+        drop(hook);
+        // A dropped hook no longer takes the first interrupt, and dropping an old guard does
+        // not unregister a newer hook.
+        let old = on_first_interrupt(|_| {});
+        drop(old);
+        assert!(!divert_to_hook(SIGINT));
+        let old = on_first_interrupt(|_| {});
+        let new = on_first_interrupt(|_| {});
+        drop(old);
+        assert!(divert_to_hook(SIGINT));
+        drop(new);
     }
 
     #[test]

@@ -14,7 +14,9 @@ pub mod mask;
 pub mod npy;
 pub mod preview;
 
-pub use folder::{OutputFolder, Replace, remove_temporaries_on_signal};
+pub use folder::{
+    InterruptHook, OutputFolder, Replace, on_first_interrupt, remove_temporaries_on_signal,
+};
 pub use mask::{read_mask, write_mask};
 pub use npy::{read_exact, read_float, write_npy, write_npy_synced};
 

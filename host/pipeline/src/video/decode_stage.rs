@@ -340,6 +340,7 @@ pub(super) fn too_short(
 ) -> VideoError {
     let cut = match stream.take_end() {
         Some(StreamEnd::Cut(error)) => Some(error.to_string()),
+        Some(StreamEnd::Stopped) => Some("an interrupt ended the stream".into()),
         _ => None,
     };
     VideoError::ClipTooShort {

@@ -36,6 +36,12 @@
 //! is recorded as failed with the reason and the video goes on; a run in which no window
 //! succeeds is an error. A stream that ends inside a frame ends the video after the windows
 //! before the cut, and [`VideoSummary::input_error`] says where.
+//!
+//! A live stream has no end of its own: [`process_until`] also ends it when a
+//! [`StopSignal`] is set (the CLI sets it on the first interrupt; this crate handles no
+//! signal). The reader takes no frame after it, the windows the frames already read complete
+//! are processed, and the run ends as at a natural end, with [`EndKind::Interrupted`]
+//! ([`stream`]).
 
 pub mod carry;
 mod decode_stage;
@@ -78,6 +84,7 @@ use meb_core::capture::binning::BinnedSource;
 use meb_core::capture::{CaptureError, FrameSource};
 use meb_core::metrics::{MetricsError, score_depth};
 use meb_core::rig::Rig;
+use meb_core::stop::StopSignal;
 use meb_core::timing::StageTiming;
 use serde::{Deserialize, Serialize};
 use std::ops::Range;
@@ -223,6 +230,23 @@ pub fn process(
     truth: Option<&mut dyn TruthSource>,
     sink: &mut dyn FnMut(&VideoFrame) -> Result<(), VideoError>,
 ) -> Result<VideoSummary, VideoError> {
+    process_until(source, rig, config, truth, &StopSignal::new(), sink)
+}
+
+/// [`process`] over a stream that also ends when `stop` is set (a live stream ended by the
+/// user): the reader takes no frame after it, the windows that the frames already read
+/// complete are processed (a window they leave incomplete is dropped) and the summary's `end`
+/// is [`EndKind::Interrupted`]; a stop before the first window is whole is
+/// [`VideoError::ClipTooShort`]. `stop` may be set from any thread at any time, also while the
+/// reader is blocked waiting for a frame that never comes ([`stream`]).
+pub fn process_until(
+    source: Box<dyn FrameSource>,
+    rig: &Rig,
+    config: &VideoConfig,
+    truth: Option<&mut dyn TruthSource>,
+    stop: &StopSignal,
+    sink: &mut dyn FnMut(&VideoFrame) -> Result<(), VideoError>,
+) -> Result<VideoSummary, VideoError> {
     let started = Instant::now();
     if rig.leds.len() < 3 {
         return Err(VideoError::Rig(format!(
@@ -274,7 +298,7 @@ pub fn process(
     let read_ahead = config
         .read_ahead
         .unwrap_or(schedule.hop.min(schedule.window));
-    let stream = FrameStream::new(source, read_ahead, config.max_frames)?;
+    let stream = FrameStream::until(source, read_ahead, config.max_frames, stop)?;
     let code_map = CodeMap::new(&format, config.decode.linearize).map_err(VideoError::Decode)?;
     let mut summary = VideoSummary {
         camera_frames: 0,
@@ -380,6 +404,7 @@ pub fn process(
             summary.input_error = Some(error.to_string());
         }
         Some(StreamEnd::Limit) => summary.end = EndKind::Limit,
+        Some(StreamEnd::Stopped) => summary.end = EndKind::Interrupted,
         Some(StreamEnd::Complete) | None => {}
     }
     if summary.reconstructed == 0 && summary.failed > 0 {

@@ -206,6 +206,9 @@ pub enum EndKind {
     Cut,
     /// The frame limit was reached.
     Limit,
+    /// A stop request ended a live stream ([`super::process_until`]; `meb video`: the first
+    /// interrupt).
+    Interrupted,
 }
 
 /// The outcome of a run.

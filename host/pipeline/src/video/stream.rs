@@ -12,10 +12,23 @@
 //!
 //! Requests must move forward in time: [`FrameStream::window`] may not ask for a frame it has
 //! already dropped.
+//!
+//! A live stream has no end of its own: [`FrameStream::until`] ends it when a [`StopSignal`] is
+//! set (the CLI sets it on the first interrupt). The reader takes no frame after the request
+//! (it looks at it before each read); the frames it had already read are still handed out, so a
+//! window that they complete is decoded; then the stream ends with [`StreamEnd::Stopped`] as
+//! if the source had ended. The reader may then be blocked in a `read()` that will not return
+//! (standard input with nothing coming): the consumer does not wait for it. The stop's waker
+//! posts a wake-up message into the channel, so a consumer asleep on the channel wakes at
+//! once, and a consumer that sees the request takes only what is already queued. The blocked
+//! reader thread is left behind, detached; it holds nothing but the source and ends with the
+//! process (or at its next frame, which it drops).
 
 use meb_core::capture::{CaptureError, Frame, FrameFormat, FrameSource, Samples};
+use meb_core::stop::StopSignal;
 use std::collections::VecDeque;
 use std::ops::Range;
+use std::sync::Arc;
 use std::sync::mpsc::{Receiver, Sender, SyncSender, channel, sync_channel};
 use std::time::{Duration, Instant};
 
@@ -28,6 +41,21 @@ pub enum StreamEnd {
     Cut(CaptureError),
     /// The frame limit was reached.
     Limit,
+    /// The stop request ended the stream ([`FrameStream::until`]); a read error after it is
+    /// put down to the stop (the pipe feeding a live stream is cut by the same interrupt).
+    Stopped,
+}
+
+/// What the reader thread hands over.
+enum Message {
+    /// The next frame.
+    Frame(Frame),
+    /// The source failed; nothing follows.
+    Failed(CaptureError),
+    /// The source has no more frames.
+    End,
+    /// The stop request (posted by its waker, not by the reader).
+    Stopped,
 }
 
 /// A window's frames in the ring.
@@ -42,7 +70,7 @@ pub struct WindowFrames<'a> {
 /// Frames of a source streamed into windows (module docs).
 pub struct FrameStream {
     format: FrameFormat,
-    receiver: Receiver<Result<Frame, CaptureError>>,
+    receiver: Receiver<Message>,
     /// Storage of dropped frames, back to the reader for reuse.
     recycle: Sender<Samples>,
     ring: VecDeque<Samples>,
@@ -51,6 +79,7 @@ pub struct FrameStream {
     /// Frames received so far (stream index of the next one).
     received: usize,
     limit: Option<usize>,
+    stop: StopSignal,
     end: Option<StreamEnd>,
     waited: Duration,
     total_hint: Option<usize>,
@@ -64,6 +93,16 @@ impl FrameStream {
         read_ahead: usize,
         limit: Option<usize>,
     ) -> Result<Self, CaptureError> {
+        Self::until(source, read_ahead, limit, &StopSignal::new())
+    }
+
+    /// [`Self::new`] for a stream that also ends when `stop` is set (module docs).
+    pub fn until(
+        source: Box<dyn FrameSource>,
+        read_ahead: usize,
+        limit: Option<usize>,
+        stop: &StopSignal,
+    ) -> Result<Self, CaptureError> {
         let format = source.format().clone();
         let total_hint = match (source.frame_count_hint(), limit) {
             (Some(n), Some(l)) => Some(n.min(l)),
@@ -72,10 +111,21 @@ impl FrameStream {
         };
         let (sender, receiver) = sync_channel(read_ahead.max(1));
         let (recycle, recycled) = channel();
+        // The reader owns the only strong reference to the sender, so the channel still hangs
+        // up when the reader ends; the waker posts through a weak one while the reader lives
+        // (never blocking: a full channel wakes the consumer by itself).
+        let sender = Arc::new(sender);
+        let waker = Arc::downgrade(&sender);
+        let reader_stop = stop.clone();
         std::thread::Builder::new()
             .name("meb-video-reader".into())
-            .spawn(move || read_frames(source, &sender, &recycled, limit))
+            .spawn(move || read_frames(source, &sender, &recycled, limit, &reader_stop))
             .map_err(|e| CaptureError::Other(format!("cannot start the frame reader: {e}")))?;
+        stop.on_stop(move || {
+            if let Some(sender) = waker.upgrade() {
+                let _ = sender.try_send(Message::Stopped);
+            }
+        });
         Ok(Self {
             format,
             receiver,
@@ -84,6 +134,7 @@ impl FrameStream {
             ring_start: 0,
             received: 0,
             limit,
+            stop: stop.clone(),
             end: None,
             waited: Duration::ZERO,
             total_hint,
@@ -181,11 +232,18 @@ impl FrameStream {
             self.end = Some(StreamEnd::Limit);
             return Ok(None);
         }
-        let started = Instant::now();
-        let message = self.receiver.recv();
-        self.waited += started.elapsed();
+        let message = if self.stop.is_stopped() {
+            // Only what the reader has already read; its next read may never return.
+            self.receiver.try_recv().unwrap_or(Message::Stopped)
+        } else {
+            let started = Instant::now();
+            let message = self.receiver.recv();
+            self.waited += started.elapsed();
+            // A reader gone without a word (it panicked) ends the stream as before.
+            message.unwrap_or(Message::End)
+        };
         match message {
-            Ok(Ok(frame)) => {
+            Message::Frame(frame) => {
                 if frame.samples.len() != self.format.pixels() {
                     self.end = Some(StreamEnd::Cut(CaptureError::Other(format!(
                         "frame {} has {} samples, expected {}x{}",
@@ -198,11 +256,20 @@ impl FrameStream {
                 }
                 Ok(Some(frame.samples))
             }
-            Ok(Err(error)) => {
+            Message::Failed(_) | Message::Stopped if self.stop.is_stopped() => {
+                self.end = Some(StreamEnd::Stopped);
+                Ok(None)
+            }
+            Message::Failed(error) => {
                 self.end = Some(StreamEnd::Cut(error));
                 Ok(None)
             }
-            Err(_) => {
+            // A stale wake-up cannot come without the request; ended all the same.
+            Message::Stopped => {
+                self.end = Some(StreamEnd::Stopped);
+                Ok(None)
+            }
+            Message::End => {
                 self.end = Some(StreamEnd::Complete);
                 Ok(None)
             }
@@ -211,24 +278,25 @@ impl FrameStream {
 }
 
 /// The reader thread: frames into the channel until the source ends, fails, reaches
-/// `limit`, or the consumer hangs up; each frame is read into the storage of a dropped one
-/// from `recycled` when there is one.
+/// `limit`, `stop` is set (looked at before each read) or the consumer hangs up; each frame is
+/// read into the storage of a dropped one from `recycled` when there is one.
 fn read_frames(
     mut source: Box<dyn FrameSource>,
-    sender: &SyncSender<Result<Frame, CaptureError>>,
+    sender: &SyncSender<Message>,
     recycled: &Receiver<Samples>,
     limit: Option<usize>,
+    stop: &StopSignal,
 ) {
     let mut read = 0usize;
-    while limit.is_none_or(|limit| read < limit) {
+    while limit.is_none_or(|limit| read < limit) && !stop.is_stopped() {
         let mut samples = recycled.try_recv().unwrap_or(Samples::U8(Vec::new()));
         let message = match source.read_frame_into(&mut samples) {
-            Ok(Some(index)) => Ok(Frame { index, samples }),
-            Ok(None) => return,
-            Err(error) => Err(error),
+            Ok(Some(index)) => Message::Frame(Frame { index, samples }),
+            Ok(None) => Message::End,
+            Err(error) => Message::Failed(error),
         };
-        let failed = message.is_err();
-        if sender.send(message).is_err() || failed {
+        let last = !matches!(message, Message::Frame(_));
+        if sender.send(message).is_err() || last {
             return;
         }
         read += 1;
@@ -346,6 +414,103 @@ mod tests {
         let made = allocations.load(std::sync::atomic::Ordering::Relaxed);
         // One window in the ring, the read-ahead in the channel, one being read.
         assert!(made <= 8 + 4 + 2, "{made} frames allocated for 192 read");
+    }
+
+    /// A source that delivers `frames` frames and then, in its next read, says so on `blocked`
+    /// and blocks until `release` hangs up, like standard input with nothing coming.
+    struct BlockingSource {
+        format: FrameFormat,
+        next: usize,
+        frames: usize,
+        blocked: std::sync::mpsc::Sender<()>,
+        release: std::sync::mpsc::Receiver<()>,
+    }
+
+    impl FrameSource for BlockingSource {
+        fn format(&self) -> &FrameFormat {
+            &self.format
+        }
+
+        fn next_frame(&mut self) -> Result<Option<Frame>, CaptureError> {
+            if self.next == self.frames {
+                let _ = self.blocked.send(());
+                let _ = self.release.recv();
+                return Ok(None);
+            }
+            self.next += 1;
+            Ok(Some(Frame {
+                index: self.next - 1,
+                samples: Samples::U8(vec![(self.next - 1) as u8, 0]),
+            }))
+        }
+    }
+
+    /// A stream of ten frames whose reader then blocks; the receiver says when it does, the
+    /// sender releases it when dropped.
+    fn blocking_stream(
+        stop: &StopSignal,
+    ) -> (
+        FrameStream,
+        std::sync::mpsc::Receiver<()>,
+        std::sync::mpsc::Sender<()>,
+    ) {
+        let (blocked, is_blocked) = std::sync::mpsc::channel();
+        let (release, released) = std::sync::mpsc::channel();
+        let source = BlockingSource {
+            format: FrameFormat::full_range(2, 1, 8, 100.0),
+            next: 0,
+            frames: 10,
+            blocked,
+            release: released,
+        };
+        let stream = FrameStream::until(Box::new(source), 16, None, stop).unwrap();
+        (stream, is_blocked, release)
+    }
+
+    #[test]
+    fn a_stop_hands_out_the_frames_already_read_and_then_ends_the_stream() {
+        let stop = StopSignal::new();
+        let (mut stream, is_blocked, release) = blocking_stream(&stop);
+        // All ten frames are queued and the reader waits in its eleventh read.
+        is_blocked.recv().unwrap();
+        stop.stop();
+        assert_eq!(
+            first_samples(&stream.window(2..8).unwrap().unwrap()),
+            vec![2, 3, 4, 5, 6, 7]
+        );
+        assert!(stream.window(6..12).unwrap().is_none());
+        assert!(matches!(stream.end(), Some(StreamEnd::Stopped)));
+        assert_eq!(stream.received(), 10);
+        drop(release);
+    }
+
+    #[test]
+    fn a_stop_wakes_a_consumer_waiting_on_a_blocked_reader() {
+        let stop = StopSignal::new();
+        let (mut stream, _is_blocked, release) = blocking_stream(&stop);
+        assert!(stream.window(0..10).unwrap().is_some());
+        // The consumer waits for frame 10, which never comes, until the stop wakes it from
+        // another thread (the signal thread in `meb video`).
+        let stopper = stop.clone();
+        let stopping = std::thread::spawn(move || {
+            std::thread::sleep(Duration::from_millis(50));
+            stopper.stop();
+        });
+        assert!(stream.window(8..12).unwrap().is_none());
+        assert!(matches!(stream.end(), Some(StreamEnd::Stopped)));
+        assert_eq!(stream.received(), 10);
+        stopping.join().unwrap();
+        drop(release);
+    }
+
+    #[test]
+    fn a_stop_before_the_stream_starts_ends_it_at_once() {
+        let stop = StopSignal::new();
+        stop.stop();
+        let mut stream = FrameStream::until(source(100), 4, None, &stop).unwrap();
+        assert!(stream.window(0..8).unwrap().is_none());
+        assert!(matches!(stream.end(), Some(StreamEnd::Stopped)));
+        assert!(stream.received() < 8);
     }
 
     #[test]
