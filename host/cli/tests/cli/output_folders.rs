@@ -12,7 +12,7 @@ use std::process::{Child, Command, Stdio};
 use std::time::{Duration, Instant};
 
 use crate::common;
-use common::{OUT_OF_PLANE_LEDS, meb, rig_toml, run_ok};
+use common::{OUT_OF_PLANE_LEDS, meb, names, rig_toml, run_ok};
 
 fn s(path: &Path) -> String {
     path.display().to_string()
@@ -23,16 +23,6 @@ fn run_err(args: &[&str]) -> String {
     let out = meb(args);
     assert!(!out.status.success(), "meb {args:?} should fail");
     String::from_utf8_lossy(&out.stderr).trim().to_string()
-}
-
-/// Names in `dir`, sorted.
-fn names(dir: &Path) -> Vec<String> {
-    let mut names: Vec<String> = std::fs::read_dir(dir)
-        .unwrap()
-        .map(|e| e.unwrap().file_name().to_string_lossy().into_owned())
-        .collect();
-    names.sort();
-    names
 }
 
 /// Temporary output folders (`.NAME.meb-partial-…`) in `dir`.

@@ -13,7 +13,7 @@ use std::sync::mpsc::{Receiver, Sender, channel};
 use std::time::{Duration, Instant};
 
 use crate::common;
-use common::{dynamic_rig, run_ok};
+use common::{dynamic_rig, names, run_ok};
 
 /// How long any wait on `meb` may take (debug builds on a busy machine are slow).
 const PATIENCE: Duration = Duration::from_secs(240);
@@ -23,16 +23,6 @@ const ENDED: &str = "interrupted: the stream ends here";
 
 fn s(path: &Path) -> String {
     path.display().to_string()
-}
-
-/// Names in `dir`, sorted.
-fn names(dir: &Path) -> Vec<String> {
-    let mut names: Vec<String> = std::fs::read_dir(dir)
-        .unwrap()
-        .map(|e| e.unwrap().file_name().to_string_lossy().into_owned())
-        .collect();
-    names.sort();
-    names
 }
 
 /// Temporary output folders (`.NAME.meb-partial-…`) in `dir`.
