@@ -14,7 +14,10 @@
 //!    highlight — the LED reading most above its prediction from the others whose half vector
 //!    lies near their normal — and is tested again while four or more LEDs remain
 //!    ([`super::highlights`]). A highlight is tested first because its excess can tilt G away
-//!    from the camera or from LEDs that do light the pixel.
+//!    from the camera or from LEDs that do light the pixel. Within an LED's lobe a smaller
+//!    excess suffices (a highlight's tail, [`PixelSolver::visible_highlight`]): 3σ above the
+//!    others' prediction with a model error of 1 %, and the same χ² test with that model
+//!    error rejects highlights (never shadows).
 //! 4. A solution facing away from the camera is contradictory. Lit LEDs it says cannot light the
 //!    pixel (n·L_i ≤ 0) are dropped and the pixel solved again.
 //! 5. A pixel that failed step 3 without a highlight loses the LED that reads most below its
@@ -189,16 +192,29 @@ impl PixelSolver {
             let variance = |i: usize| {
                 sigma_of(i).powi(2) + (f64::from(self.config.model_error) * a[i]).powi(2)
             };
-            // The outlier an inconsistent fit blames (steps 3 and 5), when it can be tested.
-            let inconsistent = statistical && lit >= 4 && !dropped_shadow && {
+            let testable = statistical && lit >= 4 && !dropped_shadow;
+            let strict = |i: usize| {
+                sigma_of(i).powi(2) + (super::highlights::HIGHLIGHT_MODEL_ERROR * a[i]).powi(2)
+            };
+            let chi2_above = |variance: &dyn Fn(usize) -> f64| {
                 let chi2: f64 = members(bits)
                     .map(|i| (a[i] - g.dot(&l[i])).powi(2) / variance(i))
                     .sum();
                 // Every lit LED has a gain (its σ was read above), so lit − 3 < gains + 1.
                 chi2 > self.chi2_limit[lit - 3]
             };
-            let outlier = if inconsistent {
+            // The outlier the fit blames (steps 3 and 5), when it can be tested: a highlight seen
+            // from the others; else the outlier of a fit inconsistent within the model error; else
+            // a highlight's tail, consistent within the model error but not within the noise.
+            let outlier = if !testable {
+                None
+            } else if let Some(found) = self.visible_highlight(a, l, v, bits, &sigma_of, &strict) {
+                Some(found)
+            } else if chi2_above(&variance) {
                 self.outlier(a, l, v, bits, &variance)
+            } else if chi2_above(&strict) {
+                self.outlier(a, l, v, bits, &strict)
+                    .filter(|o| matches!(o, Outlier::Highlight(_)))
             } else {
                 None
             };
@@ -281,6 +297,55 @@ impl PixelSolver {
         highlight
             .map(|(_, i)| Outlier::Highlight(i))
             .or(shadow.map(|(_, i)| Outlier::Shadow(i)))
+    }
+
+    /// A highlight's tail (step 3 of the module docs): an LED whose half vector lies within
+    /// `highlight_max_deg` of the others' normal and that reads more than [`HIGHLIGHT_SIGMAS`]
+    /// above their prediction, against its own noise with
+    /// [`super::highlights::HIGHLIGHT_MODEL_ERROR`] (`strict`) and the prediction's (the
+    /// others' σ carried through the solve). A glossy lobe's tail stays within the consistency
+    /// test's 3 % model error and 3.7σ quantile, yet reads above the Lambertian model in every
+    /// pixel of a ring around the highlight and tilts all their normals the same way; only in
+    /// an LED's lobe is so small an excess taken for a highlight. Of several, the one whose
+    /// half vector lies nearest the normal.
+    fn visible_highlight(
+        &self,
+        a: &[f64],
+        l: &[Vector3<f64>],
+        v: &Vector3<f64>,
+        bits: usize,
+        sigma_of: &dyn Fn(usize) -> f64,
+        strict: &dyn Fn(usize) -> f64,
+    ) -> Option<Outlier> {
+        let cos_max = f64::from(self.config.highlight_max_deg).to_radians().cos();
+        let mut best: Option<(f64, usize)> = None;
+        for i in members(bits) {
+            let others = bits & !(1 << i);
+            let Some(inv) = self.inverse(l, others) else {
+                continue;
+            };
+            let g = inv * self.weighted_sum(a, l, others);
+            let (Some(n), Some(h)) = (
+                g.try_normalize(0.0),
+                (l[i].normalize() + v).try_normalize(0.0),
+            ) else {
+                continue;
+            };
+            let cos = n.dot(&h);
+            if cos < cos_max {
+                continue;
+            }
+            // The prediction L_i·G = Σ_k w_k (L_iᵀ M⁻¹ L_k) A_k over the others.
+            let q = inv * l[i];
+            let predicted_variance: f64 = members(others)
+                .map(|k| (self.weights[k] * q.dot(&l[k]) * sigma_of(k)).powi(2))
+                .sum();
+            let deviation = (a[i] - g.dot(&l[i])) / (strict(i) + predicted_variance).sqrt();
+            if deviation > HIGHLIGHT_SIGMAS && best.is_none_or(|(c, _)| cos > c) {
+                best = Some((cos, i));
+            }
+        }
+        best.map(|(_, i)| Outlier::Highlight(i))
     }
 
     /// Σ_{i∈bits} w_i A_i L_i, the right-hand side of the normal equations.
@@ -366,6 +431,12 @@ fn normal_matrix(l: &[Vector3<f64>], weights: &[f64], bits: usize) -> [f64; 6] {
             ]
         })
 }
+
+/// Deviations (in σ of the reading and its prediction) by which an LED whose half vector lies
+/// near the others' normal must read above their prediction to be a highlight without a
+/// failed consistency test ([`PixelSolver::visible_highlight`]): a false rejection in about
+/// 10³ such readings of a matte surface.
+const HIGHLIGHT_SIGMAS: f64 = 3.0;
 
 /// The circle of normals of a pixel lit by the two LEDs in `bits` (module docs).
 fn two_led_plane(a: &[f64], l: &[Vector3<f64>], bits: usize) -> Solution {
@@ -984,10 +1055,10 @@ mod tests {
             let excess = rng.random_range(0.1..0.6);
             glossy[k] += excess;
             // Four readings leave one residual direction r (Σ r_i L_i = 0): an excess on LED k
-            // shows only through its share r_k of it, and below 25σ it is not seen at all.
+            // shows in the χ² only through its share r_k of it, and below 25σ hardly at all.
+            // The others' prediction of LED k finds it all the same.
             if excess * residual[k].abs() < 25.0 * sigma {
                 unseen += 1;
-                continue;
             }
             match solver.solve(&glossy, &l, &v, sigma) {
                 Solution::Solved(m, _, 3, bits) => {
@@ -1024,13 +1095,61 @@ mod tests {
             far += 1;
         }
         assert!(
-            highlights > 200 && matte == highlights + refused + unseen && far > 100,
+            highlights > 200 && matte == highlights + refused && unseen > 20 && far > 100,
             "{highlights} {far} {unseen}"
         );
         assert!(
             refused * 50 <= matte,
             "{refused} of {matte} highlight pixels refused"
         );
+    }
+
+    /// A highlight's tail: a reading 3.5σ above the others' prediction (σ of the reading with
+    /// 1 % model error, and of the prediction) passes the consistency test, which asks for 4σ
+    /// with 3 % model error, and also its stricter variant with 1 %; within the LED's lobe it is
+    /// rejected all the same, and the normal comes out exact. Far from the lobe it is kept.
+    #[test]
+    fn a_highlight_tail_within_the_model_error_is_rejected_in_the_lobe_only() {
+        let l = out_of_plane();
+        let solver = PixelSolver::new(
+            &Lights::Distant(l.clone()),
+            &PhotometricConfig::default(),
+            vec![1.0; 4],
+            true,
+        );
+        let (v, sigma) = (Vector3::z(), 0.002);
+        let with_tail = |n: &Vector3<f64>, k: usize| {
+            let mut a: Vec<f64> = l.iter().map(|li| 0.5 * n.dot(li)).collect();
+            let others: Vec<usize> = (0..4).filter(|&i| i != k).collect();
+            let m = others
+                .iter()
+                .fold(Matrix3::zeros(), |m, &i| m + l[i] * l[i].transpose());
+            let q = m.try_inverse().expect("three independent lights") * l[k];
+            let predicted: f64 = others.iter().map(|&i| (q.dot(&l[i]) * sigma).powi(2)).sum();
+            let own =
+                sigma.powi(2) + (super::super::highlights::HIGHLIGHT_MODEL_ERROR * a[k]).powi(2);
+            a[k] += 3.5 * (own + predicted).sqrt();
+            a
+        };
+        for k in 0..4 {
+            let h = (l[k] + v).normalize();
+            let n = nalgebra::Rotation3::new(h.cross(&Vector3::x()).normalize() * 0.05) * h;
+            match solver.solve(&with_tail(&n, k), &l, &v, sigma) {
+                Solution::Solved(m, _, 3, bits) => {
+                    assert_eq!(bits, 1 << k);
+                    assert!((m - n).norm() < 1e-9, "{m:?} for {n:?}");
+                }
+                other => panic!("{other:?} for a tail on LED {k}"),
+            }
+            // 50° from the mirror direction the same excess is noise or a model error.
+            let far = nalgebra::Rotation3::new(h.cross(&Vector3::z()).normalize() * 0.87) * h;
+            let a = with_tail(&far, k);
+            if a.iter().all(|&x| x > 0.05)
+                && let Solution::Solved(_, _, lit, bits) = solver.solve(&a, &l, &v, sigma)
+            {
+                assert_eq!((lit, bits), (4, 0), "LED {k} 50° from its lobe");
+            }
+        }
     }
 
     /// A noisy LED image in shadow is below its own 3σ (σ scaled by the LED's noise gain), so
