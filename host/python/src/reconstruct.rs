@@ -297,7 +297,7 @@ pub fn reconstruct(
             },
         )
         .map(|reconstruction| {
-            let check = check_decoded_rig(&decoded, &rig, &reconstruction);
+            let check = check_decoded_rig(&decoded, &rig, &reconstruction, &config);
             (reconstruction, check)
         })
     });

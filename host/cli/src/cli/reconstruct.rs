@@ -116,7 +116,7 @@ pub fn run(args: &ReconstructArgs) -> Result<()> {
             ..Request::default()
         },
     )?;
-    let rig_check = check_decoded_rig(&inputs.decoded, &inputs.rig, &reconstruction);
+    let rig_check = check_decoded_rig(&inputs.decoded, &inputs.rig, &reconstruction, &config);
     let implausible = !reconstruction.support.verdict.is_plausible();
     let rig_hint = super::rig::enforce(&rig_check, &args.rig, args.force, implausible)?;
     super::common::check_support(&reconstruction, rig_hint.as_deref(), args.force)?;

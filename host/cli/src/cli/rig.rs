@@ -62,21 +62,17 @@ pub fn run(args: &RigArgs) -> Result<()> {
 fn run_check(args: &CheckArgs) -> Result<()> {
     let rig = Rig::load(&args.rig).with_context(|| format!("cannot load rig {}", args.rig))?;
     let decoded = read_capture(&args.input, &rig, &args.decode)?;
-    let reconstruction = reconstruct(
-        Source::Decoded(&decoded),
-        &rig,
-        &ReconstructConfig::decoded_capture(),
-        Request::default(),
-    )
-    .with_context(|| {
-        format!(
-            "rig {} could not reconstruct {} at all, so it cannot be checked (is it the rig of \
+    let config = ReconstructConfig::decoded_capture();
+    let reconstruction = reconstruct(Source::Decoded(&decoded), &rig, &config, Request::default())
+        .with_context(|| {
+            format!(
+                "rig {} could not reconstruct {} at all, so it cannot be checked (is it the rig of \
              this capture, with the LEDs in their order?)",
-            args.rig,
-            args.input.display()
-        )
-    })?;
-    let check = check_decoded_rig(&decoded, &rig, &reconstruction);
+                args.rig,
+                args.input.display()
+            )
+        })?;
+    let check = check_decoded_rig(&decoded, &rig, &reconstruction, &config);
     print_table(&check);
     println!("{}", check.describe(&args.rig));
     if let Some(diameter) = args.sphere_mm {

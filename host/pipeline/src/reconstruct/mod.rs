@@ -826,19 +826,32 @@ fn median(values: &mut [f32]) -> f32 {
 
 /// The rig check ([`rig_check`]) of `reconstruction`, a reconstruction of `decoded` with
 /// `rig`: the usable LED images and level noise the reconstruction read, at its depth, over its
-/// measured pixels.
+/// measured pixels (on a glossy surface, those outside every LED's lobe:
+/// [`crate::photometric::highlights::glossy_lobes`]).
 pub fn check_decoded_rig(
     decoded: &Decoded,
     rig: &Rig,
     reconstruction: &Reconstruction,
+    config: &ReconstructConfig,
 ) -> rig_check::RigCheck {
+    let depth = &reconstruction.integration.depth.depth_mm;
+    let photometric = &reconstruction.photometric;
+    let lights = Lights::near_field(rig, Some(depth));
+    let mask = match crate::photometric::highlights::glossy_lobes(
+        photometric,
+        &lights,
+        config.photometric.highlight_max_deg,
+    ) {
+        Some(lobes) => &photometric.field.mask & &lobes.mapv(|lobe| !lobe),
+        None => photometric.field.mask.clone(),
+    };
     rig_check::check_rig(
         &usable_led_images(decoded),
         Some(&level_noise(decoded)),
-        &reconstruction.photometric.noise_gains,
+        &photometric.noise_gains,
         rig,
-        &reconstruction.integration.depth.depth_mm,
-        &reconstruction.photometric.field.mask,
+        depth,
+        &mask,
     )
 }
 

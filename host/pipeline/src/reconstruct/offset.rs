@@ -10,7 +10,7 @@
 
 use super::ReconstructConfig;
 use crate::integrate::Integration;
-use crate::photometric::highlights::HighlightShares;
+use crate::photometric::highlights::glossy_lobes;
 use crate::photometric::lights::moved_depth;
 use crate::photometric::{Lights, ModelMisfit, PhotometricResult};
 use meb_core::rig::{Projection, Rig};
@@ -334,50 +334,17 @@ fn constraining_pixels(
     pixels.into_iter().step_by(step).collect()
 }
 
-/// Share of the solved pixels with a rejected highlight from which the offset search leaves
-/// out the pixels near a mirror direction ([`away_from_highlights`]): a matte sphere has at
-/// most 0.1 % (noise), a Ø48 mm sphere under a 10 % GGX coat of roughness 0.25 about 5 %.
-const GLOSSY_SHARE: f64 = 0.005;
-
-/// `pixels` less those whose normal lies within `highlight_max_deg` of an LED's half vector
-/// on a glossy surface ([`GLOSSY_SHARE`]): a highlight's tail there reads above the Lambertian
-/// model by less than its noise, yet always above, and the misfit such pixels add is smallest
-/// at a wrong distance, where moved light vectors explain part of the excess. On a Ø48 mm
-/// sphere with a 30 % coat (roughness 0.25) the misfit was flat within ±60 mm with them and
-/// the sphere was placed 37 mm too near.
+/// `pixels` less those in an LED's lobe on a glossy surface ([`glossy_lobes`]).
 fn away_from_highlights(
     pixels: &[(usize, usize)],
     ps: &PhotometricResult,
     lights: &Lights,
     config: &crate::photometric::PhotometricConfig,
 ) -> Vec<(usize, usize)> {
-    if HighlightShares::of(ps).share < GLOSSY_SHARE {
-        return pixels.to_vec();
+    match glossy_lobes(ps, lights, config.highlight_max_deg) {
+        Some(lobes) => pixels.iter().copied().filter(|&p| !lobes[p]).collect(),
+        None => pixels.to_vec(),
     }
-    let cos_max = f64::from(config.highlight_max_deg).to_radians().cos();
-    let normals = &ps.field.normals;
-    pixels
-        .par_iter()
-        .map_init(
-            || vec![nalgebra::Vector3::zeros(); lights.count()],
-            |l, &(r, c)| {
-                let n = nalgebra::Vector3::new(
-                    f64::from(normals[(r, c, 0)]),
-                    f64::from(normals[(r, c, 1)]),
-                    f64::from(normals[(r, c, 2)]),
-                );
-                lights.at(r, c, l);
-                let v = lights.view_at(r, c);
-                let near = l.iter().any(|li| {
-                    let half = li.normalize() + v;
-                    let norm = half.norm();
-                    norm > 0.0 && n.dot(&half) / norm >= cos_max
-                });
-                (!near && n.iter().all(|x| x.is_finite())).then_some((r, c))
-            },
-        )
-        .flatten()
-        .collect()
 }
 
 /// Per pixel, the weighted misfit and energy of one evaluation ([`ModelMisfit::terms`]).

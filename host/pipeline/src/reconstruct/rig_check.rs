@@ -11,7 +11,9 @@
 //!
 //! - the misfit: the median over pixels of the relative residual √(Σ r_i²/Σ A_i²). The median,
 //!   because a rig error is systematic over most of the surface while a glossy highlight or a
-//!   shadow edge is a small patch;
+//!   shadow edge is a small patch. A highlight's tail is not: on a glossy surface it reads
+//!   above the model in a wide ring around each highlight, so the caller leaves out the pixels
+//!   in an LED's lobe there ([`super::check_decoded_rig`]);
 //! - each LED's apparent intensity g_i: the gains that make the readings A_i/g_i most
 //!   Lambertian under the rig's light vectors, found by alternating the per-pixel fit of G and
 //!   the per-LED gain g_i = median_p A_i/(L_i·G) (a robust form of semi-calibrated photometric
