@@ -177,14 +177,10 @@ fn factory_depths_decoded_with_the_timeline_reconstruct_and_without_are_refused(
         // own gain bias at the thesis' exposure is a few tenths of a percent.
         assert!((g - 1.0).abs() < 0.03, "LED {} gain {g:.4}", i + 1);
     }
-    let reconstruction = reconstruct(
-        Source::Decoded(&decoded),
-        &rig,
-        &ReconstructConfig::decoded_capture(),
-        Request::default(),
-    )
-    .unwrap();
-    let check = check_decoded_rig(&decoded, &rig, &reconstruction);
+    let config = ReconstructConfig::decoded_capture();
+    let reconstruction =
+        reconstruct(Source::Decoded(&decoded), &rig, &config, Request::default()).unwrap();
+    let check = check_decoded_rig(&decoded, &rig, &reconstruction, &config);
     let implausible = !reconstruction.support.verdict.is_plausible();
     let (ruling, _) = acceptance::rig(&check, "true rig", false, implausible, "--force");
     assert_eq!(ruling, Ruling::Keep, "{}", check.describe("true rig"));
@@ -240,7 +236,7 @@ fn factory_depths_decoded_with_the_timeline_reconstruct_and_without_are_refused(
     ) {
         Err(_) => true,
         Ok(reconstruction) => {
-            let check = check_decoded_rig(&unscaled, &rig, &reconstruction);
+            let check = check_decoded_rig(&unscaled, &rig, &reconstruction, &config);
             let implausible = !reconstruction.support.verdict.is_plausible();
             let (ruling, _) = acceptance::rig(&check, "true rig", false, implausible, "--force");
             eprintln!("low depth without depths: {}", check.describe("true rig"));

@@ -15,7 +15,7 @@
 //!    lies near their normal — and is tested again while four or more LEDs remain
 //!    ([`super::highlights`]). A highlight is tested first because its excess can tilt G away
 //!    from the camera or from LEDs that do light the pixel. Within an LED's lobe a smaller
-//!    excess suffices (a highlight's tail, [`PixelSolver::visible_highlight`]): 3σ above the
+//!    excess suffices (a highlight's tail, `PixelSolver::visible_highlight`): 3σ above the
 //!    others' prediction with a model error of 1 %, and the same χ² test with that model
 //!    error rejects highlights (never shadows).
 //! 4. A solution facing away from the camera is contradictory. Lit LEDs it says cannot light the
@@ -208,7 +208,9 @@ impl PixelSolver {
             // a highlight's tail, consistent within the model error but not within the noise.
             let outlier = if !testable {
                 None
-            } else if let Some(found) = self.visible_highlight(a, l, v, bits, &sigma_of, &strict) {
+            } else if let Some(found) =
+                self.visible_highlight(a, l, v, bits, (&inverse, &g), sigma, &strict)
+            {
                 Some(found)
             } else if chi2_above(&variance) {
                 self.outlier(a, l, v, bits, &variance)
@@ -308,25 +310,36 @@ impl PixelSolver {
     /// pixel of a ring around the highlight and tilts all their normals the same way; only in
     /// an LED's lobe is so small an excess taken for a highlight. Of several, the one whose
     /// half vector lies nearest the normal.
+    #[allow(clippy::too_many_arguments)]
     fn visible_highlight(
         &self,
         a: &[f64],
         l: &[Vector3<f64>],
         v: &Vector3<f64>,
         bits: usize,
-        sigma_of: &dyn Fn(usize) -> f64,
+        (inverse, g): (&Matrix3<f64>, &Vector3<f64>),
+        sigma: f64,
         strict: &dyn Fn(usize) -> f64,
     ) -> Option<Outlier> {
         let cos_max = f64::from(self.config.highlight_max_deg).to_radians().cos();
         let mut best: Option<(f64, usize)> = None;
         for i in members(bits) {
-            let others = bits & !(1 << i);
-            let Some(inv) = self.inverse(l, others) else {
+            // Leaving LED i out of the fit over `bits` (M⁻¹, G) by the Sherman–Morrison
+            // identity: with leverage h = w_i·L_iᵀM⁻¹L_i, the others' prediction misses A_i by
+            // e = r_i/(1 − h) (r_i = A_i − L_i·G), their solution is G − M⁻¹L_i·w_i·e, and
+            // their prediction's variance σ²·L_iᵀM₋ᵢ⁻¹L_i = σ²·L_iᵀM⁻¹L_i/(1 − h), since
+            // w_k·σ_k² = σ² for every LED.
+            let m_l = inverse * l[i];
+            let quadratic = l[i].dot(&m_l);
+            let leverage = self.weights[i] * quadratic;
+            // NaN or (nearly) 1: the others alone do not fix G.
+            if leverage.is_nan() || leverage >= 1.0 - LEAVE_ONE_OUT_MIN {
                 continue;
-            };
-            let g = inv * self.weighted_sum(a, l, others);
+            }
+            let miss = (a[i] - g.dot(&l[i])) / (1.0 - leverage);
+            let others = g - m_l * (self.weights[i] * miss);
             let (Some(n), Some(h)) = (
-                g.try_normalize(0.0),
+                others.try_normalize(0.0),
                 (l[i].normalize() + v).try_normalize(0.0),
             ) else {
                 continue;
@@ -335,12 +348,8 @@ impl PixelSolver {
             if cos < cos_max {
                 continue;
             }
-            // The prediction L_i·G = Σ_k w_k (L_iᵀ M⁻¹ L_k) A_k over the others.
-            let q = inv * l[i];
-            let predicted_variance: f64 = members(others)
-                .map(|k| (self.weights[k] * q.dot(&l[k]) * sigma_of(k)).powi(2))
-                .sum();
-            let deviation = (a[i] - g.dot(&l[i])) / (strict(i) + predicted_variance).sqrt();
+            let predicted_variance = sigma * sigma * quadratic / (1.0 - leverage);
+            let deviation = miss / (strict(i) + predicted_variance).sqrt();
             if deviation > HIGHLIGHT_SIGMAS && best.is_none_or(|(c, _)| cos > c) {
                 best = Some((cos, i));
             }
@@ -431,6 +440,10 @@ fn normal_matrix(l: &[Vector3<f64>], weights: &[f64], bits: usize) -> [f64; 6] {
             ]
         })
 }
+
+/// Least 1 − leverage of an LED left out of a fit ([`PixelSolver::visible_highlight`]): below
+/// it the other LEDs' normal matrix is (nearly) singular.
+const LEAVE_ONE_OUT_MIN: f64 = 1e-9;
 
 /// Deviations (in σ of the reading and its prediction) by which an LED whose half vector lies
 /// near the others' normal must read above their prediction to be a highlight without a
