@@ -837,22 +837,35 @@ pub fn check_decoded_rig(
     let depth = &reconstruction.integration.depth.depth_mm;
     let photometric = &reconstruction.photometric;
     let lights = Lights::near_field(rig, Some(depth));
-    let mask = match crate::photometric::highlights::glossy_lobes(
+    let (images, noise) = (usable_led_images(decoded), level_noise(decoded));
+    let check = |mask: &Array2<bool>| {
+        rig_check::check_rig(
+            &images,
+            Some(&noise),
+            &photometric.noise_gains,
+            rig,
+            depth,
+            mask,
+        )
+    };
+    let lobes = crate::photometric::highlights::glossy_lobes(
         photometric,
         &lights,
         config.photometric.highlight_max_deg,
-    ) {
-        Some(lobes) => &photometric.field.mask & &lobes.mapv(|lobe| !lobe),
-        None => photometric.field.mask.clone(),
-    };
-    rig_check::check_rig(
-        &usable_led_images(decoded),
-        Some(&level_noise(decoded)),
-        &photometric.noise_gains,
-        rig,
-        depth,
-        &mask,
-    )
+    );
+    match lobes {
+        // A rig whose intensities are wrong makes the brighter LEDs read above the others'
+        // prediction nearly everywhere, as highlights would: when the lobes leave too few
+        // pixels to judge, the whole surface is judged.
+        Some(lobes) => {
+            let outside = check(&(&photometric.field.mask & &lobes.mapv(|lobe| !lobe)));
+            match outside.fit {
+                rig_check::RigFit::Unjudged => check(&photometric.field.mask),
+                _ => outside,
+            }
+        }
+        None => check(&photometric.field.mask),
+    }
 }
 
 #[cfg(test)]
