@@ -33,9 +33,10 @@ use ndarray::Array2;
 use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
 
-/// Relative model error of the test for a highlight's tail ([`super::solve`], step 3): a
-/// pixel that the consistency test's model error lets pass but that fails against its noise
-/// and this much of each reading loses a highlight, though never a shadow.
+/// Relative model error of the test for a highlight's tail ([`super::solve`], step 3; only on a
+/// surface known to be glossy, [`super::PhotometricConfig::reject_highlight_tails`]): a pixel
+/// that the consistency test's model error lets pass but that fails against its noise and
+/// this much of each reading loses a highlight, though never a shadow.
 pub const HIGHLIGHT_MODEL_ERROR: f64 = 0.01;
 
 /// Share of the solved pixels with a rejected highlight above which a surface is called mostly
@@ -123,9 +124,15 @@ impl HighlightShares {
 }
 
 /// Share of the solved pixels with a rejected highlight from which a surface counts as glossy
-/// ([`glossy_lobes`]): a matte sphere has at most 0.1 % (noise), a Ø48 mm sphere under a 10 %
+/// ([`looks_glossy`]): a matte sphere has at most 0.1 % (noise), a Ø48 mm sphere under a 10 %
 /// GGX coat of roughness 0.25 about 12 %.
 pub const GLOSSY_SHARE: f64 = 0.005;
+
+/// Whether `result`'s surface is glossy: at least [`GLOSSY_SHARE`] of its solved pixels had a
+/// highlight rejected.
+pub fn looks_glossy(result: &PhotometricResult) -> bool {
+    HighlightShares::of(result).share >= GLOSSY_SHARE
+}
 
 /// On a glossy surface ([`GLOSSY_SHARE`]), the solved pixels whose normal lies within
 /// `max_deg` of some LED's half vector under `lights` (an LED's lobe); `None` on a matte one.
@@ -138,7 +145,7 @@ pub fn glossy_lobes(
     lights: &Lights,
     max_deg: f32,
 ) -> Option<Array2<bool>> {
-    if HighlightShares::of(result).share < GLOSSY_SHARE {
+    if !looks_glossy(result) {
         return None;
     }
     let cos_max = f64::from(max_deg).to_radians().cos();

@@ -42,6 +42,13 @@ pub struct PhotometricConfig {
     /// of their normal ([`highlights`]).
     #[serde(default = "default_highlight_max_deg")]
     pub highlight_max_deg: f32,
+    /// With a noise map and four or more lit LEDs: also reject a highlight's tail, a reading
+    /// within the model error but above the noise of the others' prediction in an LED's lobe
+    /// ([`highlights`]). Meant for a surface known to be glossy: a reconstruction turns it on
+    /// once a pass finds one ([`highlights::looks_glossy`]), and a video's next window starts
+    /// with it when the last one was glossy.
+    #[serde(default)]
+    pub reject_highlight_tails: bool,
     /// Fewest lit LEDs a pixel needs for a normal (3 for a unique solution).
     pub min_lit_leds: usize,
     /// Automatic object mask settings (used when no mask is given).
@@ -62,6 +69,7 @@ impl Default for PhotometricConfig {
             consistency_sigmas: 3.7,
             model_error: 0.03,
             highlight_max_deg: default_highlight_max_deg(),
+            reject_highlight_tails: false,
             min_lit_leds: 3,
             mask: MaskConfig::default(),
             noise_gain_floors: Vec::new(),

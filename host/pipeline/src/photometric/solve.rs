@@ -14,8 +14,9 @@
 //!    highlight — the LED reading most above its prediction from the others whose half vector
 //!    lies near their normal — and is tested again while four or more LEDs remain
 //!    ([`super::highlights`]). A highlight is tested first because its excess can tilt G away
-//!    from the camera or from LEDs that do light the pixel. Within an LED's lobe a smaller
-//!    excess suffices (a highlight's tail, `PixelSolver::visible_highlight`): 3σ above the
+//!    from the camera or from LEDs that do light the pixel. On a surface known to be glossy
+//!    ([`super::PhotometricConfig::reject_highlight_tails`]) a smaller excess suffices within
+//!    an LED's lobe (a highlight's tail, `PixelSolver::visible_highlight`): 3σ above the
 //!    others' prediction with a model error of 1 %, and the same χ² test with that model
 //!    error rejects highlights (never shadows).
 //! 4. A solution facing away from the camera is contradictory. Lit LEDs it says cannot light the
@@ -206,15 +207,17 @@ impl PixelSolver {
             // The outlier the fit blames (steps 3 and 5), when it can be tested: a highlight seen
             // from the others; else the outlier of a fit inconsistent within the model error; else
             // a highlight's tail, consistent within the model error but not within the noise.
+            let tails = testable && self.config.reject_highlight_tails;
             let outlier = if !testable {
                 None
-            } else if let Some(found) =
-                self.visible_highlight(a, l, v, bits, (&inverse, &g), sigma, &strict)
+            } else if let Some(found) = tails
+                .then(|| self.visible_highlight(a, l, v, bits, (&inverse, &g), sigma, &strict))
+                .flatten()
             {
                 Some(found)
             } else if chi2_above(&variance) {
                 self.outlier(a, l, v, bits, &variance)
-            } else if chi2_above(&strict) {
+            } else if tails && chi2_above(&strict) {
                 self.outlier(a, l, v, bits, &strict)
                     .filter(|o| matches!(o, Outlier::Highlight(_)))
             } else {
@@ -1022,15 +1025,26 @@ mod tests {
     /// A highlight added to the LED whose half vector is nearest the normal is rejected and
     /// the three others give the normal; the same excess on a pixel facing away from that
     /// LED's mirror direction is not called a highlight; a matte pixel rejects nothing.
-    /// Normals drawn at random (fixed seed) where all four LEDs light the pixel.
+    /// Normals drawn at random (fixed seed) where all four LEDs light the pixel. Without the
+    /// tail test an excess the χ² hardly sees is kept; with it, it is found all the same.
     #[test]
     fn a_highlight_is_rejected_and_the_rest_give_the_normal() {
+        for tails in [false, true] {
+            highlights_rejected(tails);
+        }
+    }
+
+    /// [`a_highlight_is_rejected_and_the_rest_give_the_normal`] with or without the tail test.
+    fn highlights_rejected(tails: bool) {
         use rand::{RngExt, SeedableRng};
         use rand_chacha::ChaCha8Rng;
         let l = out_of_plane();
         let solver = PixelSolver::new(
             &Lights::Distant(l.clone()),
-            &PhotometricConfig::default(),
+            &PhotometricConfig {
+                reject_highlight_tails: tails,
+                ..PhotometricConfig::default()
+            },
             vec![1.0; 4],
             true,
         );
@@ -1069,9 +1083,12 @@ mod tests {
             glossy[k] += excess;
             // Four readings leave one residual direction r (Σ r_i L_i = 0): an excess on LED k
             // shows in the χ² only through its share r_k of it, and below 25σ hardly at all.
-            // The others' prediction of LED k finds it all the same.
+            // The others' prediction of LED k finds it all the same, with the tail test.
             if excess * residual[k].abs() < 25.0 * sigma {
                 unseen += 1;
+                if !tails {
+                    continue;
+                }
             }
             match solver.solve(&glossy, &l, &v, sigma) {
                 Solution::Solved(m, _, 3, bits) => {
@@ -1107,9 +1124,10 @@ mod tests {
             }
             far += 1;
         }
+        let kept = if tails { 0 } else { unseen };
         assert!(
-            highlights > 200 && matte == highlights + refused && unseen > 20 && far > 100,
-            "{highlights} {far} {unseen}"
+            highlights > 200 && matte == highlights + refused + kept && unseen > 20 && far > 100,
+            "tails {tails}: {highlights} {far} {unseen}"
         );
         assert!(
             refused * 50 <= matte,
@@ -1125,6 +1143,15 @@ mod tests {
     fn a_highlight_tail_within_the_model_error_is_rejected_in_the_lobe_only() {
         let l = out_of_plane();
         let solver = PixelSolver::new(
+            &Lights::Distant(l.clone()),
+            &PhotometricConfig {
+                reject_highlight_tails: true,
+                ..PhotometricConfig::default()
+            },
+            vec![1.0; 4],
+            true,
+        );
+        let plain = PixelSolver::new(
             &Lights::Distant(l.clone()),
             &PhotometricConfig::default(),
             vec![1.0; 4],
@@ -1154,6 +1181,12 @@ mod tests {
                 }
                 other => panic!("{other:?} for a tail on LED {k}"),
             }
+            // Without the tail test the reading is within the model error and kept.
+            let kept = plain.solve(&with_tail(&n, k), &l, &v, sigma);
+            assert!(
+                matches!(kept, Solution::Solved(_, _, 4, 0)),
+                "{kept:?} without the tail test"
+            );
             // 50° from the mirror direction the same excess is noise or a model error.
             let far = nalgebra::Rotation3::new(h.cross(&Vector3::z()).normalize() * 0.87) * h;
             let a = with_tail(&far, k);

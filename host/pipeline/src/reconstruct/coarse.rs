@@ -20,6 +20,7 @@
 use super::inputs::Source;
 use super::{ReconstructConfig, StageTiming, WarmStart};
 use crate::demod::Decoded;
+use crate::photometric::highlights::looks_glossy;
 use meb_core::rig::Rig;
 use meb_core::types::LedImages;
 use ndarray::Array2;
@@ -73,6 +74,7 @@ pub(super) fn start(
     }));
     Some(WarmStart {
         depth_mm: spread(&coarse.integration.depth.depth_mm, COARSE_BIN, frame),
+        glossy: looks_glossy(&coarse.photometric),
     })
 }
 

@@ -48,7 +48,7 @@ use crate::integrate::{
     BilateralConfig, Confidence, IntegrateConfig, IntegrateError, Integration,
     IntegrationWorkspace, SurfaceEvidence, integrate_surface_with,
 };
-use crate::photometric::highlights::HighlightShares;
+use crate::photometric::highlights::{HighlightShares, looks_glossy};
 use crate::photometric::{
     Lights, PhotometricConfig, PhotometricError, PhotometricResult, estimate_normals,
 };
@@ -272,6 +272,10 @@ pub enum Start {
 pub struct WarmStart {
     /// Depth in mm (NaN where it was not reconstructed).
     pub depth_mm: Array2<f32>,
+    /// Whether the surface was glossy ([`crate::photometric::highlights::looks_glossy`]): the
+    /// next reconstruction then rejects highlight tails from its first pass
+    /// ([`crate::photometric::PhotometricConfig::reject_highlight_tails`]).
+    pub glossy: bool,
 }
 
 impl WarmStart {
@@ -279,6 +283,7 @@ impl WarmStart {
     pub fn of(reconstruction: &Reconstruction) -> Self {
         Self {
             depth_mm: reconstruction.integration.depth.depth_mm.clone(),
+            glossy: looks_glossy(&reconstruction.photometric),
         }
     }
 }
@@ -564,6 +569,7 @@ fn warm_in_region(
     let region_mask = mask.map(|m| roi.cut(m));
     let region_warm = WarmStart {
         depth_mm: roi.cut(&warm.depth_mm),
+        glossy: warm.glossy,
     };
     timings.push(StageTiming::since(
         "region of interest, warm".to_string(),
@@ -641,6 +647,10 @@ fn passes(
     let mut scanned = false;
     // The last pass's depth change from the warm start, when its light vectors came from it.
     let mut moved_from_warm: Option<DepthChange> = None;
+    // Highlight tails are rejected once the surface is known to be glossy: from the warm
+    // start, or from the first pass whose highlights show it (that pass is solved again).
+    let mut pass_config = config.clone();
+    pass_config.photometric.reject_highlight_tails |= warm.is_some_and(|w| w.glossy);
     for pass in 0..passes {
         let start = Instant::now();
         let depth = previous
@@ -651,13 +661,15 @@ fn passes(
             LightModel::Distant => distant.clone(),
             LightModel::NearField { .. } => Lights::near_field(rig, depth),
         };
-        let ps = estimate_normals(
-            images,
-            &lights,
-            object_mask.as_ref(),
-            noise,
-            &config.photometric,
-        )?;
+        let solve = |photometric: &PhotometricConfig| {
+            estimate_normals(images, &lights, object_mask.as_ref(), noise, photometric)
+        };
+        let mut ps = solve(&pass_config.photometric)?;
+        if !pass_config.photometric.reject_highlight_tails && looks_glossy(&ps) {
+            pass_config.photometric.reject_highlight_tails = true;
+            ps = solve(&pass_config.photometric)?;
+        }
+        let config = &pass_config;
         time("photometric stereo", pass, start);
         object_mask.get_or_insert_with(|| ps.object_mask.clone());
         let start = Instant::now();

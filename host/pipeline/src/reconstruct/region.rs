@@ -127,6 +127,7 @@ pub(super) fn in_region(
         .filter(|w| w.depth_mm.dim() == frame)
         .map(|w| WarmStart {
             depth_mm: roi.cut(&w.depth_mm),
+            glossy: w.glossy,
         });
     let region_request = Request {
         warm: region_warm.as_ref(),

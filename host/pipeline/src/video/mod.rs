@@ -383,8 +383,12 @@ pub fn process_until(
                 })?;
                 // The next window starts from this one's depth, moved rather than copied.
                 if let Some(reconstruction) = outcome.reconstruction {
+                    let glossy = crate::photometric::highlights::looks_glossy(
+                        &reconstruction.reconstruction().photometric,
+                    );
                     warm = Some(WarmStart {
                         depth_mm: reconstruction.into_depth_mm(),
+                        glossy,
                     });
                 }
             }
