@@ -20,8 +20,9 @@
 //! The page marks `<body>` with `data-viewer="rendered"` after its first frame (or
 //! `data-viewer="error: …"`), `data-open-ms` with the milliseconds from the start of the
 //! page's navigation to that frame, and `data-frame="K"` for the 3-D frame K shown; `#frame=K`
-//! in the address shows K first. Windows without a 3-D frame show their verdict in place of
-//! the surface.
+//! in the address shows K first, and `#play` (or `#frame=K&play`) starts playing, counting
+//! the frames stepped to in `data-played`. Windows without a 3-D frame show their verdict in
+//! place of the surface.
 
 use super::ExportError;
 use super::viewer;
@@ -440,7 +441,7 @@ fn html_page(video: &VideoJson, meshes: &VideoMeshes) -> Result<String, ExportEr
          body{{font-family:system-ui,sans-serif;margin:2em;background:#fafafa;color:#222}}\n\
          table{{border-collapse:collapse;margin:1em 0;font-size:90%}} th,td{{padding:3px 8px;border-bottom:1px solid #ddd;text-align:left}}\n\
          td.n{{text-align:right;font-variant-numeric:tabular-nums}} tr.current{{background:#ffe9a8}}\n\
-         tr[data-status=skipped] td.verdict{{color:#8a6d00}} tr[data-status=failed] td.verdict{{color:#b00020}}\n\
+         td.verdict{{min-width:16em}} tr[data-status=skipped] td.verdict{{color:#8a6d00}} tr[data-status=failed] td.verdict{{color:#b00020}}\n\
          #meb-controls{{display:flex;gap:12px;align-items:center;margin:8px 0;width:720px;max-width:100%}} #meb-scrub{{flex:1}}\n\
          </style></head><body>\n\
          <h1>meb video: {title}</h1>\n<p>{summary}</p>\n<p>Videos:{files}; per-frame depth in depth_NNNNN.npy, every figure in video.json.</p>\n\
@@ -570,8 +571,8 @@ try {{
   }};
   scrub.addEventListener("input", () => show(Number(scrub.value)));
   const play = document.getElementById("meb-play");
-  let timer = null;
-  play.addEventListener("click", () => {{
+  let timer = null, shown = 0;
+  const toggle = () => {{
     if (timer !== null) {{
       clearInterval(timer);
       timer = null;
@@ -579,8 +580,12 @@ try {{
       return;
     }}
     play.textContent = "pause";
-    timer = setInterval(() => show((current + 1) % windows.length), 1000 / data.fps);
-  }});
+    timer = setInterval(() => {{
+      show((current + 1) % windows.length);
+      document.body.dataset.played = String(++shown);
+    }}, 1000 / data.fps);
+  }};
+  play.addEventListener("click", toggle);
   let drag = null;
   canvas.addEventListener("pointerdown", (e) => {{ drag = [e.clientX, e.clientY]; canvas.setPointerCapture(e.pointerId); }});
   canvas.addEventListener("pointerup", () => {{ drag = null; }});
@@ -598,6 +603,7 @@ try {{
   show(first >= 0 ? first : Math.max(0, windows.findIndex((w) => w.mesh)));
   document.body.dataset.openMs = String(Math.round(performance.now()));
   document.body.dataset.viewer = "rendered";
+  if (/(^#|&)play(&|$)/.test(location.hash)) toggle();
 }} catch (error) {{
   note.textContent = "3-D view unavailable: " + error;
   document.body.dataset.viewer = "error: " + error;

@@ -221,6 +221,22 @@ fn the_video_page_lists_every_window_and_shows_the_chosen_frame() {
     let dom = dump_dom(program, &tmp.path().join("profile-3"), &page, "#frame=3");
     assert!(dom.contains("data-frame=\"3\""));
     assert!(dom.contains(">4 / 4<"), "scrubber at the 4th window");
+    // #play steps through the windows at the 3-D frame rate (25 per second of the 10 s of
+    // virtual time), round and round.
+    let dom = dump_dom(
+        program,
+        &tmp.path().join("profile-4"),
+        &page,
+        "#frame=0&play",
+    );
+    assert!(dom.contains(">pause<"), "the button offers to pause");
+    let played: usize = dom
+        .split("data-played=\"")
+        .nth(1)
+        .and_then(|rest| rest.split('"').next())
+        .and_then(|n| n.parse().ok())
+        .expect("the page counts the frames played");
+    assert!(played > 8, "{played} frames played");
 }
 
 /// A sphere of radius 150 pixels (75 mm) centred at column `x` of a 1280×720 frame.
