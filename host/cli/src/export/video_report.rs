@@ -395,7 +395,8 @@ fn html_page(video: &VideoJson, meshes: &VideoMeshes) -> Result<String, ExportEr
             path: PathBuf::from("video.html"),
             source: Box::new(e),
         })?
-        .replace("</", "<\\/");
+        // `<` only occurs in strings: as \u003c no text can end or open a tag in the script.
+        .replace('<', "\\u003c");
     let s = &video.summary;
     let mut summary = format!(
         "{} 3-D frames from {} camera frames ({}) in {:.1} s, {:.2} 3-D frames/s: {} reconstructed, \
@@ -656,6 +657,72 @@ mod tests {
         }
         // Corners of the box lie off the sphere.
         assert_eq!(mesh.xyz[0], NO_DEPTH);
+    }
+
+    /// A `video.json` of three windows: reconstructed with a mesh, skipped, failed.
+    fn three_windows() -> VideoJson {
+        let record = |k: usize, status: &str, reason: Option<&str>| {
+            serde_json::json!({
+                "index": k, "frames": [40 * k, 40 * k + 40], "decoded": [40 * k + 4, 40 * k + 36],
+                "time_s": 0.02 + 0.04 * k as f64, "status": status, "reason": reason,
+                "placed_by": 0, "verdict": if status == "failed" { None } else { Some("plausible") },
+                "timing_source": "fitted",
+                "motion": { "score": 0.25, "moving": status == "skipped", "lit_pixels": 100,
+                            "moving_pixels": 25 },
+                "accuracy": (status == "reconstructed").then(|| serde_json::json!({
+                    "rmse_mm": 1.234, "nrmse": 0.01, "reconstructed_fraction": 0.9,
+                    "truth_frame": 20.0 })),
+                "timing": { "read_ms": 1.0, "wait_ms": 2.0, "decode_ms": 30.0, "motion_ms": 4.0,
+                            "reconstruct_ms": 55.5, "compare_ms": 6.0, "write_ms": 7.0 },
+            })
+        };
+        serde_json::from_value(serde_json::json!({
+            "settings": { "input": "a<b>.y4m", "rate_3d_fps": 25.0 },
+            "summary": { "camera_frames": 120, "windows": 3, "reconstructed": 1, "skipped": 1,
+                         "failed": 1, "moving": 1, "end": "complete", "input_error": null,
+                         "wall_s": 1.0, "frames_per_second": 3.0 },
+            "outputs": { "depth_video": "depth.mp4", "shaded_video": "shaded.mp4",
+                         "depth_range_mm": null, "frames_written": 1, "video_container": "mp4" },
+            "mean_timing_ms": { "windows": 3, "read_ms": 1.0, "wait_ms": 2.0, "decode_ms": 30.0,
+                                "motion_ms": 4.0, "reconstruct_ms": 18.5, "compare_ms": 2.0,
+                                "write_ms": 7.0 },
+            "accuracy": { "frames": 1, "rmse_mm_min": 1.234, "rmse_mm_median": 1.234,
+                          "rmse_mm_max": 1.234 },
+            "frames": [
+                record(0, "reconstructed", None),
+                record(1, "skipped", Some("the object moved")),
+                record(2, "failed", Some("decoding failed: no <signal>")),
+            ],
+        }))
+        .unwrap()
+    }
+
+    #[test]
+    fn the_page_shows_each_windows_verdict_reason_and_timings() {
+        let mut meshes = VideoMeshes::new(projection());
+        meshes.add(0, &sphere_depth());
+        let html = html_page(&three_windows(), &meshes).unwrap();
+        assert_eq!(html.matches("<tr id=\"frame-").count(), 3);
+        assert!(html.contains("data-status=\"skipped\"><td class=\"n\">1</td>"));
+        assert!(html.contains("reconstructed (plausible)"));
+        assert!(html.contains("skipped: the object moved"));
+        assert!(
+            html.contains("failed: decoding failed: no &lt;signal&gt;"),
+            "escaped"
+        );
+        assert!(html.contains("moving (25.0 %)") && html.contains("still (25.0 %)"));
+        assert!(html.contains(">1.23<") && html.contains(">55.5<") && html.contains(">18.5<"));
+        assert!(html.contains("median 1.23 mm"));
+        assert!(html.contains("meb video: a&lt;b&gt;.y4m"));
+        // One mesh, for the reconstructed window; the data cannot end its script early.
+        assert_eq!(html.matches("\"xyz\":\"").count(), 1);
+        let data = html.split("id=\"meb-frames\">").nth(1).unwrap();
+        let data = data.split("</script>").next().unwrap();
+        assert!(!data.contains('<'));
+        let data: serde_json::Value = serde_json::from_str(data).unwrap();
+        assert_eq!(data["windows"].as_array().unwrap().len(), 3);
+        assert_eq!(data["fps"], 25.0);
+        assert!(data["windows"][2]["mesh"].is_null());
     }
 
     #[test]
