@@ -432,6 +432,11 @@ fn html_page(video: &VideoJson, meshes: &VideoMeshes) -> Result<String, ExportEr
         .flatten()
         .map(|f| format!(" <a href=\"{0}\">{0}</a>", escape(f)))
         .collect();
+    let files = if files.is_empty() {
+        " none".to_string()
+    } else {
+        files
+    };
     let input = video
         .settings
         .get("input")
