@@ -1,5 +1,7 @@
 //! `meb video`: a long or live capture → a 3-D frame per window (thesis Ch. 5), written as
-//! per-frame arrays, a colour-mapped depth video, a shaded-render video and `video.json`.
+//! per-frame arrays, a colour-mapped depth video, a shaded-render video, `video.json` and
+//! `video.html` (the 3-D frames with a scrubber and every window's record,
+//! [`meb_cli::export::video_report`]).
 //!
 //! A live input (`-`, a device, a FIFO: anything but a regular file or a frame folder) has no
 //! end of its own, so while its frames are processed the first SIGINT or SIGTERM ends the
@@ -16,6 +18,7 @@ use super::integrate::IntegratorArg;
 use anyhow::{Context, Result, bail};
 use clap::{Args, ValueEnum};
 use indicatif::{ProgressBar, ProgressStyle};
+use meb_cli::export::video_report::{VideoMeshes, write_video_report};
 use meb_core::capture::open;
 use meb_core::io::on_first_interrupt;
 use meb_core::rig::Rig;
@@ -41,7 +44,7 @@ pub struct VideoArgs {
     /// Rig: a TOML file or a preset (thesis-dynamic for the thesis' Ch. 5 set-up).
     #[arg(long)]
     rig: String,
-    /// Output folder (depth_NNNNN.npy…, depth.mp4, shaded.mp4, video.json), replaced whole
+    /// Output folder (depth_NNNNN.npy…, depth.mp4, shaded.mp4, video.json, video.html), replaced whole
     /// and atomically when the run ends.
     #[arg(long)]
     out: PathBuf,
@@ -182,6 +185,8 @@ pub fn run(args: &VideoArgs) -> Result<()> {
     )?;
     // Writing overlaps the reconstruction of the next windows.
     let mut output = OutputThread::start(output)?;
+    // Decimated meshes of the 3-D frames for video.html.
+    let mut meshes = VideoMeshes::new(frame_camera.projection());
     let bar = ProgressBar::new(0);
     bar.set_style(
         ProgressStyle::with_template("{spinner} {pos}/{len} camera frames [{elapsed}] {msg}")
@@ -211,6 +216,9 @@ pub fn run(args: &VideoArgs) -> Result<()> {
         &stop,
         &mut |frame: &VideoFrame| {
             output.add(frame)?;
+            if let Some(reconstruction) = frame.reconstruction {
+                meshes.add(frame.record.index, reconstruction.depth_mm());
+            }
             done += 1;
             bar.set_length(frame.total_frames.unwrap_or(frame.camera_frames) as u64);
             bar.set_position(frame.camera_frames as u64);
@@ -243,6 +251,7 @@ pub fn run(args: &VideoArgs) -> Result<()> {
     let output = output.finish()?;
     let mean = output.timing().clone();
     let written = output.finish(settings, &summary)?;
+    write_video_report(folder.path(), &meshes)?;
     let out = super::common::commit(folder)?;
     println!(
         "{} 3-D frames from {} camera frames in {:.1} s ({:.1} 3-D frames/s): {} reconstructed, \
@@ -277,6 +286,7 @@ pub fn run(args: &VideoArgs) -> Result<()> {
         eprintln!("note: {reason} (install FFmpeg for MP4 videos)");
     }
     println!("wrote {}", out.join("video.json").display());
+    println!("wrote {}", out.join("video.html").display());
     if summary.end == EndKind::Cut {
         bail!(
             "the input stopped early: {}; the {} 3-D frames before it were written to {}",

@@ -143,6 +143,13 @@ pub fn viewer_mesh(depth: &meb_core::types::DepthMap) -> SurfaceMesh {
     })
 }
 
+/// The awaitable JavaScript expression that imports three.js exactly as [`surface_viewer`]'s
+/// script does (the inlined module, or the pinned CDN copy checked against
+/// [`THREE_JS_SHA384`]), for other pages' 3-D views (`video.html`).
+pub fn three_js_import() -> String {
+    three_import()
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
