@@ -35,3 +35,4 @@ mod tof_range;
 mod video_cli;
 mod video_fallback;
 mod video_interrupt;
+mod video_live;

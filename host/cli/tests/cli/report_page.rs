@@ -156,7 +156,7 @@ fn ply_and_obj_surfaces_read_back_with_independent_readers() {
 }
 
 /// Chromium's program name, or `None` (a failure under `CI=true`, where setup installs it).
-fn chromium() -> Option<&'static str> {
+pub(crate) fn chromium() -> Option<&'static str> {
     for name in ["chromium", "chromium-browser", "google-chrome"] {
         if Command::new(name)
             .arg("--version")
