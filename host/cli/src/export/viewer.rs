@@ -165,7 +165,9 @@ pub fn mesh_base64(mesh: &SurfaceMesh) -> (String, String) {
 /// `window.mebSurface = { positions, indices }` (as [`mesh_base64`] encodes them) and
 /// dispatching a `meb-surface` event on `window`; a surface set before three.js has loaded is
 /// drawn once it has. The camera keeps the turn and zoom it is given; each surface is centred
-/// on its bounding sphere, and the first one sets the distance. After each surface drawn the
+/// on its bounding sphere, and the first one sets the distance; drawing is not antialiased, to
+/// keep a browser without a GPU light while surfaces come several times a second. After each
+/// surface drawn the
 /// viewer sets `data-viewer="rendered"` and `data-meshes` (surfaces drawn) on `<body>`
 /// (`data-viewer="error: …"` when three.js cannot load).
 pub fn live_surface_viewer() -> String {
@@ -179,7 +181,7 @@ try {{
   const THREE = await {three};
   const bytes = (s) => {{ const b = atob(s); const a = new Uint8Array(b.length); for (let i = 0; i < b.length; i++) a[i] = b.charCodeAt(i); return a.buffer; }};
   const canvas = document.getElementById("meb-surface");
-  const renderer = new THREE.WebGLRenderer({{ canvas, antialias: true, preserveDrawingBuffer: true }});
+  const renderer = new THREE.WebGLRenderer({{ canvas, antialias: false, preserveDrawingBuffer: true }});
   renderer.setPixelRatio(window.devicePixelRatio || 1);
   const scene = new THREE.Scene();
   scene.background = new THREE.Color(0x181a20);
@@ -281,6 +283,24 @@ mod tests {
             let digest = base64::engine::general_purpose::STANDARD.encode(digest);
             assert_eq!(THREE_JS_SHA384, format!("sha384-{digest}"));
         }
+    }
+
+    #[test]
+    fn the_live_viewer_loads_the_same_three_js_and_takes_encoded_meshes() {
+        let html = live_surface_viewer();
+        assert!(html.contains(&three_import()));
+        assert!(html.contains("meb-surface") && html.contains("dataset.meshes"));
+        let mesh = SurfaceMesh {
+            vertices: vec![[0.0, 0.0, 1.0], [1.0, 0.0, 1.0], [0.0, 1.0, 1.0]],
+            triangles: vec![[0, 1, 2]],
+        };
+        let (positions, indices) = mesh_base64(&mesh);
+        let decode = |s: &str| base64::engine::general_purpose::STANDARD.decode(s).unwrap();
+        assert_eq!(decode(&positions).len(), 9 * 4);
+        assert_eq!(
+            decode(&indices),
+            [0u32, 1, 2].map(u32::to_le_bytes).concat()
+        );
     }
 
     #[test]

@@ -5,11 +5,11 @@
 //! The pipeline never waits for a browser: [`LiveView::publish`] makes a small copy of the
 //! window (its depth sampled down to at most [`LIVE_VERTICES`] points for the mesh and to
 //! [`LIVE_PICTURE_WIDTH`] pixels wide for the pictures) and replaces the latest frame in a
-//! `tokio::sync::watch` slot; nothing queues. The server ([`server`]) turns the latest frame into
-//! an event (mesh, PNG pictures, figures) only when a page is connected, on its own thread and
-//! runtime, and sends each page only the newest frame it has not seen. It serves fixed routes
-//! only (`/` the page, `/events` the event stream); every other path is 404 and no request
-//! reaches the file system. Dropping the [`LiveView`] stops the server.
+//! `tokio::sync::watch` slot; nothing queues. The server turns the latest frame into an event
+//! (mesh, PNG pictures, figures) only when a page is connected, on its own thread and runtime,
+//! and sends each page only the newest frame it has not seen, at most one every 500 ms. It
+//! serves fixed routes only (`/` the page, `/events` the event stream); every other path is 404
+//! and no request reaches the file system. Dropping the [`LiveView`] stops the server.
 
 mod page;
 mod server;
@@ -25,7 +25,7 @@ use thiserror::Error;
 use tokio::sync::{oneshot, watch};
 
 /// Most points of the surface a live event carries; larger surfaces are sub-sampled.
-pub const LIVE_VERTICES: usize = 12_000;
+pub const LIVE_VERTICES: usize = 8_000;
 
 /// Largest width of a live event's shaded and depth pictures, pixels.
 pub const LIVE_PICTURE_WIDTH: usize = 320;
@@ -213,5 +213,40 @@ impl Drop for LiveView {
         if let Some(thread) = self.thread.take() {
             let _ = thread.join();
         }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn a_large_surface_is_sub_sampled_to_the_live_limit() {
+        let depth = DepthMap {
+            depth_mm: Array2::from_elem((720, 1280), 400.0),
+            pitch_mm: 0.25,
+            perspective: None,
+        };
+        let small = sub_sampled(&depth, None);
+        let points = small.depth_mm.len();
+        assert!(points <= LIVE_VERTICES, "{points}");
+        assert!(points > LIVE_VERTICES / 2, "{points}");
+        let step = 1280_f64 / small.depth_mm.ncols() as f64;
+        assert!((small.pitch_mm - 0.25 * step.ceil()).abs() < 1e-9);
+        // A small one is kept whole.
+        let whole = sub_sampled(&depth, Some(LIVE_VERTICES));
+        assert_eq!(whole.depth_mm.dim(), (720, 1280));
+    }
+
+    #[test]
+    fn a_port_in_use_is_an_error_naming_the_address() {
+        let taken = std::net::TcpListener::bind("127.0.0.1:0").unwrap();
+        let addr = taken.local_addr().unwrap();
+        let error = LiveView::start(addr).err().unwrap();
+        assert!(matches!(error, LiveError::Bind { .. }));
+        assert!(error.to_string().contains(&addr.to_string()), "{error}");
+        let free = LiveView::start("127.0.0.1:0".parse().unwrap()).unwrap();
+        assert_ne!(free.addr().port(), 0);
+        assert!(free.url().starts_with("http://127.0.0.1:"));
     }
 }

@@ -18,8 +18,12 @@ use meb_pipeline::video::{FrameStatus, WindowVerdict};
 use std::convert::Infallible;
 use std::future::IntoFuture;
 use std::sync::{Arc, Mutex, OnceLock, PoisonError};
-use std::time::Duration;
+use std::time::{Duration, Instant};
 use tokio::sync::{oneshot, watch};
+
+/// The shortest time between two events to a page (at most 2 a second): the browser draws
+/// each surface on the same machine as the pipeline, often without a GPU.
+const EVENT_INTERVAL: Duration = Duration::from_millis(500);
 
 /// What the handlers share.
 struct Shared {
@@ -88,9 +92,9 @@ async fn not_found() -> impl IntoResponse {
     (StatusCode::NOT_FOUND, "not found\n")
 }
 
-/// The event stream of one page: the latest frame at once (event type `current`), then each
-/// newer one as it comes (type `frame`); frames that came while the page was still receiving
-/// an older one are passed over.
+/// The event stream of one page: the latest frame at once (event type `current`), then the
+/// newest one as frames come (type `frame`), at most one per [`EVENT_INTERVAL`]; frames that
+/// came meanwhile, or while the page was still receiving an older one, are passed over.
 async fn events(
     State(shared): State<Arc<Shared>>,
 ) -> Sse<impl Stream<Item = Result<Event, Infallible>>> {
@@ -98,18 +102,23 @@ async fn events(
     let replay = latest.borrow().is_some();
     latest.mark_changed();
     let stream = futures_util::stream::unfold(
-        (latest, shared, replay),
-        |(mut latest, shared, replay)| async move {
+        (latest, shared, replay, None::<Instant>),
+        |(mut latest, shared, replay, sent)| async move {
             loop {
                 // The pipeline has ended when the sender is gone.
                 latest.changed().await.ok()?;
+                // At most one event per EVENT_INTERVAL: the frames that come meanwhile are
+                // passed over for the newest.
+                if let Some(sent) = sent {
+                    tokio::time::sleep_until((sent + EVENT_INTERVAL).into()).await;
+                }
                 let Some(frame) = latest.borrow_and_update().clone() else {
                     continue;
                 };
                 let data = shared.event_data(frame).await;
                 let kind = if replay { "current" } else { "frame" };
                 let event = Event::default().event(kind).data(&*data);
-                return Some((Ok(event), (latest, shared, false)));
+                return Some((Ok(event), (latest, shared, false, Some(Instant::now()))));
             }
         },
     );
