@@ -114,6 +114,17 @@ pub struct VideoArgs {
     /// Use distant light vectors L_i(0) (the thesis' model) instead of near-field refinement.
     #[arg(long)]
     no_near_field: bool,
+    /// Serve a live view while the video runs: a local web page with the newest 3-D frame,
+    /// its pictures, verdict and timings (docs/live-view.md). Its URL is printed on stderr.
+    #[arg(long)]
+    live: bool,
+    /// Port of the live view (0: a free one).
+    #[arg(long, requires = "live", default_value_t = meb_cli::live::DEFAULT_PORT)]
+    port: u16,
+    /// Address the live view listens on (default 127.0.0.1, this machine only; e.g. 0.0.0.0
+    /// opens it to the network).
+    #[arg(long, requires = "live")]
+    listen: Option<std::net::IpAddr>,
     /// Decoder settings.
     #[command(flatten)]
     decode: DecodeOptions,
@@ -154,6 +165,7 @@ pub fn run(args: &VideoArgs) -> Result<()> {
         .as_deref()
         .map(|path| TruthFolder::open(path, shape))
         .transpose()?;
+    let live = args.live.then(|| start_live_view(args)).transpose()?;
     let folder = super::common::output_folder(&args.out, "video", args.force)?;
     let source = open(&args.input, &open_options(&args.decode)?)
         .with_context(|| format!("cannot open {}", args.input.display()))?;
@@ -220,6 +232,10 @@ pub fn run(args: &VideoArgs) -> Result<()> {
                 meshes.add(frame.record.index, reconstruction.depth_mm());
             }
             done += 1;
+            if let Some(live) = &live {
+                let seconds = started.elapsed().as_secs_f64();
+                live.publish(frame, done, seconds, frame_camera.pitch_mm());
+            }
             bar.set_length(frame.total_frames.unwrap_or(frame.camera_frames) as u64);
             bar.set_position(frame.camera_frames as u64);
             bar.set_message(progress_message(
@@ -296,6 +312,16 @@ pub fn run(args: &VideoArgs) -> Result<()> {
         );
     }
     Ok(())
+}
+
+/// Starts the live view (`--live`) and prints its URL.
+fn start_live_view(args: &VideoArgs) -> Result<meb_cli::live::LiveView> {
+    let ip = args
+        .listen
+        .unwrap_or(std::net::IpAddr::V4(std::net::Ipv4Addr::LOCALHOST));
+    let live = meb_cli::live::LiveView::start(std::net::SocketAddr::new(ip, args.port))?;
+    eprintln!("live view: {}", live.url());
+    Ok(live)
 }
 
 /// Whether `input` is a live stream, which an interrupt ends instead of discarding the run:

@@ -150,6 +150,116 @@ pub fn three_js_import() -> String {
     three_import()
 }
 
+/// `mesh` as the viewers take it: base64 of its little-endian float32 vertex positions (x, y,
+/// z) and of its uint32 triangle indices.
+pub fn mesh_base64(mesh: &SurfaceMesh) -> (String, String) {
+    let b64 = |bytes: &[u8]| base64::engine::general_purpose::STANDARD.encode(bytes);
+    let positions: Vec<u8> = mesh
+        .vertices
+        .iter()
+        .flat_map(|v| v.iter().flat_map(|x| x.to_le_bytes()))
+        .collect();
+    let indices: Vec<u8> = mesh
+        .triangles
+        .iter()
+        .flat_map(|t| t.iter().flat_map(|i| i.to_le_bytes()))
+        .collect();
+    (b64(&positions), b64(&indices))
+}
+
+/// The HTML (canvas + module script) of a 3-D view whose surface is replaced as new ones come,
+/// for the live view of `meb video --live`. A page shows a surface by setting
+/// `window.mebSurface = { positions, indices }` (as [`mesh_base64`] encodes them) and
+/// dispatching a `meb-surface` event on `window`; a surface set before three.js has loaded is
+/// drawn once it has. The camera keeps the turn and zoom it is given; each surface is centred
+/// on its bounding sphere, and the first one sets the distance; drawing is not antialiased, to
+/// keep a browser without a GPU light while surfaces come several times a second. After each
+/// surface drawn the
+/// viewer sets `data-viewer="rendered"` and `data-meshes` (surfaces drawn) on `<body>`
+/// (`data-viewer="error: …"` when three.js cannot load).
+pub fn live_surface_viewer() -> String {
+    format!(
+        r#"<div id="meb-viewer" style="position:relative;width:720px;max-width:100%;height:480px;border:1px solid #ddd;background:#181a20">
+<canvas id="meb-surface" style="width:100%;height:100%;display:block;cursor:grab"></canvas>
+<div id="meb-viewer-note" style="position:absolute;left:8px;bottom:6px;color:#aaa;font-size:85%">waiting for the first 3-D frame</div></div>
+<script type="module">
+const note = document.getElementById("meb-viewer-note");
+try {{
+  const THREE = await {three};
+  const bytes = (s) => {{ const b = atob(s); const a = new Uint8Array(b.length); for (let i = 0; i < b.length; i++) a[i] = b.charCodeAt(i); return a.buffer; }};
+  const canvas = document.getElementById("meb-surface");
+  const renderer = new THREE.WebGLRenderer({{ canvas, antialias: false, preserveDrawingBuffer: true }});
+  renderer.setPixelRatio(window.devicePixelRatio || 1);
+  const scene = new THREE.Scene();
+  scene.background = new THREE.Color(0x181a20);
+  const surface = new THREE.Mesh(new THREE.BufferGeometry(), new THREE.MeshStandardMaterial({{ color: 0xd7cdbe, roughness: 0.85, side: THREE.DoubleSide }}));
+  const pivot = new THREE.Group();
+  pivot.add(surface);
+  scene.add(pivot);
+  scene.add(new THREE.HemisphereLight(0xffffff, 0x303040, 1.2));
+  const camera = new THREE.PerspectiveCamera(35, 1, 0.1, 1e5);
+  const light = new THREE.DirectionalLight(0xffffff, 2.0);
+  light.position.set(-0.4, 0.5, 1.0);
+  camera.add(light);
+  scene.add(camera);
+  let distance = null, yaw = -0.5, pitch = 0.35, shown = 0;
+  const draw = () => {{
+    if (distance === null) return;
+    const w = canvas.clientWidth, h = canvas.clientHeight;
+    renderer.setSize(w, h, false);
+    camera.aspect = w / h;
+    camera.updateProjectionMatrix();
+    pivot.rotation.set(pitch, yaw, 0);
+    camera.position.set(0, 0, distance);
+    camera.lookAt(0, 0, 0);
+    renderer.render(scene, camera);
+  }};
+  const show = (mesh) => {{
+    if (!mesh || !mesh.positions || !mesh.indices) return;
+    const geometry = new THREE.BufferGeometry();
+    geometry.setAttribute("position", new THREE.BufferAttribute(new Float32Array(bytes(mesh.positions)), 3));
+    geometry.setIndex(new THREE.BufferAttribute(new Uint32Array(bytes(mesh.indices)), 1));
+    geometry.computeVertexNormals();
+    geometry.computeBoundingSphere();
+    const sphere = geometry.boundingSphere;
+    if (!(sphere.radius > 0)) return;
+    geometry.translate(-sphere.center.x, -sphere.center.y, -sphere.center.z);
+    surface.geometry.dispose();
+    surface.geometry = geometry;
+    if (distance === null) {{
+      distance = sphere.radius * 3.2;
+      camera.near = sphere.radius / 100;
+      camera.far = sphere.radius * 100;
+      note.textContent = "drag to turn, scroll to zoom";
+    }}
+    draw();
+    shown += 1;
+    document.body.dataset.meshes = String(shown);
+    document.body.dataset.viewer = "rendered";
+  }};
+  let drag = null;
+  canvas.addEventListener("pointerdown", (e) => {{ drag = [e.clientX, e.clientY]; canvas.setPointerCapture(e.pointerId); }});
+  canvas.addEventListener("pointerup", () => {{ drag = null; }});
+  canvas.addEventListener("pointermove", (e) => {{
+    if (!drag) return;
+    yaw += (e.clientX - drag[0]) * 0.01;
+    pitch = Math.max(-1.5, Math.min(1.5, pitch + (e.clientY - drag[1]) * 0.01));
+    drag = [e.clientX, e.clientY];
+    draw();
+  }});
+  canvas.addEventListener("wheel", (e) => {{ e.preventDefault(); if (distance !== null) {{ distance *= Math.exp(e.deltaY * 0.001); draw(); }} }}, {{ passive: false }});
+  window.addEventListener("resize", draw);
+  window.addEventListener("meb-surface", () => show(window.mebSurface));
+  show(window.mebSurface);
+}} catch (error) {{
+  note.textContent = "3-D view unavailable: " + error;
+  document.body.dataset.viewer = "error: " + error;
+}}
+</script>"#,
+        three = three_import(),
+    )
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -180,6 +290,24 @@ mod tests {
             let digest = base64::engine::general_purpose::STANDARD.encode(digest);
             assert_eq!(THREE_JS_SHA384, format!("sha384-{digest}"));
         }
+    }
+
+    #[test]
+    fn the_live_viewer_loads_the_same_three_js_and_takes_encoded_meshes() {
+        let html = live_surface_viewer();
+        assert!(html.contains(&three_import()));
+        assert!(html.contains("meb-surface") && html.contains("dataset.meshes"));
+        let mesh = SurfaceMesh {
+            vertices: vec![[0.0, 0.0, 1.0], [1.0, 0.0, 1.0], [0.0, 1.0, 1.0]],
+            triangles: vec![[0, 1, 2]],
+        };
+        let (positions, indices) = mesh_base64(&mesh);
+        let decode = |s: &str| base64::engine::general_purpose::STANDARD.decode(s).unwrap();
+        assert_eq!(decode(&positions).len(), 9 * 4);
+        assert_eq!(
+            decode(&indices),
+            [0u32, 1, 2].map(u32::to_le_bytes).concat()
+        );
     }
 
     #[test]

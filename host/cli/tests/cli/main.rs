@@ -35,4 +35,5 @@ mod tof_range;
 mod video_cli;
 mod video_fallback;
 mod video_interrupt;
+mod video_live;
 mod video_report;

@@ -26,7 +26,7 @@ fn s(path: &Path) -> String {
 }
 
 /// Temporary output folders (`.NAME.meb-partial-…`) in `dir`.
-fn temporaries(dir: &Path) -> Vec<PathBuf> {
+pub(crate) fn temporaries(dir: &Path) -> Vec<PathBuf> {
     names(dir)
         .into_iter()
         .filter(|n| n.contains(".meb-partial-"))
@@ -34,20 +34,20 @@ fn temporaries(dir: &Path) -> Vec<PathBuf> {
         .collect()
 }
 
-fn video_json(dir: &Path) -> serde_json::Value {
+pub(crate) fn video_json(dir: &Path) -> serde_json::Value {
     serde_json::from_str(&std::fs::read_to_string(dir.join("video.json")).unwrap()).unwrap()
 }
 
 /// A simulated y4m clip of the turning ellipsoid (as in `video_cli`) on the thesis' dynamic
 /// rig at 160×90: the rig's path and the clip split into its header and frames.
-struct Clip {
-    rig: String,
-    header: Vec<u8>,
-    frames: Vec<Vec<u8>>,
+pub(crate) struct Clip {
+    pub(crate) rig: String,
+    pub(crate) header: Vec<u8>,
+    pub(crate) frames: Vec<Vec<u8>>,
 }
 
 impl Clip {
-    fn simulate(dir: &Path, frames: usize) -> Self {
+    pub(crate) fn simulate(dir: &Path, frames: usize) -> Self {
         let rig = dynamic_rig(dir, 160, 90);
         let out = dir.join("clip");
         let count = frames.to_string();
@@ -84,7 +84,7 @@ impl Clip {
     }
 
     /// The header and the first `n` frames (cycling through the clip past its end).
-    fn stream(&self, n: usize) -> Vec<u8> {
+    pub(crate) fn stream(&self, n: usize) -> Vec<u8> {
         let mut bytes = self.header.clone();
         for k in 0..n {
             bytes.extend_from_slice(&self.frames[k % self.frames.len()]);
