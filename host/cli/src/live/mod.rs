@@ -7,7 +7,7 @@
 //! [`LIVE_PICTURE_WIDTH`] pixels wide for the pictures) and replaces the latest frame in a
 //! `tokio::sync::watch` slot; nothing queues. The server turns the latest frame into an event
 //! (mesh, PNG pictures, figures) only when a page is connected, on its own thread and runtime,
-//! and sends each page only the newest frame it has not seen, at most one every 500 ms. It
+//! and sends each page only the newest frame it has not seen, at most one a second. It
 //! serves fixed routes only (`/` the page, `/events` the event stream); every other path is 404
 //! and no request reaches the file system. Dropping the [`LiveView`] stops the server.
 

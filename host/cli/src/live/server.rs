@@ -21,9 +21,10 @@ use std::sync::{Arc, Mutex, OnceLock, PoisonError};
 use std::time::{Duration, Instant};
 use tokio::sync::{oneshot, watch};
 
-/// The shortest time between two events to a page (at most 2 a second): the browser draws
-/// each surface on the same machine as the pipeline, often without a GPU.
-const EVENT_INTERVAL: Duration = Duration::from_millis(500);
+/// The shortest time between two events to a page (at most 1 a second): the browser draws
+/// each surface on the same machine as the pipeline, often without a GPU, where one surface
+/// costs 60–100 ms of CPU (docs/live-view.md).
+const EVENT_INTERVAL: Duration = Duration::from_millis(1000);
 
 /// What the handlers share.
 struct Shared {
