@@ -592,16 +592,7 @@ try {{
     }}, 1000 / data.fps);
   }};
   play.addEventListener("click", toggle);
-  let drag = null;
-  canvas.addEventListener("pointerdown", (e) => {{ drag = [e.clientX, e.clientY]; canvas.setPointerCapture(e.pointerId); }});
-  canvas.addEventListener("pointerup", () => {{ drag = null; }});
-  canvas.addEventListener("pointermove", (e) => {{
-    if (!drag) return;
-    yaw += (e.clientX - drag[0]) * 0.01;
-    pitch = Math.max(-1.5, Math.min(1.5, pitch + (e.clientY - drag[1]) * 0.01));
-    drag = [e.clientX, e.clientY];
-    draw();
-  }});
+{turn}
   canvas.addEventListener("wheel", (e) => {{ e.preventDefault(); distance *= Math.exp(e.deltaY * 0.001); draw(); }}, {{ passive: false }});
   window.addEventListener("resize", draw);
   const wanted = /frame=(\d+)/.exec(location.hash);
@@ -616,6 +607,7 @@ try {{
 }}
 "#,
         three = viewer::three_js_import(),
+        turn = viewer::TURN_BY_DRAG,
     )
 }
 

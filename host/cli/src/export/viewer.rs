@@ -42,19 +42,22 @@ fn three_import() -> String {
 /// Most vertices the viewer draws; larger meshes are sub-sampled.
 pub const MAX_VIEWER_VERTICES: usize = 120_000;
 
+/// The script lines that turn a view's surface by dragging on its `canvas`: they change the
+/// page's `yaw` and `pitch` and call its `draw()` (every viewer page declares those).
+pub const TURN_BY_DRAG: &str = r#"  let drag = null;
+  canvas.addEventListener("pointerdown", (e) => { drag = [e.clientX, e.clientY]; canvas.setPointerCapture(e.pointerId); });
+  canvas.addEventListener("pointerup", () => { drag = null; });
+  canvas.addEventListener("pointermove", (e) => {
+    if (!drag) return;
+    yaw += (e.clientX - drag[0]) * 0.01;
+    pitch = Math.max(-1.5, Math.min(1.5, pitch + (e.clientY - drag[1]) * 0.01));
+    drag = [e.clientX, e.clientY];
+    draw();
+  });"#;
+
 /// The HTML (canvas + module script) of the 3-D view of `mesh`.
 pub fn surface_viewer(mesh: &SurfaceMesh) -> String {
-    let b64 = |bytes: &[u8]| base64::engine::general_purpose::STANDARD.encode(bytes);
-    let positions: Vec<u8> = mesh
-        .vertices
-        .iter()
-        .flat_map(|v| v.iter().flat_map(|x| x.to_le_bytes()))
-        .collect();
-    let indices: Vec<u8> = mesh
-        .triangles
-        .iter()
-        .flat_map(|t| t.iter().flat_map(|i| i.to_le_bytes()))
-        .collect();
+    let (positions, indices) = mesh_base64(mesh);
     format!(
         r#"<div id="meb-viewer" style="position:relative;width:720px;max-width:100%;height:480px;border:1px solid #ddd;background:#181a20">
 <canvas id="meb-surface" style="width:100%;height:100%;display:block;cursor:grab"></canvas>
@@ -97,16 +100,7 @@ try {{
     camera.lookAt(0, 0, 0);
     renderer.render(scene, camera);
   }};
-  let drag = null;
-  canvas.addEventListener("pointerdown", (e) => {{ drag = [e.clientX, e.clientY]; canvas.setPointerCapture(e.pointerId); }});
-  canvas.addEventListener("pointerup", () => {{ drag = null; }});
-  canvas.addEventListener("pointermove", (e) => {{
-    if (!drag) return;
-    yaw += (e.clientX - drag[0]) * 0.01;
-    pitch = Math.max(-1.5, Math.min(1.5, pitch + (e.clientY - drag[1]) * 0.01));
-    drag = [e.clientX, e.clientY];
-    draw();
-  }});
+{turn}
   canvas.addEventListener("wheel", (e) => {{ e.preventDefault(); distance *= Math.exp(e.deltaY * 0.001); draw(); }}, {{ passive: false }});
   window.addEventListener("resize", draw);
   draw();
@@ -117,8 +111,9 @@ try {{
 }}
 </script>"#,
         three = three_import(),
-        positions = b64(&positions),
-        indices = b64(&indices),
+        turn = TURN_BY_DRAG,
+        positions = positions,
+        indices = indices,
     )
 }
 
@@ -237,16 +232,7 @@ try {{
     document.body.dataset.meshes = String(shown);
     document.body.dataset.viewer = "rendered";
   }};
-  let drag = null;
-  canvas.addEventListener("pointerdown", (e) => {{ drag = [e.clientX, e.clientY]; canvas.setPointerCapture(e.pointerId); }});
-  canvas.addEventListener("pointerup", () => {{ drag = null; }});
-  canvas.addEventListener("pointermove", (e) => {{
-    if (!drag) return;
-    yaw += (e.clientX - drag[0]) * 0.01;
-    pitch = Math.max(-1.5, Math.min(1.5, pitch + (e.clientY - drag[1]) * 0.01));
-    drag = [e.clientX, e.clientY];
-    draw();
-  }});
+{turn}
   canvas.addEventListener("wheel", (e) => {{ e.preventDefault(); if (distance !== null) {{ distance *= Math.exp(e.deltaY * 0.001); draw(); }} }}, {{ passive: false }});
   window.addEventListener("resize", draw);
   window.addEventListener("meb-surface", () => show(window.mebSurface));
@@ -257,6 +243,7 @@ try {{
 }}
 </script>"#,
         three = three_import(),
+        turn = TURN_BY_DRAG,
     )
 }
 
