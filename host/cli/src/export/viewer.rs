@@ -79,7 +79,7 @@ try {{
   renderer.setPixelRatio(window.devicePixelRatio || 1);
   const scene = new THREE.Scene();
   scene.background = new THREE.Color(0x181a20);
-  const surface = new THREE.Mesh(geometry, new THREE.MeshStandardMaterial({{ color: 0xd7cdbe, roughness: 0.85, side: THREE.DoubleSide }}));
+  const surface = new THREE.Mesh(geometry, new THREE.MeshLambertMaterial({{ color: 0xd7cdbe, side: THREE.DoubleSide }}));
   const pivot = new THREE.Group();
   pivot.add(surface);
   scene.add(pivot);
@@ -162,15 +162,25 @@ pub fn mesh_base64(mesh: &SurfaceMesh) -> (String, String) {
     (b64(&positions), b64(&indices))
 }
 
+/// Largest share of the wall time the live view spends drawing surfaces
+/// ([`live_surface_viewer`]).
+pub const LIVE_DRAW_SHARE: f64 = 0.03;
+
 /// The HTML (canvas + module script) of a 3-D view whose surface is replaced as new ones come,
 /// for the live view of `meb video --live`. A page shows a surface by setting
 /// `window.mebSurface = { positions, indices }` (as [`mesh_base64`] encodes them) and
 /// dispatching a `meb-surface` event on `window`; a surface set before three.js has loaded is
 /// drawn once it has. The camera keeps the turn and zoom it is given; each surface is centred
-/// on its bounding sphere, and the first one sets the distance; drawing is not antialiased, to
-/// keep a browser without a GPU light while surfaces come several times a second. After each
-/// surface drawn the
-/// viewer sets `data-viewer="rendered"` and `data-meshes` (surfaces drawn) on `<body>`
+/// on its bounding sphere, and the first one sets the distance.
+///
+/// The view keeps the browser's share of the machine small, since a browser without a GPU
+/// draws in software on the cores the pipeline uses: drawing is not antialiased, the material
+/// is Lambertian, and a surface is drawn only when the time spent on the last one (timed up
+/// to a one-pixel read-back, which waits for the drawing) is at most [`LIVE_DRAW_SHARE`] of
+/// the time since; a surface that comes sooner is skipped, and the next one after the pause is
+/// drawn as it comes. With a GPU every surface is drawn. After each surface drawn the viewer
+/// sets `data-viewer="rendered"`, `data-meshes` (surfaces drawn), `data-skipped` (surfaces
+/// skipped) and `data-draw-ms` (the last one's drawing time) on `<body>`
 /// (`data-viewer="error: …"` when three.js cannot load).
 pub fn live_surface_viewer() -> String {
     format!(
@@ -187,7 +197,7 @@ try {{
   renderer.setPixelRatio(window.devicePixelRatio || 1);
   const scene = new THREE.Scene();
   scene.background = new THREE.Color(0x181a20);
-  const surface = new THREE.Mesh(new THREE.BufferGeometry(), new THREE.MeshStandardMaterial({{ color: 0xd7cdbe, roughness: 0.85, side: THREE.DoubleSide }}));
+  const surface = new THREE.Mesh(new THREE.BufferGeometry(), new THREE.MeshLambertMaterial({{ color: 0xd7cdbe, side: THREE.DoubleSide }}));
   const pivot = new THREE.Group();
   pivot.add(surface);
   scene.add(pivot);
@@ -197,7 +207,8 @@ try {{
   light.position.set(-0.4, 0.5, 1.0);
   camera.add(light);
   scene.add(camera);
-  let distance = null, yaw = -0.5, pitch = 0.35, shown = 0;
+  let distance = null, yaw = -0.5, pitch = 0.35, shown = 0, skipped = 0, free = 0;
+  const pixel = new Uint8Array(4);
   const draw = () => {{
     if (distance === null) return;
     const w = canvas.clientWidth, h = canvas.clientHeight;
@@ -211,6 +222,12 @@ try {{
   }};
   const show = (mesh) => {{
     if (!mesh || !mesh.positions || !mesh.indices) return;
+    const start = performance.now();
+    if (shown > 0 && start < free) {{
+      skipped += 1;
+      document.body.dataset.skipped = String(skipped);
+      return;
+    }}
     const geometry = new THREE.BufferGeometry();
     geometry.setAttribute("position", new THREE.BufferAttribute(new Float32Array(bytes(mesh.positions)), 3));
     geometry.setIndex(new THREE.BufferAttribute(new Uint32Array(bytes(mesh.indices)), 1));
@@ -228,7 +245,12 @@ try {{
       note.textContent = "drag to turn, scroll to zoom";
     }}
     draw();
+    const gl = renderer.getContext();
+    gl.readPixels(0, 0, 1, 1, gl.RGBA, gl.UNSIGNED_BYTE, pixel);
+    const cost = performance.now() - start;
+    free = performance.now() + cost / {share};
     shown += 1;
+    document.body.dataset.drawMs = cost.toFixed(1);
     document.body.dataset.meshes = String(shown);
     document.body.dataset.viewer = "rendered";
   }};
@@ -244,6 +266,7 @@ try {{
 </script>"#,
         three = three_import(),
         turn = TURN_BY_DRAG,
+        share = LIVE_DRAW_SHARE,
     )
 }
 

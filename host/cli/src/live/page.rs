@@ -7,7 +7,8 @@
 //! event), `data-events` (events received), `data-index` (the last one's 3-D frame number),
 //! `data-state` (its verdict), `data-latency-ms` (receipt time − the event's timestamp of the
 //! last new frame, ms; the frame already done when the page connects is not counted),
-//! `data-connection` (`open` or `closed`), and the viewer's `data-viewer` and `data-meshes`.
+//! `data-connection` (`open` or `closed`), and the viewer's `data-viewer`, `data-meshes`,
+//! `data-skipped` and `data-draw-ms`.
 
 use crate::export::viewer::live_surface_viewer;
 
@@ -55,7 +56,7 @@ td:first-child {{ color: #666; }}
 <script>
 (() => {{
   const body = document.body;
-  const set = (id, text) => {{ document.getElementById(id).textContent = text; }};
+  const set = (id, text) => {{ const e = document.getElementById(id); if (e.textContent !== text) e.textContent = text; }};
   const ms = (x) => (typeof x === "number" ? x.toFixed(1) + " ms" : "–");
   let received = 0;
   const update = (live) => (event) => {{

@@ -37,3 +37,4 @@ mod video_fallback;
 mod video_interrupt;
 mod video_live;
 mod video_report;
+mod video_run;

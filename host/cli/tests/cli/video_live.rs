@@ -4,132 +4,49 @@
 //! surface, and a SIGINT mid-stream still leaves a complete folder. Every path but the page's
 //! own is 404, and a port in use is refused before any processing.
 
-use nix::sys::signal::{Signal, kill};
-use nix::unistd::Pid;
 use serde_json::{Value, json};
-use std::io::{BufRead, BufReader, Read, Write};
+use std::io::{Read, Write};
 use std::net::{SocketAddr, TcpListener, TcpStream};
 use std::path::{Path, PathBuf};
-use std::process::{Child, Command, ExitStatus, Stdio};
-use std::sync::mpsc::{Receiver, Sender, channel};
+use std::process::{Child, Command, Stdio};
 use std::time::{Duration, Instant};
 
 use crate::common::names;
 use crate::report_page::chromium;
-use crate::video_interrupt::{Clip, temporaries, video_json};
-
-/// How long any wait may take (debug builds on a busy machine are slow).
-const PATIENCE: Duration = Duration::from_secs(240);
+use crate::video_run::{Clip, Feed, PATIENCE, VideoRun, s, temporaries, video_json};
 
 /// Camera frames per window (`meb video`'s default).
 const WINDOW: usize = 40;
 
 /// `meb video - --rig RIG --out OUT --live --port 0`, fed `windows` windows of `clip` through
-/// a pipe, one window every `pace`; the pipe stays open until the run is dropped or finished.
-struct LiveRun {
-    child: Child,
-    lines: Receiver<String>,
-    stderr: Vec<String>,
-    close: Option<Sender<()>>,
+/// a pipe, one window every `pace`; the pipe stays open until the run is finished or dropped.
+fn live_run(clip: Clip, out: &Path, windows: usize, pace: Duration) -> VideoRun {
+    let args = [
+        "video",
+        "-",
+        "--rig",
+        &clip.rig,
+        "--out",
+        &s(out),
+        "--live",
+        "--port",
+        "0",
+    ]
+    .map(String::from);
+    let feed = Feed::Paced {
+        clip,
+        windows,
+        window: WINDOW,
+        pace,
+    };
+    VideoRun::start(&args, feed)
 }
 
-impl LiveRun {
-    fn start(clip: &Clip, out: &Path, windows: usize, pace: Duration) -> Self {
-        let mut child = Command::new(env!("CARGO_BIN_EXE_meb"))
-            .args(["video", "-", "--rig", &clip.rig, "--out"])
-            .arg(out)
-            .args(["--live", "--port", "0"])
-            .stdin(Stdio::piped())
-            .stdout(Stdio::null())
-            .stderr(Stdio::piped())
-            .spawn()
-            .unwrap();
-        let (line_sender, lines) = channel();
-        let stderr = child.stderr.take().unwrap();
-        std::thread::spawn(move || {
-            for line in BufReader::new(stderr).lines() {
-                let Ok(line) = line else { break };
-                if line_sender.send(line).is_err() {
-                    break;
-                }
-            }
-        });
-        let mut stdin = child.stdin.take().unwrap();
-        let header = clip.header.clone();
-        let frames = clip.frames.clone();
-        let (close, closed) = channel::<()>();
-        std::thread::spawn(move || {
-            // meb may end before reading everything (then a write fails): fine.
-            let mut fed = stdin.write_all(&header);
-            for k in 0..windows * WINDOW {
-                if fed.is_err() {
-                    break;
-                }
-                if k % WINDOW == 0 && k > 0 {
-                    std::thread::sleep(pace);
-                }
-                fed = stdin.write_all(&frames[k % frames.len()]);
-            }
-            let _ = stdin.flush();
-            let _ = closed.recv();
-        });
-        Self {
-            child,
-            lines,
-            stderr: Vec::new(),
-            close: Some(close),
-        }
-    }
-
-    /// The live view's address, from the `live view: http://…/` line.
-    fn address(&mut self) -> SocketAddr {
-        let start = Instant::now();
-        loop {
-            if let Some(url) = self
-                .stderr
-                .iter()
-                .find_map(|l| l.strip_prefix("live view: http://"))
-            {
-                return url.trim_end_matches('/').parse().unwrap();
-            }
-            match self.lines.recv_timeout(Duration::from_millis(100)) {
-                Ok(line) => self.stderr.push(line),
-                Err(_) => assert!(
-                    start.elapsed() < PATIENCE && self.child.try_wait().unwrap().is_none(),
-                    "no live view URL: {:?}",
-                    self.stderr
-                ),
-            }
-        }
-    }
-
-    fn interrupt(&self) {
-        kill(Pid::from_raw(self.child.id() as i32), Signal::SIGINT).unwrap();
-    }
-
-    /// Waits for `meb` to end, then closes the pipe; its status and all of its stderr.
-    fn finish(mut self) -> (ExitStatus, String) {
-        let start = Instant::now();
-        let status = loop {
-            if let Some(status) = self.child.try_wait().unwrap() {
-                break status;
-            }
-            assert!(start.elapsed() < PATIENCE, "meb did not end");
-            std::thread::sleep(Duration::from_millis(20));
-        };
-        drop(self.close.take());
-        while let Ok(line) = self.lines.recv_timeout(Duration::from_secs(10)) {
-            self.stderr.push(line);
-        }
-        (status, self.stderr.join("\n"))
-    }
-}
-
-impl Drop for LiveRun {
-    fn drop(&mut self) {
-        let _ = self.child.kill();
-        let _ = self.child.wait();
-    }
+/// The live view's address, from the run's `live view: http://…/` line.
+fn address(run: &mut VideoRun) -> SocketAddr {
+    let line = run.wait_for_line("live view: http://");
+    let url = line.split("http://").nth(1).unwrap_or_default();
+    url.trim_end_matches('/').parse().unwrap()
 }
 
 /// A plain HTTP/1.1 GET of `path`: the status code and what arrived within a second.
@@ -317,8 +234,8 @@ fn the_live_page_follows_the_stream_and_an_interrupt_still_writes_the_folder() {
     // 200 windows, one every 0.3 s: longer than the test needs (however slowly Chromium
     // starts), so the interrupt comes mid-stream.
     let windows = 200;
-    let mut run = LiveRun::start(&clip, &out, windows, Duration::from_millis(300));
-    let addr = run.address();
+    let mut run = live_run(clip, &out, windows, Duration::from_millis(300));
+    let addr = address(&mut run);
     assert!(addr.ip().is_loopback(), "{addr}");
     let url = format!("http://{addr}/");
     let mut browser = Browser::open(program, &tmp.path().join("profile"), &url);
@@ -335,8 +252,14 @@ fn the_live_page_follows_the_stream_and_an_interrupt_still_writes_the_folder() {
     assert_eq!(later["connection"], "open", "{later}");
     let latency = number(&later, "latencyMs");
     eprintln!(
-        "live view: 3-D frames {} → {}, meshes {} → {}, event latency {latency} ms",
-        first["frames"], later["frames"], first["meshes"], later["meshes"]
+        "live view: 3-D frames {} → {}, meshes {} → {} ({} skipped, {} ms to draw the last), \
+         event latency {latency} ms",
+        first["frames"],
+        later["frames"],
+        first["meshes"],
+        later["meshes"],
+        later["skipped"],
+        later["drawMs"]
     );
     assert!(latency < 5000.0, "event latency {latency} ms");
     assert!(
@@ -413,8 +336,8 @@ fn the_live_view_serves_its_page_and_events_and_nothing_else() {
     let tmp = tempfile::tempdir().unwrap();
     let clip = Clip::simulate(tmp.path(), 160);
     let out = tmp.path().join("live");
-    let mut run = LiveRun::start(&clip, &out, 4, Duration::ZERO);
-    let addr = run.address();
+    let mut run = live_run(clip, &out, 4, Duration::ZERO);
+    let addr = address(&mut run);
     let (status, page) = get(addr, "/");
     assert_eq!(status, 200, "{page}");
     assert!(page.contains("text/html") && page.contains("EventSource(\"/events\")"));

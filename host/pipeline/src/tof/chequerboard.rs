@@ -225,6 +225,23 @@ fn canonical_order(mut points: Vec<[f64; 2]>, board: BoardSize) -> Vec<[f64; 2]>
 mod tests {
     use super::*;
 
+    /// A build without OpenCV refuses before any work, saying how to rebuild; a build with it
+    /// goes on. (CI tests the build with the feature; `meb tof calibrate`'s refusal in the
+    /// default build is the CLI test `tof_cli::calibrate_without_opencv_refuses_…`.)
+    #[test]
+    fn the_corner_detector_is_refused_exactly_in_a_build_without_opencv() {
+        assert_eq!(CORNER_DETECTOR, cfg!(feature = "opencv"));
+        let gate = require_corner_detector();
+        assert_eq!(gate.is_ok(), cfg!(feature = "opencv"), "{gate:?}");
+        if let Err(error) = gate {
+            assert!(matches!(error, TofError::NoCornerDetector), "{error}");
+        }
+        let text = TofError::NoCornerDetector.to_string();
+        assert!(text.contains("built without OpenCV"), "{text}");
+        assert!(text.contains("--features opencv"), "{text}");
+        assert!(text.contains("scripts/setup.sh"), "{text}");
+    }
+
     /// A rendered board (anti-aliased by 4×4 supersampling) with a known affine placement.
     fn board_image(
         rows: usize,
