@@ -1,5 +1,5 @@
 //! `meb video` and interrupts, with real processes and real signals: the first SIGINT of a live
-//! stream (standard input) ends the stream and the folder is written and committed as at a
+//! stream (standard input or a named pipe) ends the stream and the folder is written and committed as at a
 //! natural end; a second one discards everything; an interrupt of a file input discards the
 //! run as for every command.
 
@@ -71,6 +71,26 @@ fn the_first_interrupt_of_a_live_stream_ends_it_and_writes_the_folder() {
             "{file}"
         );
     }
+}
+
+#[test]
+fn a_named_pipe_is_a_live_stream_that_the_first_interrupt_ends() {
+    let tmp = tempfile::tempdir().unwrap();
+    let clip = Clip::simulate(tmp.path(), 180);
+    let fifo = tmp.path().join("camera.y4m");
+    nix::unistd::mkfifo(&fifo, nix::sys::stat::Mode::S_IRWXU).unwrap();
+    let out = tmp.path().join("live");
+    let feed = Feed::Fifo(fifo.clone(), clip.stream(180));
+    let mut run = VideoRun::start(&video(&s(&fifo), &clip.rig, &out), feed);
+    run.wait_for_file(&out, "depth_00003.npy");
+    run.interrupt();
+    let (status, stderr) = run.finish();
+    assert!(status.success(), "{status:?}: {stderr}");
+    assert!(stderr.contains(ENDED), "{stderr}");
+    assert_eq!(temporaries(tmp.path()), Vec::<PathBuf>::new());
+    let json = video_json(&out);
+    assert_eq!(json["summary"]["end"], "interrupted", "{json}");
+    assert_eq!(json["summary"]["windows"], 4, "{json}");
 }
 
 #[test]

@@ -94,6 +94,9 @@ pub(crate) enum Feed {
     Nothing,
     /// These bytes, written at once.
     Stream(Vec<u8>),
+    /// These bytes, written at once into the named pipe (FIFO) `meb` reads, which stays open
+    /// like standard input.
+    Fifo(PathBuf, Vec<u8>),
     /// The clip's header, then `windows` windows of `window` frames each (cycling through the
     /// clip), one window every `pace`.
     Paced {
@@ -105,12 +108,18 @@ pub(crate) enum Feed {
 }
 
 impl Feed {
-    /// Writes the feed to `stdin`; stops at the first failed write (meb may end before reading
-    /// everything: fine).
-    fn write(self, stdin: &mut impl Write) {
+    /// Writes the feed to `stdin` (or its FIFO) and returns the writer to keep the pipe open;
+    /// stops at the first failed write (meb may end before reading everything: fine).
+    fn write(self, mut stdin: impl Write + Send + 'static) -> Box<dyn Write + Send> {
         let fed = match self {
             Feed::Nothing => Ok(()),
             Feed::Stream(bytes) => stdin.write_all(&bytes),
+            Feed::Fifo(path, bytes) => {
+                // Opening blocks until meb opens the pipe for reading.
+                let mut fifo = std::fs::OpenOptions::new().write(true).open(path).unwrap();
+                let _ = fifo.write_all(&bytes).and_then(|()| fifo.flush());
+                return Box::new(fifo);
+            }
             Feed::Paced {
                 clip,
                 windows,
@@ -128,6 +137,7 @@ impl Feed {
             })(),
         };
         let _ = fed.and_then(|()| stdin.flush());
+        Box::new(stdin)
     }
 }
 
@@ -143,7 +153,7 @@ pub(crate) struct VideoRun {
 impl VideoRun {
     /// `meb ARGS…` (a `meb video` command line), reading `feed` on standard input.
     pub(crate) fn start(args: &[String], feed: Feed) -> Self {
-        let piped = !matches!(feed, Feed::Nothing);
+        let piped = matches!(feed, Feed::Stream(_) | Feed::Paced { .. });
         let mut child = Command::new(env!("CARGO_BIN_EXE_meb"))
             .args(args)
             .stdin(if piped { Stdio::piped() } else { Stdio::null() })
@@ -161,12 +171,16 @@ impl VideoRun {
                 }
             }
         });
-        let close = piped.then(|| {
-            let mut stdin = child.stdin.take().unwrap();
+        let stdin = child.stdin.take();
+        let close = (!matches!(feed, Feed::Nothing)).then(|| {
             let (close, closed) = channel::<()>();
             std::thread::spawn(move || {
-                feed.write(&mut stdin);
+                let open = match stdin {
+                    Some(stdin) => feed.write(stdin),
+                    None => feed.write(std::io::sink()),
+                };
                 let _ = closed.recv();
+                drop(open);
             });
             close
         });
