@@ -8,10 +8,11 @@ use crate::json::to_python;
 use crate::rig::rig_of;
 use meb_core::capture::memory::MemorySource;
 use meb_core::capture::{Frame, FrameFormat, FrameSource, OpenOptions, Samples, open};
+use meb_core::stop::StopSignal;
 use meb_pipeline::demod::LedCount;
 use meb_pipeline::video::{
     FrameRecord, VideoConfig, VideoError, VideoFrame as RustVideoFrame, VideoSummary,
-    WindowReconstruction, WindowSchedule, process,
+    WindowReconstruction, WindowSchedule, process_until,
 };
 use ndarray::{Array2, Array3};
 use numpy::{IntoPyArray, PyArrayMethods, PyUntypedArrayMethods};
@@ -19,8 +20,12 @@ use pyo3::exceptions::{PyStopIteration, PyTypeError, PyValueError};
 use pyo3::prelude::*;
 use std::path::PathBuf;
 use std::sync::Mutex;
-use std::sync::mpsc::{Receiver, sync_channel};
+use std::sync::mpsc::{Receiver, RecvTimeoutError, sync_channel};
 use std::thread::JoinHandle;
+use std::time::Duration;
+
+/// How often a wait for the next 3-D frame lets Python handle its signals (Ctrl-C).
+const SIGNAL_POLL: Duration = Duration::from_millis(100);
 
 /// What the pipeline thread hands over: a 3-D frame, or the end of the run.
 enum Item {
@@ -80,11 +85,17 @@ impl VideoFrame {
 }
 
 /// An iterator of 3-D frames; `summary` holds the run's summary once it is exhausted.
+///
+/// A wait for the next frame handles Python's signals every [`SIGNAL_POLL`]: Ctrl-C raises
+/// `KeyboardInterrupt` from `next()` while the pipeline goes on; `stop()` then ends the stream
+/// as `meb video`'s first Ctrl-C does (the windows the frames already read complete are still
+/// yielded, and the summary's `end` is `"interrupted"`), `close()` drops the rest.
 #[pyclass(module = "meb")]
 pub struct Video {
     receiver: Mutex<Option<Receiver<Item>>>,
     worker: Option<JoinHandle<()>>,
     summary: Option<Py<PyAny>>,
+    stop: StopSignal,
 }
 
 #[pymethods]
@@ -104,7 +115,23 @@ impl Video {
         let Some(receiver) = receiver else {
             return Err(PyStopIteration::new_err(()));
         };
-        let (item, receiver) = py.detach(move || (receiver.recv().ok(), receiver));
+        let mut receiver = receiver;
+        let item = loop {
+            let (waited, back) = py.detach(move || (receiver.recv_timeout(SIGNAL_POLL), receiver));
+            receiver = back;
+            match waited {
+                Ok(item) => break Some(item),
+                Err(RecvTimeoutError::Disconnected) => break None,
+                Err(RecvTimeoutError::Timeout) => {
+                    if let Err(interrupt) = py.check_signals() {
+                        if let Ok(mut guard) = self.receiver.lock() {
+                            *guard = Some(receiver);
+                        }
+                        return Err(interrupt);
+                    }
+                }
+            }
+        };
         if let Ok(mut guard) = self.receiver.lock() {
             *guard = Some(receiver);
         }
@@ -148,6 +175,13 @@ impl Video {
     #[getter]
     fn summary(&self, py: Python<'_>) -> Option<Py<PyAny>> {
         self.summary.as_ref().map(|s| s.clone_ref(py))
+    }
+
+    /// Ends the stream as `meb video`'s first Ctrl-C does: the pipeline reads no more camera
+    /// frames, the windows the frames already read complete are still yielded, and the
+    /// summary's `end` is `"interrupted"`.
+    fn stop(&self) {
+        self.stop.stop();
     }
 
     /// Stops the pipeline (the frames not yet taken are dropped).
@@ -284,10 +318,12 @@ pub fn video(
     config.max_frames = max_frames;
     let source = frame_source(py, source, fps)?;
     let (sender, receiver) = sync_channel::<Item>(1);
+    let stop = StopSignal::new();
+    let stopped = stop.clone();
     let worker = std::thread::Builder::new()
         .name("meb-video".into())
         .spawn(move || {
-            let result = process(source, &rig, &config, None, &mut |frame| {
+            let result = process_until(source, &rig, &config, None, &stopped, &mut |frame| {
                 sender
                     .send(Item::Frame(Box::new(owned(frame))))
                     .map_err(|_| VideoError::Encode("the Python iterator was closed".into()))
@@ -300,6 +336,7 @@ pub fn video(
         receiver: Mutex::new(Some(receiver)),
         worker: Some(worker),
         summary: None,
+        stop,
     })
 }
 

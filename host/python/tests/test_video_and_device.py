@@ -2,7 +2,10 @@
 of `meb device emulate` on a pseudo-terminal through the client `meb device` uses."""
 
 import json
+import os
+import signal
 import subprocess
+import threading
 import warnings
 
 import numpy as np
@@ -40,6 +43,41 @@ def test_a_closed_video_stops_its_pipeline():
     frames.close()
     with pytest.raises(StopIteration):
         next(frames)
+
+
+def test_ctrl_c_then_stop_ends_a_live_stream_as_meb_videos_first_interrupt(tmp_path):
+    clip = tmp_path / "clip"
+    run_meb("simulate", "--rig", "thesis-dynamic", "--camera-size", "160x90", "--scene",
+            "ellipsoid", "--axes-mm", "100,60,60", "--rpm", "7.5", "--frames", "100",
+            "--format", "y4m", "--out", str(clip))
+    # A named pipe that delivers 100 frames (two whole 40-frame windows) and stays open.
+    fifo = tmp_path / "camera.y4m"
+    os.mkfifo(fifo)
+    release = threading.Event()
+
+    def feed():
+        with open(fifo, "wb") as pipe:
+            pipe.write((clip / "capture.y4m").read_bytes())
+            pipe.flush()
+            release.wait(120)
+
+    threading.Thread(target=feed, daemon=True).start()
+    try:
+        frames = meb.video(fifo, str(clip / "rig.toml"))
+        assert [next(frames).index, next(frames).index] == [0, 1]
+        # No frame comes any more: the wait for the next one is interrupted by Ctrl-C.
+        ctrl_c = threading.Timer(0.5, os.kill, (os.getpid(), signal.SIGINT))
+        ctrl_c.start()
+        with pytest.raises(KeyboardInterrupt):
+            next(frames)
+        ctrl_c.join()
+        assert frames.summary is None
+        frames.stop()
+        assert list(frames) == []
+        assert frames.summary["end"] == "interrupted", frames.summary
+        assert frames.summary["windows"] == 2, frames.summary
+    finally:
+        release.set()
 
 
 @pytest.fixture

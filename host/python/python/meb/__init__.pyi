@@ -260,15 +260,21 @@ class VideoFrame:
     camera_frames: int
 
 class Video(Iterator[VideoFrame]):
-    """3-D frames as the pipeline finishes them; ``summary`` once exhausted."""
+    """3-D frames as the pipeline finishes them; ``summary`` once exhausted. Ctrl-C raises
+    ``KeyboardInterrupt`` from ``next()`` while the pipeline goes on: ``stop()`` then ends the
+    stream (the windows already read are still yielded), ``close()`` drops the rest."""
 
     def __iter__(self) -> Video: ...
     def __next__(self) -> VideoFrame: ...
     @property
     def summary(self) -> dict[str, Any] | None:
         """``video.json``'s summary once the iterator is exhausted, else None."""
+    def stop(self) -> None:
+        """Ends the stream as ``meb video``'s first Ctrl-C does: no more camera frames are
+        read, the windows the frames already read complete are still yielded, and the
+        summary's ``end`` is ``"interrupted"``."""
     def close(self) -> None:
-        """Stops the pipeline."""
+        """Stops the pipeline; the frames not yet taken are dropped."""
 
 def video(
     source: npt.NDArray[np.uint8] | npt.NDArray[np.uint16] | _Path,
