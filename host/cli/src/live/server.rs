@@ -1,15 +1,21 @@
 //! The live view's HTTP server: `/` (the page), `/events` (server-sent events, one per new
 //! 3-D frame) and 404 for every other path. Each event is built from the latest frame only when
 //! a page asks for it, once for all pages, off the server's async thread.
+//!
+//! Served on a loopback address, it answers only requests whose `Host` names a loopback host
+//! (`localhost`, `127.0.0.1`, `[::1]`, with any port), and 403 to others: a web page from
+//! elsewhere cannot read the view through a DNS name rebound to 127.0.0.1. Served on another
+//! address (`--listen`), it answers every host.
 
 use super::{Latest, LiveFrame, page};
 use crate::export::mesh::SurfaceMesh;
 use crate::export::viewer::mesh_base64;
 use axum::Router;
-use axum::extract::State;
-use axum::http::{StatusCode, header};
+use axum::extract::{Request, State};
+use axum::http::{HeaderMap, StatusCode, header};
+use axum::middleware::{Next, from_fn_with_state};
 use axum::response::sse::{Event, KeepAlive, Sse};
-use axum::response::{Html, IntoResponse};
+use axum::response::{Html, IntoResponse, Response};
 use axum::routing::get;
 use base64::Engine;
 use futures_util::stream::Stream;
@@ -21,9 +27,9 @@ use std::sync::{Arc, Mutex, OnceLock, PoisonError};
 use std::time::{Duration, Instant};
 use tokio::sync::{oneshot, watch};
 
-/// The shortest time between two events to a page (at most 1 a second): the browser draws
-/// each surface on the same machine as the pipeline, often without a GPU, where one surface
-/// costs 60–100 ms of CPU (docs/live-view.md).
+/// The shortest time between two events to a page (at most 1 a second): the browser often runs
+/// on the pipeline's cores without a GPU, where repainting the page for one event costs it
+/// 40–100 ms of CPU (docs/live-view.md).
 const EVENT_INTERVAL: Duration = Duration::from_millis(1000);
 
 /// What the handlers share.
@@ -36,6 +42,8 @@ struct Shared {
     event: Mutex<Option<(usize, Arc<str>)>>,
     /// Depth range of the depth pictures, mm: that of the first 3-D frame, so colours stay.
     range: OnceLock<(f32, f32)>,
+    /// Whether only requests naming a loopback host are answered (module docs).
+    loopback: bool,
 }
 
 /// Serves on `listener` until `stopped` fires (or its sender is dropped), then drops every
@@ -54,11 +62,13 @@ pub(super) fn run(
                 return;
             }
         };
+        let loopback = listener.local_addr().is_ok_and(|a| a.ip().is_loopback());
         let shared = Arc::new(Shared {
             page: page::html(),
             latest,
             event: Mutex::new(None),
             range: OnceLock::new(),
+            loopback,
         });
         let serve = axum::serve(listener, router(shared)).into_future();
         tokio::select! {
@@ -73,13 +83,43 @@ pub(super) fn run(
     runtime.shutdown_timeout(Duration::from_millis(500));
 }
 
-/// The fixed routes; anything else is 404.
+/// The fixed routes; anything else is 404; on a loopback address, a request naming another
+/// host is 403.
 fn router(shared: Arc<Shared>) -> Router {
     Router::new()
         .route("/", get(index))
         .route("/events", get(events))
         .fallback(not_found)
+        .layer(from_fn_with_state(shared.clone(), loopback_host))
         .with_state(shared)
+}
+
+/// Refuses (403) a request whose `Host` is not a loopback host when serving on loopback.
+async fn loopback_host(
+    State(shared): State<Arc<Shared>>,
+    request: Request,
+    next: Next,
+) -> Response {
+    if shared.loopback && !names_loopback(request.headers()) {
+        let refusal = "forbidden: this live view answers only localhost, 127.0.0.1 or [::1]\n";
+        return (StatusCode::FORBIDDEN, refusal).into_response();
+    }
+    next.run(request).await
+}
+
+/// Whether the request's `Host` (without its port) is `localhost` or a loopback address.
+fn names_loopback(headers: &HeaderMap) -> bool {
+    let Some(host) = headers.get(header::HOST).and_then(|h| h.to_str().ok()) else {
+        return false;
+    };
+    let name = match host.strip_prefix('[') {
+        Some(bracketed) => bracketed.split_once(']').map_or("", |(ip, _)| ip),
+        None => host.split_once(':').map_or(host, |(name, _)| name),
+    };
+    name.eq_ignore_ascii_case("localhost")
+        || name
+            .parse::<std::net::IpAddr>()
+            .is_ok_and(|ip| ip.is_loopback())
 }
 
 async fn index(State(shared): State<Arc<Shared>>) -> impl IntoResponse {
@@ -234,4 +274,42 @@ fn png_data_url(picture: &image::RgbImage) -> Option<String> {
         "data:image/png;base64,{}",
         base64::engine::general_purpose::STANDARD.encode(png)
     ))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn host(value: &str) -> HeaderMap {
+        let mut headers = HeaderMap::new();
+        headers.insert(header::HOST, value.parse().unwrap());
+        headers
+    }
+
+    #[test]
+    fn only_loopback_hosts_name_the_loopback_view() {
+        for name in [
+            "localhost",
+            "LOCALHOST:8960",
+            "127.0.0.1",
+            "127.0.0.1:8960",
+            "127.1.2.3:80",
+            "[::1]",
+            "[::1]:8960",
+        ] {
+            assert!(names_loopback(&host(name)), "{name}");
+        }
+        for name in [
+            "evil.example",
+            "evil.example:8960",
+            "localhost.evil.example",
+            "192.168.1.20:8960",
+            "[2001:db8::1]:8960",
+            "[::1",
+            "",
+        ] {
+            assert!(!names_loopback(&host(name)), "{name}");
+        }
+        assert!(!names_loopback(&HeaderMap::new()));
+    }
 }

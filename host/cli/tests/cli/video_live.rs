@@ -2,7 +2,8 @@
 //! opened in headless Chromium driven over the DevTools protocol (its WebSocket): the page's
 //! frame counter and 3-D view advance, it measures the event latency, a screenshot shows the
 //! surface, and a SIGINT mid-stream still leaves a complete folder. Every path but the page's
-//! own is 404, and a port in use is refused before any processing.
+//! own is 404, a request naming another host than the loopback is 403, and a port in use is
+//! refused before any processing.
 
 use serde_json::{Value, json};
 use std::io::{Read, Write};
@@ -51,13 +52,18 @@ fn address(run: &mut VideoRun) -> SocketAddr {
 
 /// A plain HTTP/1.1 GET of `path`: the status code and what arrived within a second.
 fn get(addr: SocketAddr, path: &str) -> (u16, String) {
+    get_as(addr, &addr.to_string(), path)
+}
+
+/// [`get`] naming `host` in the request's `Host` header.
+fn get_as(addr: SocketAddr, host: &str, path: &str) -> (u16, String) {
     let mut stream = TcpStream::connect(addr).unwrap();
     stream
         .set_read_timeout(Some(Duration::from_secs(1)))
         .unwrap();
     write!(
         stream,
-        "GET {path} HTTP/1.1\r\nHost: {addr}\r\nConnection: close\r\n\r\n"
+        "GET {path} HTTP/1.1\r\nHost: {host}\r\nConnection: close\r\n\r\n"
     )
     .unwrap();
     let mut response = Vec::new();
@@ -358,6 +364,19 @@ fn the_live_view_serves_its_page_and_events_and_nothing_else() {
         let (status, response) = get(addr, path);
         assert_eq!(status, 404, "{path}: {response}");
         assert!(!response.contains("[package]") && !response.contains("root:"));
+    }
+    // A page from elsewhere, through a DNS name rebound to 127.0.0.1, is refused; the view's
+    // own names are answered.
+    for host in ["evil.example", "evil.example:80", "localhost.evil.example"] {
+        for path in ["/", "/events"] {
+            let (status, response) = get_as(addr, host, path);
+            assert_eq!(status, 403, "{host}{path}: {response}");
+            assert!(!response.contains("EventSource") && !response.contains("event:"));
+        }
+    }
+    let port = addr.port();
+    for host in [format!("localhost:{port}"), format!("127.0.0.1:{port}")] {
+        assert_eq!(get_as(addr, &host, "/").0, 200, "{host}");
     }
     run.interrupt();
     let (status, stderr) = run.finish();
