@@ -21,8 +21,8 @@ pub struct CameraArgs {
     #[arg(required = true)]
     images: Vec<PathBuf>,
     /// Inner corners of the board, COLSxROWS (squares − 1 each way), e.g. 9x6.
-    #[arg(long)]
-    board: String,
+    #[arg(long, value_parser = super::parse::board)]
+    board: BoardSize,
     /// The board's square edge, mm.
     #[arg(long)]
     square_mm: f64,
@@ -40,7 +40,7 @@ pub struct CameraArgs {
 /// Runs `meb calibrate camera`.
 pub fn run(args: &CameraArgs) -> Result<()> {
     require_corner_detector()?;
-    let board = BoardSize::parse(&args.board)?;
+    let board = args.board;
     let folder = super::common::output_folder(&args.out, "calibrate camera", args.force)?;
     let mut rig = Rig::load(&args.rig).with_context(|| format!("cannot load rig {}", args.rig))?;
     let mut images = Vec::with_capacity(args.images.len());

@@ -86,7 +86,7 @@ struct JsonFlag {
 #[derive(Args)]
 struct SetArgs {
     /// Number of LEDs N (1..=8).
-    #[arg(long)]
+    #[arg(long, value_parser = clap::value_parser!(u8).range(1..=8))]
     leds: u8,
     /// Chip rate in Hz (= the camera frame rate), e.g. 960 or 959.5; 1 to 4000 Hz.
     #[arg(long)]
@@ -100,8 +100,8 @@ struct SetArgs {
     /// Modulation depth (on − off)/(on + off) in (0, 1]: one value for every LED, N
     /// comma-separated values, or `auto` for each LED's largest IEEE 1789 low-risk depth at
     /// this rate (default: the luminaire's current off levels).
-    #[arg(long)]
-    depth: Option<String>,
+    #[arg(long, value_parser = super::parse::device_depth)]
+    depth: Option<DepthRequest>,
     /// Apply a configuration that flickers above IEEE 1789 low risk (people in the room may
     /// see flicker, and below 60 Hz it can trigger seizures).
     #[arg(long)]
@@ -347,17 +347,12 @@ fn source_text(source: ConfigSource) -> &'static str {
 /// The full configuration `meb device set` sends: the flags given, the current off levels
 /// for LEDs without `--depth`.
 fn config_from_args(set: &SetArgs, current: &LuminaireConfig) -> Result<LuminaireConfig> {
-    let depth = set
-        .depth
-        .as_deref()
-        .map(|text| DepthRequest::parse(text, &Spelling::CLI))
-        .transpose()?;
     let request = SettingsRequest {
         leds: set.leds,
         rate_hz: set.rate,
         brightness: set.brightness.as_deref(),
         phase: set.phase.as_deref(),
-        depth: depth.as_ref(),
+        depth: set.depth.as_ref(),
         allow_flicker: set.allow_flicker,
     };
     Ok(settings::configure(&request, current, &Spelling::CLI)?)

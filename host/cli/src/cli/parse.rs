@@ -31,6 +31,11 @@ pub fn depth(text: &str) -> Result<ModulationDepths, String> {
     }
 }
 
+/// Parses `meb device set --depth`: `auto`, or one depth or one per LED in (0, 1].
+pub fn device_depth(text: &str) -> Result<DepthRequest, String> {
+    DepthRequest::parse(text, &Spelling::CLI).map_err(|e| e.to_string())
+}
+
 /// Parses `--linearize`: `none`, `srgb` or `gamma:G` with G > 0.
 pub fn linearize(text: &str) -> Result<Linearize, String> {
     match text {

@@ -154,6 +154,51 @@ fn a_mesh_without_area_is_an_error() {
     assert!(!out.exists());
 }
 
+/// The luminaire's settings and the chequerboard's size are parsed by clap too: usage errors
+/// (exit 2) naming the flag, before any port or photo is opened.
+#[test]
+fn bad_luminaire_settings_and_board_sizes_are_usage_errors() {
+    let set = ["device", "--port", "/dev/meb-none", "set", "--rate", "960"];
+    let cases: [(Vec<&str>, &[&str]); 4] = [
+        ([&set[..], &["--leds", "9"]].concat(), &["--leds", "1..=8"]),
+        (
+            [&set[..], &["--leds", "4", "--depth", "1.5"]].concat(),
+            &["--depth", "1.5"],
+        ),
+        (
+            [&set[..], &["--leds", "4", "--depth", "half"]].concat(),
+            &["--depth", "half"],
+        ),
+        (
+            vec![
+                "calibrate",
+                "camera",
+                "no-such-photo.png",
+                "--board",
+                "9by6",
+                "--square-mm",
+                "20",
+                "--rig",
+                "thesis-dynamic",
+                "--out",
+                "no-such-folder",
+            ],
+            &["--board", "COLSxROWS"],
+        ),
+    ];
+    for (args, wanted) in cases {
+        let out = meb(&args);
+        assert_eq!(out.status.code(), Some(2), "meb {args:?}: {:?}", out.status);
+        let stderr = String::from_utf8_lossy(&out.stderr);
+        for w in wanted {
+            assert!(
+                stderr.contains(w),
+                "meb {args:?}: {w:?} missing from {stderr}"
+            );
+        }
+    }
+}
+
 /// Structured and enumerated flags are parsed by clap: a bad value is a usage error (exit 2)
 /// that names the flag and what it accepts, before any input is opened.
 #[test]
