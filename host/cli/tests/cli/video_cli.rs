@@ -19,6 +19,7 @@ use std::path::{Path, PathBuf};
 use std::process::{Command, Stdio};
 
 use crate::common;
+use crate::video_run::{Spin, ellipsoid_clip};
 use common::{dynamic_rig, meb, run_ok, simulate_y4m};
 
 /// The thesis' dynamic rig at 160×90 pixels.
@@ -47,32 +48,7 @@ fn ellipsoid_with(
     axis: &str,
     options: &[&str],
 ) -> PathBuf {
-    let out = dir.join(name);
-    let (rpm, frames, out_arg) = (rpm.to_string(), frames.to_string(), s(&out));
-    let mut args = vec![
-        "simulate",
-        "--rig",
-        rig,
-        "--scene",
-        "ellipsoid",
-        "--axes-mm",
-        "100,60,60",
-        "--rpm",
-        &rpm,
-        "--spin-axis",
-        axis,
-        "--frames",
-        &frames,
-        "--format",
-        "y4m",
-        "--truth-every",
-        "20",
-        "--out",
-        &out_arg,
-    ];
-    args.extend(options);
-    run_ok(&args);
-    out
+    ellipsoid_clip(dir, rig, name, frames, Spin(rpm, axis), 20, options)
 }
 
 fn video_json(dir: &Path) -> serde_json::Value {

@@ -17,6 +17,7 @@ use std::time::Instant;
 
 use crate::common::{dynamic_rig, run_ok};
 use crate::report_page::{chromium, headless};
+use crate::video_run::{Spin, ellipsoid_clip};
 
 fn s(path: &Path) -> String {
     path.display().to_string()
@@ -25,32 +26,8 @@ fn s(path: &Path) -> String {
 /// Simulates `frames` frames of the ellipsoid turning at `rpm` in the image plane with the
 /// true depth every 16 frames; returns the capture folder.
 fn ellipsoid(dir: &Path, rig: &str, name: &str, frames: usize, rpm: f64) -> PathBuf {
-    let out = dir.join(name);
-    let (rpm, frames, out_arg) = (rpm.to_string(), frames.to_string(), s(&out));
-    run_ok(&[
-        "simulate",
-        "--rig",
-        rig,
-        "--scene",
-        "ellipsoid",
-        "--axes-mm",
-        "100,60,60",
-        "--rpm",
-        &rpm,
-        "--spin-axis",
-        "0,0,1",
-        "--frames",
-        &frames,
-        "--format",
-        "y4m",
-        "--truth-every",
-        "16",
-        "--phases",
-        "3,7,11,5",
-        "--out",
-        &out_arg,
-    ]);
-    out
+    let phases = ["--phases", "3,7,11,5"];
+    ellipsoid_clip(dir, rig, name, frames, Spin(rpm, "0,0,1"), 16, &phases)
 }
 
 /// Runs `meb video` on the turning-then-still capture (module docs) into `dir/video`; returns

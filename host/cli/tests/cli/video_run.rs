@@ -88,6 +88,55 @@ impl Clip {
     }
 }
 
+/// How the simulated ellipsoid of the video tests turns: revolutions per minute about an axis
+/// given as `x,y,z`.
+pub(crate) struct Spin<'a>(pub(crate) f64, pub(crate) &'a str);
+
+/// Simulates `frames` frames of the 100×60×60 mm ellipsoid turning as `spin` under `rig`, as a
+/// y4m clip with the true depth every `truth_every` frames and more simulator `options`;
+/// returns the capture folder `dir/name`.
+pub(crate) fn ellipsoid_clip(
+    dir: &Path,
+    rig: &str,
+    name: &str,
+    frames: usize,
+    Spin(rpm, axis): Spin<'_>,
+    truth_every: usize,
+    options: &[&str],
+) -> PathBuf {
+    let out = dir.join(name);
+    let (rpm, frames, every, out_arg) = (
+        rpm.to_string(),
+        frames.to_string(),
+        truth_every.to_string(),
+        s(&out),
+    );
+    let mut args = vec![
+        "simulate",
+        "--rig",
+        rig,
+        "--scene",
+        "ellipsoid",
+        "--axes-mm",
+        "100,60,60",
+        "--rpm",
+        &rpm,
+        "--spin-axis",
+        axis,
+        "--frames",
+        &frames,
+        "--format",
+        "y4m",
+        "--truth-every",
+        &every,
+        "--out",
+        &out_arg,
+    ];
+    args.extend(options);
+    run_ok(&args);
+    out
+}
+
 /// What a `meb video` run reads on its standard input.
 pub(crate) enum Feed {
     /// Nothing: the input is a file.
