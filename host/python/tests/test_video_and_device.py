@@ -15,11 +15,16 @@ import meb
 from conftest import meb_binary, nan_equal, run_meb
 
 
+def turning_ellipsoid_clip(folder, size, frames):
+    """`meb simulate`'s y4m clip of the turning ellipsoid on the thesis' dynamic rig."""
+    run_meb("simulate", "--rig", "thesis-dynamic", "--camera-size", size, "--scene",
+            "ellipsoid", "--axes-mm", "100,60,60", "--rpm", "7.5", "--frames", str(frames),
+            "--format", "y4m", "--out", str(folder))
+    return folder
+
+
 def test_video_yields_the_frames_meb_video_writes(tmp_path):
-    clip = tmp_path / "clip"
-    run_meb("simulate", "--rig", "thesis-dynamic", "--camera-size", "320x180", "--scene",
-            "ellipsoid", "--axes-mm", "100,60,60", "--rpm", "7.5", "--frames", "120",
-            "--format", "y4m", "--out", str(clip))
+    clip = turning_ellipsoid_clip(tmp_path / "clip", "320x180", 120)
     out = tmp_path / "video"
     rig = str(clip / "rig.toml")
     run_meb("video", str(clip / "capture.y4m"), "--rig", rig, "--out", str(out))
@@ -46,10 +51,7 @@ def test_a_closed_video_stops_its_pipeline():
 
 
 def test_ctrl_c_then_stop_ends_a_live_stream_as_meb_videos_first_interrupt(tmp_path):
-    clip = tmp_path / "clip"
-    run_meb("simulate", "--rig", "thesis-dynamic", "--camera-size", "160x90", "--scene",
-            "ellipsoid", "--axes-mm", "100,60,60", "--rpm", "7.5", "--frames", "100",
-            "--format", "y4m", "--out", str(clip))
+    clip = turning_ellipsoid_clip(tmp_path / "clip", "160x90", 100)
     # A named pipe that delivers 100 frames (two whole 40-frame windows) and stays open.
     fifo = tmp_path / "camera.y4m"
     os.mkfifo(fifo)

@@ -187,15 +187,7 @@ fn bad_luminaire_settings_and_board_sizes_are_usage_errors() {
         ),
     ];
     for (args, wanted) in cases {
-        let out = meb(&args);
-        assert_eq!(out.status.code(), Some(2), "meb {args:?}: {:?}", out.status);
-        let stderr = String::from_utf8_lossy(&out.stderr);
-        for w in wanted {
-            assert!(
-                stderr.contains(w),
-                "meb {args:?}: {w:?} missing from {stderr}"
-            );
-        }
+        assert_usage_error(&args, wanted);
     }
 }
 
@@ -217,14 +209,19 @@ fn bad_flag_values_are_usage_errors_that_list_what_is_accepted() {
     for (flag, wanted) in cases {
         let mut args = vec!["decode", "no-such-capture.y4m", "--out", "no-such-folder"];
         args.extend_from_slice(flag);
-        let out = meb(&args);
-        assert_eq!(out.status.code(), Some(2), "meb {args:?}: {:?}", out.status);
-        let stderr = String::from_utf8_lossy(&out.stderr);
-        for w in wanted {
-            assert!(
-                stderr.contains(w),
-                "meb {args:?}: {w:?} missing from {stderr}"
-            );
-        }
+        assert_usage_error(&args, wanted);
+    }
+}
+
+/// `meb ARGS` is a usage error (exit 2) whose message contains every one of `wanted`.
+fn assert_usage_error(args: &[&str], wanted: &[&str]) {
+    let out = meb(args);
+    assert_eq!(out.status.code(), Some(2), "meb {args:?}: {:?}", out.status);
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    for w in wanted {
+        assert!(
+            stderr.contains(w),
+            "meb {args:?}: {w:?} missing from {stderr}"
+        );
     }
 }
