@@ -116,18 +116,15 @@ impl Video {
             return Err(PyStopIteration::new_err(()));
         };
         let mut receiver = receiver;
-        let item = loop {
+        let waited = loop {
             let (waited, back) = py.detach(move || (receiver.recv_timeout(SIGNAL_POLL), receiver));
             receiver = back;
             match waited {
-                Ok(item) => break Some(item),
-                Err(RecvTimeoutError::Disconnected) => break None,
+                Ok(item) => break Ok(Some(item)),
+                Err(RecvTimeoutError::Disconnected) => break Ok(None),
                 Err(RecvTimeoutError::Timeout) => {
                     if let Err(interrupt) = py.check_signals() {
-                        if let Ok(mut guard) = self.receiver.lock() {
-                            *guard = Some(receiver);
-                        }
-                        return Err(interrupt);
+                        break Err(interrupt);
                     }
                 }
             }
@@ -135,7 +132,7 @@ impl Video {
         if let Ok(mut guard) = self.receiver.lock() {
             *guard = Some(receiver);
         }
-        match item {
+        match waited? {
             Some(Item::Frame(frame)) => {
                 let frame = *frame;
                 Ok(VideoFrame {

@@ -223,7 +223,7 @@ try {{
   const show = (mesh) => {{
     if (!mesh || !mesh.positions || !mesh.indices) return;
     const start = performance.now();
-    if (shown > 0 && start < free) {{
+    if (start < free) {{
       skipped += 1;
       document.body.dataset.skipped = String(skipped);
       return;

@@ -62,7 +62,8 @@ pub(super) fn run(
                 return;
             }
         };
-        let loopback = listener.local_addr().is_ok_and(|a| a.ip().is_loopback());
+        // An address that cannot be read is treated as loopback: the check then stays on.
+        let loopback = listener.local_addr().map_or(true, |a| a.ip().is_loopback());
         let shared = Arc::new(Shared {
             page: page::html(),
             latest,

@@ -48,7 +48,7 @@ fn ellipsoid_with(
     axis: &str,
     options: &[&str],
 ) -> PathBuf {
-    ellipsoid_clip(dir, rig, name, frames, Spin(rpm, axis), 20, options)
+    ellipsoid_clip(dir, rig, name, frames, Spin(rpm, axis), Some(20), options)
 }
 
 fn video_json(dir: &Path) -> serde_json::Value {

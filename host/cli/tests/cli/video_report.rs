@@ -27,7 +27,15 @@ fn s(path: &Path) -> String {
 /// true depth every 16 frames; returns the capture folder.
 fn ellipsoid(dir: &Path, rig: &str, name: &str, frames: usize, rpm: f64) -> PathBuf {
     let phases = ["--phases", "3,7,11,5"];
-    ellipsoid_clip(dir, rig, name, frames, Spin(rpm, "0,0,1"), 16, &phases)
+    ellipsoid_clip(
+        dir,
+        rig,
+        name,
+        frames,
+        Spin(rpm, "0,0,1"),
+        Some(16),
+        &phases,
+    )
 }
 
 /// Runs `meb video` on the turning-then-still capture (module docs) into `dir/video`; returns

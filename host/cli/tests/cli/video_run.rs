@@ -44,29 +44,8 @@ pub(crate) struct Clip {
 impl Clip {
     pub(crate) fn simulate(dir: &Path, frames: usize) -> Self {
         let rig = dynamic_rig(dir, 160, 90);
-        let out = dir.join("clip");
-        let count = frames.to_string();
-        run_ok(&[
-            "simulate",
-            "--rig",
-            &rig,
-            "--scene",
-            "ellipsoid",
-            "--axes-mm",
-            "100,60,60",
-            "--rpm",
-            "7.5",
-            "--spin-axis",
-            "0,1,0",
-            "--frames",
-            &count,
-            "--format",
-            "y4m",
-            "--phases",
-            "3,7,11,5",
-            "--out",
-            &s(&out),
-        ]);
+        let phases = ["--phases", "3,7,11,5"];
+        let out = ellipsoid_clip(dir, &rig, "clip", frames, Spin(7.5, "0,1,0"), None, &phases);
         let bytes = std::fs::read(out.join("capture.y4m")).unwrap();
         let header = bytes.iter().position(|&c| c == b'\n').unwrap() + 1;
         let size = (bytes.len() - header) / frames;
@@ -93,7 +72,8 @@ impl Clip {
 pub(crate) struct Spin<'a>(pub(crate) f64, pub(crate) &'a str);
 
 /// Simulates `frames` frames of the 100×60×60 mm ellipsoid turning as `spin` under `rig`, as a
-/// y4m clip with the true depth every `truth_every` frames and more simulator `options`;
+/// y4m clip with the true depth every `truth_every` frames (if given) and more simulator
+/// `options`;
 /// returns the capture folder `dir/name`.
 pub(crate) fn ellipsoid_clip(
     dir: &Path,
@@ -101,16 +81,12 @@ pub(crate) fn ellipsoid_clip(
     name: &str,
     frames: usize,
     Spin(rpm, axis): Spin<'_>,
-    truth_every: usize,
+    truth_every: Option<usize>,
     options: &[&str],
 ) -> PathBuf {
     let out = dir.join(name);
-    let (rpm, frames, every, out_arg) = (
-        rpm.to_string(),
-        frames.to_string(),
-        truth_every.to_string(),
-        s(&out),
-    );
+    let (rpm, frames, out_arg) = (rpm.to_string(), frames.to_string(), s(&out));
+    let every = truth_every.map(|k| k.to_string());
     let mut args = vec![
         "simulate",
         "--rig",
@@ -127,11 +103,12 @@ pub(crate) fn ellipsoid_clip(
         &frames,
         "--format",
         "y4m",
-        "--truth-every",
-        &every,
         "--out",
         &out_arg,
     ];
+    if let Some(every) = &every {
+        args.extend(["--truth-every", every]);
+    }
     args.extend(options);
     run_ok(&args);
     out
