@@ -178,6 +178,7 @@ pub fn reconstruction_summary(
         light_model: Some(light_model_name(config.light_model)),
         object_pixels: Some(mask.iter().filter(|&&m| m).count()),
         kept_fraction: Some(reconstruction.integration.kept_fraction),
+        integrator_choice: super::integrate::integrator_choice(&reconstruction.integration),
         measured_share: Some(reconstruction.support.measured_share),
         absolute_depth: Some(reconstruction.support.absolute_depth.describe()),
         implausible: reconstruction.support.verdict.problems.clone(),

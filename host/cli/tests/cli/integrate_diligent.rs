@@ -222,6 +222,7 @@ fn diligent_sweep_of_integrators() {
                 AutoConfig {
                     decisive_weight,
                     radius,
+                    ..AutoConfig::default()
                 },
             ));
         }

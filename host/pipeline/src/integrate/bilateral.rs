@@ -18,6 +18,7 @@
 //! solve is a weighted graph Laplacian for the multigrid-preconditioned CG of
 //! [`super::least_squares`]. With w⁺ = w⁻ = ½ and no n_z factor this is plain least squares.
 
+use super::AutoConfig;
 use super::least_squares::{EdgeEquations, Topology};
 use super::multigrid::{NONE, PARALLEL_BAND as NODES_PER_TASK};
 use rayon::prelude::*;
@@ -147,29 +148,54 @@ pub(crate) fn discontinuities(
         .collect()
 }
 
-/// Nodes within `radius` grid steps of a node where the bilateral weights are decisive: one of
-/// its one-sided weights (on an axis with both neighbours) is below `cut`, i.e. the surface
-/// continues on one side only. Elsewhere both sides agree and least squares is as good.
+/// Nodes within `decision.radius` grid steps of a node where the bilateral weights are
+/// decisive ([`AutoConfig`]): one of its one-sided weights (on an axis with both neighbours) is
+/// below `decision.decisive_weight` (the surface continues on one side only), the pixels on that
+/// side run on along the axis for at least `decision.rim` steps (at the end of a line the
+/// one-sided differences of a steep curved rim differ by its curvature alone), and the depth
+/// across that side's edge departs from the slopes of its two pixels by at least
+/// `decision.min_jump_px` (the trapezoid rule's residual |Δz − h·(g_i + g_j)/2|, in pixel
+/// units). Elsewhere both sides agree and least squares is as good.
 pub(crate) fn near_discontinuities(
     topology: &Topology,
     x: &[f64],
     slopes: &[(f64, f64)],
     stiffness: Stiffness,
-    cut: f64,
-    radius: usize,
+    decision: &AutoConfig,
 ) -> Vec<bool> {
+    let (cut, jump) = (decision.decisive_weight, decision.min_jump_px);
     let w = sigmoid_weights(topology, x, slopes, stiffness);
-    let mut near: Vec<bool> = topology
-        .neighbours
-        .iter()
-        .zip(&w)
-        .map(|(nb, w)| {
-            [(0, 2), (1, 3)]
-                .iter()
-                .any(|&(f, b)| nb[f] != NONE && nb[b] != NONE && (w[f] < cut || w[b] < cut))
+    // The slope of node i along axis d (0: right, s_x; 1: down, −s_y).
+    let along = |i: usize, d: usize| {
+        if d == 0 { slopes[i].0 } else { -slopes[i].1 }
+    };
+    // Whether the edge i → j (right or down, axis d) departs from its slopes by `jump` or more.
+    let jumps = |i: usize, j: usize, d: usize| {
+        let residual = (x[j] - x[i]) * stiffness.units - 0.5 * (along(i, d) + along(j, d));
+        residual.abs() >= jump
+    };
+    // Whether the pixels from node k run on for `decision.rim` steps in direction `side`.
+    let runs_on = |k: usize, side: usize| {
+        let mut node = k;
+        (0..decision.rim).all(|_| {
+            let next = topology.neighbours[node][side];
+            node = next as usize;
+            next != NONE
+        })
+    };
+    let mut near: Vec<bool> = (0..topology.len())
+        .map(|k| {
+            [(0, 2), (1, 3)].iter().any(|&(f, b)| {
+                let decisive = |side: usize| w[k][side] < cut && runs_on(k, side);
+                let nb = topology.neighbours[k];
+                nb[f] != NONE
+                    && nb[b] != NONE
+                    && ((decisive(f) && jumps(k, nb[f] as usize, f))
+                        || (decisive(b) && jumps(nb[b] as usize, k, f)))
+            })
         })
         .collect();
-    for _ in 0..radius {
+    for _ in 0..decision.radius {
         let grown: Vec<bool> = topology
             .neighbours
             .iter()
@@ -343,5 +369,80 @@ mod tests {
         let eq = side_equations(&topology, &w, &slopes, 1.0);
         assert!(eq.weight[left_of_step][0] < 1e-3);
         assert!((eq.weight[flat][0] - 1.0).abs() < 1e-12);
+    }
+
+    /// Which nodes [`near_discontinuities`] marks on a 9 × 12 grid whose depth (pixel units)
+    /// along each row is `profile(col)` with slopes `slope(col)`, for `auto` (radius 0).
+    fn near_columns(
+        profile: impl Fn(f64) -> f64,
+        slope: impl Fn(f64) -> f64,
+        k: f64,
+        auto: AutoConfig,
+    ) -> Vec<usize> {
+        let mask = Array2::from_elem((9, 12), true);
+        let topology = Topology::new(&mask);
+        let x: Vec<f64> = topology
+            .cells
+            .iter()
+            .map(|&(_, c)| profile(c as f64))
+            .collect();
+        let slopes: Vec<(f64, f64)> = topology
+            .cells
+            .iter()
+            .map(|&(_, c)| (slope(c as f64), 0.0))
+            .collect();
+        let stiffness = Stiffness { units: 1.0, k };
+        let near = near_discontinuities(
+            &topology,
+            &x,
+            &slopes,
+            stiffness,
+            &AutoConfig { radius: 0, ..auto },
+        );
+        let mut columns: Vec<usize> = topology
+            .cells
+            .iter()
+            .zip(&near)
+            .filter(|&(&(r, _), &n)| n && r == 4)
+            .map(|(&(_, c), _)| c)
+            .collect();
+        columns.dedup();
+        columns
+    }
+
+    /// A jump in depth inside the grid is a discontinuity; a steep parabola whose depth follows
+    /// its slopes is one only without the jump test, and a jump beside the outline only without
+    /// the rim test.
+    #[test]
+    fn discontinuities_need_a_jump_away_from_the_outline() {
+        let auto = AutoConfig::default;
+        let step = |at: f64| move |c: f64| if c < at { 0.0 } else { 10.0 };
+        let flat = |_: f64| 0.0;
+        assert_eq!(near_columns(step(6.0), flat, 2.0, auto()), vec![5, 6]);
+        let small_jumps = AutoConfig {
+            min_jump_px: 0.5,
+            ..auto()
+        };
+        assert_eq!(
+            near_columns(step(6.0), flat, 2.0, small_jumps.clone()),
+            vec![5, 6]
+        );
+        let large_jumps = AutoConfig {
+            min_jump_px: 20.0,
+            ..auto()
+        };
+        assert!(near_columns(step(6.0), flat, 2.0, large_jumps).is_empty());
+        // z = c²/2 with slope c: the trapezoid rule is exact, the stiff sigmoid still decisive.
+        let parabola = |c: f64| 0.5 * c * c;
+        let any_jump = AutoConfig {
+            min_jump_px: 0.0,
+            ..auto()
+        };
+        assert!(!near_columns(parabola, |c| c, 10.0, any_jump).is_empty());
+        assert!(near_columns(parabola, |c| c, 10.0, small_jumps).is_empty());
+        // A jump between columns 0 and 1: the line behind column 1 ends after one step.
+        let no_rim = AutoConfig { rim: 0, ..auto() };
+        assert_eq!(near_columns(step(1.0), flat, 2.0, no_rim), vec![1]);
+        assert!(near_columns(step(1.0), flat, 2.0, auto()).is_empty());
     }
 }

@@ -118,6 +118,14 @@ pub struct AutoConfig {
     /// A pixel is near a discontinuity when one of its one-sided bilateral weights is below
     /// this (the surface continues on one side only).
     pub decisive_weight: f64,
+    /// ... and the depth across that side's edge departs from the edge's slopes by more than
+    /// this many pixels (0: any departure). Noise makes stiff weights decisive on smooth
+    /// surfaces, where depth still follows the slopes.
+    pub min_jump_px: f64,
+    /// ... and the pixels on that side run on along the axis for at least this many grid
+    /// steps: at the end of a line the one-sided differences of a steep rim differ by its
+    /// curvature alone.
+    pub rim: usize,
     /// Pixels within this many grid steps of such a pixel keep their bilateral weights.
     pub radius: usize,
 }
@@ -126,6 +134,8 @@ impl Default for AutoConfig {
     fn default() -> Self {
         Self {
             decisive_weight: 0.05,
+            min_jump_px: 0.0,
+            rim: 2,
             radius: 2,
         }
     }
@@ -219,6 +229,13 @@ impl IntegrateConfig {
         positive("bilateral stiffness", self.bilateral.stiffness)?;
         positive("bilateral tolerance", self.bilateral.tolerance)?;
         positive("auto decisive weight", self.auto.decisive_weight)?;
+        if !(self.auto.min_jump_px.is_finite() && self.auto.min_jump_px >= 0.0) {
+            return Err(IntegrateError::BadSetting {
+                name: "auto min_jump_px",
+                value: self.auto.min_jump_px,
+                reason: "must be a number ≥ 0",
+            });
+        }
         positive("two-LED weight", self.coverage.two_led_weight)?;
         positive("fill weight", self.coverage.fill_weight)?;
         positive("coverage tolerance", self.coverage.tolerance)?;

@@ -190,14 +190,8 @@ impl WindowSystem<'_> {
         let (topology, x, slopes) = (self.topology, &state.x, &state.slopes);
         let cut =
             bilateral::discontinuities(topology, x, slopes, self.stiffness, DISCONTINUITY_WEIGHT);
-        let near = bilateral::near_discontinuities(
-            topology,
-            x,
-            slopes,
-            self.stiffness,
-            self.config.auto.decisive_weight,
-            self.config.auto.radius,
-        );
+        let near =
+            bilateral::near_discontinuities(topology, x, slopes, self.stiffness, &self.config.auto);
         let weighted = bilateral::bilateral(topology, x, slopes, &self.confidence, self.stiffness);
         let mut sides = bilateral::uniform(&self.confidence, slopes, &self.estimated);
         for ((side, w), &n) in sides.iter_mut().zip(weighted).zip(&near) {
