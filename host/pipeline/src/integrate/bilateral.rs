@@ -148,14 +148,118 @@ pub(crate) fn discontinuities(
         .collect()
 }
 
+/// Whether the edge i → j (right or down, axis `d`) departs from the slopes of its two pixels
+/// by at least `jump`: the trapezoid rule's residual |Δz − h·(g_i + g_j)/2| in pixel units.
+fn departs(
+    x: &[f64],
+    slopes: &[(f64, f64)],
+    units: f64,
+    (i, j, d): (usize, usize, usize),
+    jump: f64,
+) -> bool {
+    let along = |k: usize| if d == 0 { slopes[k].0 } else { -slopes[k].1 };
+    let residual = (x[j] - x[i]) * units - 0.5 * (along(i) + along(j));
+    residual.abs() >= jump
+}
+
+/// Whether the pixels from node `k` run on for `steps` grid steps in direction `side`.
+fn runs_on(topology: &Topology, k: usize, side: usize, steps: usize) -> bool {
+    let mut node = k;
+    (0..steps).all(|_| {
+        let next = topology.neighbours[node][side];
+        node = next as usize;
+        next != NONE
+    })
+}
+
+/// Keeps of the cut edges (as [`discontinuities`] finds them) those that pass the automatic
+/// integrator's tests ([`AutoConfig`]): both pixels' lines run on across the edge for
+/// `decision.rim` steps and the depth across it departs from its slopes ([`departs`]).
+pub(crate) fn decisive_cuts(
+    topology: &Topology,
+    x: &[f64],
+    slopes: &[(f64, f64)],
+    stiffness: Stiffness,
+    decision: &AutoConfig,
+    cut: &mut [[bool; 2]],
+) {
+    for (k, edges) in cut.iter_mut().enumerate() {
+        for (d, edge) in edges.iter_mut().enumerate() {
+            if *edge {
+                let j = topology.neighbours[k][d] as usize;
+                *edge = runs_on(topology, k, d, decision.rim)
+                    && runs_on(topology, j, d + 2, decision.rim)
+                    && departs(x, slopes, stiffness.units, (k, j, d), decision.min_jump_px);
+            }
+        }
+    }
+}
+
+/// Clears the cut edges of every chain shorter than `min_edges`: a depth discontinuity is a
+/// curve in the image, so its cut edges join end to end (two edges are chained when their
+/// segments between pixel corners share a corner), while noise cuts an edge here and there.
+pub(crate) fn drop_short_cuts(topology: &Topology, cut: &mut [[bool; 2]], min_edges: usize) {
+    if min_edges <= 1 {
+        return;
+    }
+    let rows = topology
+        .cells
+        .iter()
+        .map(|&(r, _)| r + 2)
+        .max()
+        .unwrap_or(0);
+    let cols = topology
+        .cells
+        .iter()
+        .map(|&(_, c)| c + 2)
+        .max()
+        .unwrap_or(0);
+    let corner = |r: usize, c: usize| r * cols + c;
+    // The segment between pixel corners that edge d of the node at (r, c) crosses.
+    let segment = |(r, c): (usize, usize), d: usize| {
+        if d == 0 {
+            (corner(r, c + 1), corner(r + 1, c + 1))
+        } else {
+            (corner(r + 1, c), corner(r + 1, c + 1))
+        }
+    };
+    let mut parent: Vec<usize> = (0..rows * cols).collect();
+    fn root(parent: &mut [usize], mut a: usize) -> usize {
+        while parent[a] != a {
+            parent[a] = parent[parent[a]];
+            a = parent[a];
+        }
+        a
+    }
+    // Every cut edge as (node, axis).
+    let edges: Vec<(usize, usize)> = cut
+        .iter()
+        .enumerate()
+        .flat_map(|(k, e)| (0..2).filter(move |&d| e[d]).map(move |d| (k, d)))
+        .collect();
+    for &(k, d) in &edges {
+        let (a, b) = segment(topology.cells[k], d);
+        let (ra, rb) = (root(&mut parent, a), root(&mut parent, b));
+        parent[ra] = rb;
+    }
+    let mut chain_of = vec![0usize; rows * cols];
+    for &(k, d) in &edges {
+        chain_of[root(&mut parent, segment(topology.cells[k], d).0)] += 1;
+    }
+    for &(k, d) in &edges {
+        let chain = chain_of[root(&mut parent, segment(topology.cells[k], d).0)];
+        cut[k][d] = chain >= min_edges;
+    }
+}
+
 /// Nodes within `decision.radius` grid steps of a node where the bilateral weights are
 /// decisive ([`AutoConfig`]): one of its one-sided weights (on an axis with both neighbours) is
 /// below `decision.decisive_weight` (the surface continues on one side only), the pixels on that
 /// side run on along the axis for at least `decision.rim` steps (at the end of a line the
 /// one-sided differences of a steep curved rim differ by its curvature alone), and the depth
 /// across that side's edge departs from the slopes of its two pixels by at least
-/// `decision.min_jump_px` (the trapezoid rule's residual |Δz − h·(g_i + g_j)/2|, in pixel
-/// units). Elsewhere both sides agree and least squares is as good.
+/// `decision.min_jump_px` ([`departs`]). Elsewhere both sides agree and least squares is as
+/// good.
 pub(crate) fn near_discontinuities(
     topology: &Topology,
     x: &[f64],
@@ -165,33 +269,18 @@ pub(crate) fn near_discontinuities(
 ) -> Vec<bool> {
     let (cut, jump) = (decision.decisive_weight, decision.min_jump_px);
     let w = sigmoid_weights(topology, x, slopes, stiffness);
-    // The slope of node i along axis d (0: right, s_x; 1: down, −s_y).
-    let along = |i: usize, d: usize| {
-        if d == 0 { slopes[i].0 } else { -slopes[i].1 }
-    };
-    // Whether the edge i → j (right or down, axis d) departs from its slopes by `jump` or more.
-    let jumps = |i: usize, j: usize, d: usize| {
-        let residual = (x[j] - x[i]) * stiffness.units - 0.5 * (along(i, d) + along(j, d));
-        residual.abs() >= jump
-    };
-    // Whether the pixels from node k run on for `decision.rim` steps in direction `side`.
-    let runs_on = |k: usize, side: usize| {
-        let mut node = k;
-        (0..decision.rim).all(|_| {
-            let next = topology.neighbours[node][side];
-            node = next as usize;
-            next != NONE
-        })
-    };
     let mut near: Vec<bool> = (0..topology.len())
         .map(|k| {
             [(0, 2), (1, 3)].iter().any(|&(f, b)| {
-                let decisive = |side: usize| w[k][side] < cut && runs_on(k, side);
+                let decisive =
+                    |side: usize| w[k][side] < cut && runs_on(topology, k, side, decision.rim);
                 let nb = topology.neighbours[k];
                 nb[f] != NONE
                     && nb[b] != NONE
-                    && ((decisive(f) && jumps(k, nb[f] as usize, f))
-                        || (decisive(b) && jumps(nb[b] as usize, k, f)))
+                    && ((decisive(f)
+                        && departs(x, slopes, stiffness.units, (k, nb[f] as usize, f), jump))
+                        || (decisive(b)
+                            && departs(x, slopes, stiffness.units, (nb[b] as usize, k, f), jump)))
             })
         })
         .collect();
@@ -444,5 +533,53 @@ mod tests {
         let no_rim = AutoConfig { rim: 0, ..auto() };
         assert_eq!(near_columns(step(1.0), flat, 2.0, no_rim), vec![1]);
         assert!(near_columns(step(1.0), flat, 2.0, auto()).is_empty());
+    }
+
+    /// Cut edges along a wall survive as one chain, a lone cut edge is dropped, and a wall
+    /// beside the outline or one whose depth follows the slopes is not cut.
+    #[test]
+    fn cuts_are_chains_of_jumps_away_from_the_outline() {
+        let mask = Array2::from_elem((9, 12), true);
+        let topology = Topology::new(&mask);
+        let wall = |at: usize| -> Vec<[bool; 2]> {
+            topology
+                .cells
+                .iter()
+                .map(|&(_, c)| [c + 1 == at, false])
+                .collect()
+        };
+        let mut cut = wall(6);
+        let lone = topology.node((2, 1)).unwrap();
+        cut[lone][1] = true;
+        drop_short_cuts(&topology, &mut cut, 4);
+        let kept: Vec<(usize, usize)> = topology
+            .cells
+            .iter()
+            .zip(&cut)
+            .flat_map(|(&(r, c), e)| (0..2).filter(|&d| e[d]).map(move |d| (r * 12 + c, d)))
+            .collect();
+        assert_eq!(kept.len(), 9, "{kept:?}");
+        assert!(kept.iter().all(|&(k, d)| k % 12 == 5 && d == 0));
+
+        let decide = |at: usize, depth_step: f64| {
+            let x: Vec<f64> = topology
+                .cells
+                .iter()
+                .map(|&(_, c)| if c < at { 0.0 } else { depth_step })
+                .collect();
+            // Flat slopes: the step departs from them by `depth_step` pixels.
+            let slopes = vec![(0.0, 0.0); topology.len()];
+            let mut cut = wall(at);
+            let stiffness = Stiffness { units: 1.0, k: 2.0 };
+            let auto = AutoConfig {
+                min_jump_px: 1.0,
+                ..AutoConfig::default()
+            };
+            decisive_cuts(&topology, &x, &slopes, stiffness, &auto, &mut cut);
+            cut.iter().filter(|e| e[0]).count()
+        };
+        assert_eq!(decide(6, 10.0), 9);
+        assert_eq!(decide(1, 10.0), 0, "beside the outline");
+        assert_eq!(decide(6, 0.5), 0, "within the jump the slopes allow");
     }
 }

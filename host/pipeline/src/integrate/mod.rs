@@ -128,6 +128,10 @@ pub struct AutoConfig {
     pub rim: usize,
     /// Pixels within this many grid steps of such a pixel keep their bilateral weights.
     pub radius: usize,
+    /// A grid edge is cut only when, besides both its one-sided weights turning away and the
+    /// run-on and jump tests above, it belongs to a chain of at least this many cut edges
+    /// joined end to end: a discontinuity is a curve, noise cuts an edge here and there.
+    pub min_cut_chain: usize,
 }
 
 impl Default for AutoConfig {
@@ -137,6 +141,7 @@ impl Default for AutoConfig {
             min_jump_px: 0.0,
             rim: 2,
             radius: 2,
+            min_cut_chain: 4,
         }
     }
 }

@@ -188,10 +188,12 @@ impl WindowSystem<'_> {
     pub fn cut_solve(&self, state: &mut SolveState) -> CutEdges {
         let t = Instant::now();
         let (topology, x, slopes) = (self.topology, &state.x, &state.slopes);
-        let cut =
+        let decision = &self.config.auto;
+        let mut cut =
             bilateral::discontinuities(topology, x, slopes, self.stiffness, DISCONTINUITY_WEIGHT);
-        let near =
-            bilateral::near_discontinuities(topology, x, slopes, self.stiffness, &self.config.auto);
+        bilateral::decisive_cuts(topology, x, slopes, self.stiffness, decision, &mut cut);
+        bilateral::drop_short_cuts(topology, &mut cut, decision.min_cut_chain);
+        let near = bilateral::near_discontinuities(topology, x, slopes, self.stiffness, decision);
         let weighted = bilateral::bilateral(topology, x, slopes, &self.confidence, self.stiffness);
         let mut sides = bilateral::uniform(&self.confidence, slopes, &self.estimated);
         for ((side, w), &n) in sides.iter_mut().zip(weighted).zip(&near) {

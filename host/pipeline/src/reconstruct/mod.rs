@@ -91,13 +91,13 @@ const EARLY_PASS_REWEIGHTINGS: usize = 8;
 /// NRMSE 0.35 % at k = 2, 0.67 % at k = 10).
 const BILATERAL_STIFFNESS: f64 = 10.0;
 
-/// Depth departure from the slopes (pixels) a decisive bilateral weight of the automatic
-/// integrator (`--integrator auto`) must come with in reconstructions ([`AutoConfig::min_jump_px`]). At k = 10 the
-/// decoder's noise alone makes weights decisive on smooth surfaces: on the simulator's blobby
-/// shape (out-of-plane rig, 352×224, seed 1) least squares gives 0.154 mm, the automatic
-/// integrator 0.196 mm without this test and 0.160 mm with 0.5 px (1 px: 0.149 mm); on Suzanne
-/// (seeds 1–4) 0.5 px gives 4.09 / 4.15 / 4.06 / 3.55 mm, 0 px 3.32 / 3.98 / 4.29 / 3.59 mm,
-/// 1 px 4.08 / 4.00 / 5.12 / 3.29 mm, least squares 7.6 / 7.5 / 7.5 / 7.3 mm.
+/// Depth departure from the slopes (pixels) a decisive bilateral weight or a cut edge of the
+/// automatic integrator (`--integrator auto`) must come with in reconstructions
+/// ([`AutoConfig::min_jump_px`]). At k = 10 the decoder's noise alone makes weights decisive on
+/// smooth surfaces. On the simulator's blobby shape (out-of-plane rig, 352×224, seed 1) least
+/// squares gives 0.154 mm and the automatic integrator 0.169 mm (0.196 mm without this test);
+/// on Suzanne (384×288, seeds 1–4) 3.93 / 3.90 / 4.30 / 3.34 mm against least squares'
+/// 7.65 / 7.47 / 7.48 / 7.34 mm.
 const AUTO_MIN_JUMP_PX: f64 = 0.5;
 
 /// Median absolute depth change in mm, from the depth a warm pass's light vectors were computed
