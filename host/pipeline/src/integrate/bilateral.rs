@@ -202,18 +202,10 @@ pub(crate) fn drop_short_cuts(topology: &Topology, cut: &mut [[bool; 2]], min_ed
     if min_edges <= 1 {
         return;
     }
-    let rows = topology
-        .cells
-        .iter()
-        .map(|&(r, _)| r + 2)
-        .max()
-        .unwrap_or(0);
-    let cols = topology
-        .cells
-        .iter()
-        .map(|&(_, c)| c + 2)
-        .max()
-        .unwrap_or(0);
+    // Corners of the pixels' bounding box, one more row and column than its pixels.
+    let (rows, cols) = topology.cells.iter().fold((0, 0), |(rows, cols), &(r, c)| {
+        (rows.max(r + 2), cols.max(c + 2))
+    });
     let corner = |r: usize, c: usize| r * cols + c;
     // The segment between pixel corners that edge d of the node at (r, c) crosses.
     let segment = |(r, c): (usize, usize), d: usize| {
