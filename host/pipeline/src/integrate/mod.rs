@@ -118,8 +118,8 @@ pub struct AutoConfig {
     /// A pixel is near a discontinuity when one of its one-sided bilateral weights is below
     /// this (the surface continues on one side only).
     pub decisive_weight: f64,
-    /// ... and the depth across that side's edge departs from the edge's slopes by more than
-    /// this many pixels (0: any departure). Noise makes stiff weights decisive on smooth
+    /// ... and the depth across that side's edge departs from the edge's slopes by at least
+    /// this many pixels (0: no such test). Noise makes stiff weights decisive on smooth
     /// surfaces, where depth still follows the slopes.
     pub min_jump_px: f64,
     /// ... and the pixels on that side run on along the axis for at least this many grid
