@@ -154,8 +154,9 @@ fn row_runs(inside: &[bool], (rows, cols): (usize, usize)) -> RowRuns {
     RowRuns { runs, first }
 }
 
-/// The root of run `i`'s set, halving the path on the way.
-fn root(parent: &mut [u32], mut i: u32) -> u32 {
+/// The root of element `i`'s set in the union–find forest `parent`, halving the path on the
+/// way.
+pub(crate) fn root(parent: &mut [u32], mut i: u32) -> u32 {
     while parent[i as usize] != i {
         parent[i as usize] = parent[parent[i as usize] as usize];
         i = parent[i as usize];

@@ -21,6 +21,7 @@
 use super::AutoConfig;
 use super::least_squares::{EdgeEquations, Topology};
 use super::multigrid::{NONE, PARALLEL_BAND as NODES_PER_TASK};
+use crate::regions::root;
 use rayon::prelude::*;
 
 /// Weights of a node's one-sided equations: right (forward x), down (forward row), left, up.
@@ -215,14 +216,7 @@ pub(crate) fn drop_short_cuts(topology: &Topology, cut: &mut [[bool; 2]], min_ed
             (corner(r + 1, c), corner(r + 1, c + 1))
         }
     };
-    let mut parent: Vec<usize> = (0..rows * cols).collect();
-    fn root(parent: &mut [usize], mut a: usize) -> usize {
-        while parent[a] != a {
-            parent[a] = parent[parent[a]];
-            a = parent[a];
-        }
-        a
-    }
+    let mut parent: Vec<u32> = (0..(rows * cols) as u32).collect();
     // Every cut edge as (node, axis).
     let edges: Vec<(usize, usize)> = cut
         .iter()
@@ -231,16 +225,18 @@ pub(crate) fn drop_short_cuts(topology: &Topology, cut: &mut [[bool; 2]], min_ed
         .collect();
     for &(k, d) in &edges {
         let (a, b) = segment(topology.cells[k], d);
-        let (ra, rb) = (root(&mut parent, a), root(&mut parent, b));
-        parent[ra] = rb;
+        let (ra, rb) = (root(&mut parent, a as u32), root(&mut parent, b as u32));
+        parent[ra as usize] = rb;
     }
+    let chain_root = |parent: &mut [u32], k: usize, d: usize| {
+        root(parent, segment(topology.cells[k], d).0 as u32) as usize
+    };
     let mut chain_of = vec![0usize; rows * cols];
     for &(k, d) in &edges {
-        chain_of[root(&mut parent, segment(topology.cells[k], d).0)] += 1;
+        chain_of[chain_root(&mut parent, k, d)] += 1;
     }
     for &(k, d) in &edges {
-        let chain = chain_of[root(&mut parent, segment(topology.cells[k], d).0)];
-        cut[k][d] = chain >= min_edges;
+        cut[k][d] = chain_of[chain_root(&mut parent, k, d)] >= min_edges;
     }
 }
 
