@@ -476,3 +476,11 @@ fn a_frame_dropped_or_repeated_near_an_end_is_found_or_refused() {
         }
     }
 }
+
+/// The issue's steady capture with seed 7: LED 4's exposure window ends 0.006 chip past a
+/// chip boundary, a sliver the timing fit finds only across a kink of its cost (2 % low with
+/// exit 0 before).
+#[test]
+fn a_weak_led_a_sliver_past_a_chip_boundary_decodes_within_one_percent() {
+    decoded_within_by(ISSUE, RoomEffects::default(), 7, 0.01);
+}

@@ -949,6 +949,14 @@ fn motion_is_found_while_the_object_turns_and_not_once_it_stops() {
         assert_eq!(f["timing"]["compare_ms"], 0.0, "{f:#}");
         assert!(f["accuracy"].is_null(), "{f:#}");
     }
+    // A timing fitted while the object turned is provisional: once it is seen still in two
+    // windows, the next window is fitted freely and carries the rest (the clips' chips run at
+    // the frame rate; a turning window's fit carried on was up to 0.12 % off, and the last
+    // window 2.6 mm off).
+    for f in &frames(&json)[6..] {
+        let rate = f["decode"]["rate_ratio"].as_f64().unwrap();
+        assert!((rate - 1.0).abs() < 1e-4, "{f:#}");
+    }
     for f in &frames(&json)[4..] {
         assert!(f["timing"]["compare_ms"].as_f64().unwrap() > 0.0, "{f:#}");
         assert!(f["accuracy"]["rmse_mm"].as_f64().unwrap() < 2.0, "{f:#}");

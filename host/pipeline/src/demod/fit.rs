@@ -88,6 +88,11 @@ const BACKFIT_STEP: f64 = 0.25;
 const BACKFIT_REACH: f64 = 2.0;
 /// Sweeps over the LEDs of that re-search.
 const BACKFIT_SWEEPS: usize = 2;
+/// Distances, chips, beside a kink of the cost at which a shift is tried
+/// ([`Fitter::across_kinks`]).
+const KINK_STEPS: [f64; 3] = [0.002, 0.01, 0.04];
+/// Most restarts of the least-squares steps from across a kink.
+const KINK_ROUNDS: usize = 3;
 /// Exposures the row-wise refinement starts from besides the band-wise fit's.
 const ROW_EXPOSURES: [f64; 1] = [1.0];
 /// A sample row takes part in the row-wise fit when its leading singular value² exceeds the
@@ -373,12 +378,11 @@ pub fn refit_timing(
     let fit = if previous.rolling {
         fitter.rows(sample, pixel_noise, &start, limits.line_delay.is_none())
     } else {
+        let groups = global_groups(space, frames);
+        let freedom = fitter.freedom(false);
+        let solution = fitter.solve(&groups, &start, &freedom);
         RowFit {
-            solution: fitter.solve(
-                &global_groups(space, frames),
-                &start,
-                &fitter.freedom(false),
-            ),
+            solution: fitter.across_kinks(&groups, solution, &freedom),
             evidence: 0.0,
         }
     };
@@ -524,6 +528,7 @@ impl Fitter<'_> {
             })
             .collect();
         self.best_of(&groups, starts, &freedom)
+            .map(|best| self.across_kinks(&groups, best, &freedom))
             .unwrap_or_else(|| Solution {
                 params: {
                     let mut p = vec![self.limits.rate_ratio.unwrap_or(1.0), 1.0, 0.0];
@@ -534,6 +539,58 @@ impl Fitter<'_> {
                 information: DMatrix::zeros(0, 0),
                 free: Vec::new(),
             })
+    }
+
+    /// Restarts the least-squares steps from across the kinks of each LED's shift while that
+    /// lowers the cost.
+    ///
+    /// With the exposure e < 1 chip, the template of a shift Δ whose window [Δ, Δ + e] lies
+    /// inside one chip is the same for every such Δ: the cost is flat there, and has a kink
+    /// wherever the window's start or end crosses a chip boundary (Δ = n or Δ = n − e). The
+    /// steps stop at a kink or on the flat when the optimum lies across it, and the LED's
+    /// template then misses the sliver of the neighbouring chip its window holds, which lowers
+    /// its gain by 1.5–2 times that sliver's share of the window (neighbouring chips of a
+    /// Manchester carrier correlate at −½ to −1). Each shift is therefore tried at
+    /// [`KINK_STEPS`] on both sides of every kink within a chip of its window, the others
+    /// held, and the steps restart from the lowest of these when it is below the current cost.
+    fn across_kinks(&self, groups: &[FitGroup], mut best: Solution, freedom: &Freedom) -> Solution {
+        let problem = Projection::new(self.waves, groups, self.frames);
+        for _ in 0..KINK_ROUNDS {
+            let exposure = best.params[EXPOSURE];
+            let trials: Vec<Vec<f64>> = (0..self.waves.len())
+                .flat_map(|i| {
+                    let shift = best.params[SHIFTS + i];
+                    let first = shift.floor() as i64 - 1;
+                    let last = (shift + exposure).ceil() as i64 + 1;
+                    (first..=last)
+                        .flat_map(move |n| [n as f64, n as f64 - exposure])
+                        .flat_map(|edge| KINK_STEPS.iter().flat_map(move |s| [edge - s, edge + s]))
+                        .map(move |trial| (i, trial))
+                })
+                .map(|(i, trial)| {
+                    let mut params = best.params.clone();
+                    params[SHIFTS + i] = trial;
+                    params
+                })
+                .collect();
+            let lowest = trials
+                .into_par_iter()
+                .map(|params| {
+                    let mut residual = Vec::new();
+                    problem.residuals(&params, &mut residual);
+                    (residual.iter().map(|r| r * r).sum::<f64>(), params)
+                })
+                .min_by(|a, b| a.0.total_cmp(&b.0));
+            let Some((_, start)) = lowest.filter(|(cost, _)| *cost < best.cost) else {
+                break;
+            };
+            let refined = self.solve(groups, &start, freedom);
+            if refined.cost >= best.cost {
+                break;
+            }
+            best = refined;
+        }
+        best
     }
 
     /// Parameters with line delay `delay` whose shifts equal `params`' at region row `row`.

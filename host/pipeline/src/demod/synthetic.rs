@@ -33,6 +33,8 @@ pub struct Scene {
     pub bit_depth: u8,
     /// A flat face instead of the sphere.
     pub face: Option<Face>,
+    /// Each LED's shift in chips (drawn from the seed when `None`).
+    pub shifts: Option<Vec<f64>>,
 }
 
 impl Default for Scene {
@@ -49,6 +51,7 @@ impl Default for Scene {
             seed: 7,
             bit_depth: 16,
             face: None,
+            shifts: None,
         }
     }
 }
@@ -74,9 +77,10 @@ fn on_fraction(led: usize, shift: f64, t0: f64, w: f64) -> f64 {
 /// Renders the scene: (source, true A_i images row-major, shifts used).
 pub fn render(scene: &Scene) -> (MemorySource, Vec<Vec<f32>>, Vec<f64>) {
     let mut rng = ChaCha8Rng::seed_from_u64(scene.seed);
-    let shifts: Vec<f64> = (0..scene.leds)
+    let drawn: Vec<f64> = (0..scene.leds)
         .map(|_| rng.random::<f64>() * 64.0)
         .collect();
+    let shifts = scene.shifts.clone().unwrap_or(drawn);
     let (w, h) = (scene.width, scene.height);
     // A "sphere" lit from four sides: on-levels fall off towards each LED's far side.
     let truth: Vec<Vec<f32>> = (0..scene.leds)

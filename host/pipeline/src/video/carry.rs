@@ -20,6 +20,14 @@
 //! explained its own window ([`SUSPICIOUS_RATIO`]), and the better of the two is kept (and
 //! carried on, when the free fit wins).
 //!
+//! A timing fitted to a window in which the object moved is provisional: motion blurs the
+//! modulation the fit explains, so a moving window's fit can carry a rate ratio 0.1 % off
+//! (0.16 chip of drift over the next 128 frames) and still explain its own window best. When
+//! the object is then seen still in [`STILL_WINDOWS`] windows in a row, the next window is
+//! decoded freely too, and its fit replaces the provisional one when it explains its window
+//! better ([`TimingCarry::observe`]). A video that keeps moving keeps its carried timing, at no
+//! extra cost.
+//!
 //! A window decoded in a region around the object ([`super::focus`]) is judged against the
 //! median σ of the last whole-frame decode inside that region, not against the whole frame's
 //! ([`TimingCarry::decode_region`]); its free fit may serve the window but is never carried on,
@@ -31,6 +39,8 @@ use serde::{Deserialize, Serialize};
 
 /// Windows decoded both with the carried and a free timing before the carry is trusted.
 pub const FREE_WINDOWS: usize = 3;
+/// Windows in a row in which the object is seen still before a provisional timing is refitted.
+pub const STILL_WINDOWS: usize = 2;
 /// A carried decode whose median σ exceeds the carried fit's by this factor is refitted.
 pub const SUSPICIOUS_RATIO: f64 = 1.5;
 
@@ -55,6 +65,8 @@ struct Timing {
     /// cannot be given in seconds (no frame rate), so that every window fits it.
     line_time_s: Option<f64>,
     median_noise: f64,
+    /// Fitted to a window in which the object moved (module docs).
+    moving: bool,
 }
 
 impl Timing {
@@ -80,6 +92,7 @@ impl Timing {
             exposure: r.exposure,
             line_time_s,
             median_noise: r.median_noise,
+            moving: false,
         })
     }
 
@@ -100,6 +113,10 @@ pub struct TimingCarry {
     enabled: bool,
     best: Option<Timing>,
     windows: usize,
+    /// The last window decoded was fitted freely and its fit became `best`.
+    best_is_last: bool,
+    /// Windows in a row, up to the last one decoded, found still (and plausible).
+    still_run: usize,
 }
 
 /// A decoded window and where its timing came from.
@@ -123,6 +140,7 @@ impl TimingCarry {
     ) -> DecodedWindow {
         let given = config.rate_ratio.is_some() && config.exposure.is_some();
         self.windows += 1;
+        self.best_is_last = false;
         let carried = match self.best.filter(|_| self.enabled && !given) {
             None => {
                 let decoded = crate::demod::decode_frames(frames, format, config);
@@ -137,7 +155,9 @@ impl TimingCarry {
             Some(best) => best,
         };
         let first = crate::demod::decode_frames(frames, format, &carried.given_in(config));
-        let trusted = self.windows > FREE_WINDOWS
+        let provisional = carried.moving && self.still_run >= STILL_WINDOWS;
+        let trusted = !provisional
+            && self.windows > FREE_WINDOWS
             && first
                 .as_ref()
                 .is_ok_and(|d| d.report.median_noise <= SUSPICIOUS_RATIO * carried.median_noise);
@@ -172,6 +192,7 @@ impl TimingCarry {
     ) -> DecodedWindow {
         let given = config.rate_ratio.is_some() && config.exposure.is_some();
         self.windows += 1;
+        self.best_is_last = false;
         let Some(carried) = self.best.filter(|_| self.enabled && !given) else {
             let decoded = crate::demod::decode_frames(frames, format, config);
             let source = if given {
@@ -208,6 +229,16 @@ impl TimingCarry {
             .is_none_or(|best| timing.median_noise < best.median_noise)
         {
             self.best = Some(timing);
+            self.best_is_last = true;
         }
+    }
+
+    /// Records whether the object was `still` (and the decode plausible) in the window
+    /// decoded last: a fit of a window that was not still is provisional (module docs).
+    pub fn observe(&mut self, still: bool) {
+        if let Some(best) = self.best.as_mut().filter(|_| self.best_is_last && !still) {
+            best.moving = true;
+        }
+        self.still_run = if still { self.still_run + 1 } else { 0 };
     }
 }

@@ -300,6 +300,7 @@ impl DecodeStage<'_> {
             // so its relative motion score can look still: only a plausible decode counts.
             let plausible = attempt.is_plausible();
             let still = plausible && attempt.motion.is_some_and(|m| !m.moving);
+            carry.observe(still);
             // Placing keeps the scheduled try unless a later one is still: a try that is only
             // "least moving" is no better placed than where the schedule put it.
             let better = best.is_none() || still;
