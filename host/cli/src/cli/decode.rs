@@ -223,13 +223,13 @@ fn flag_hint(error: &DemodError) -> Option<String> {
     })
 }
 
-/// Says what a decode without a frame rate could not look for.
+/// Says how a decode without a frame rate looked for room-light flicker.
 fn note_if_rate_unknown(report: &DecodeReport) {
     if report.fps <= 0.0 {
         eprintln!(
             "note: the frame rate is unknown (image files carry none), so flicker of room lights \
-             on the mains was not looked for (a lamp at 1 % of full scale moved gains by up to \
-             4 % in tests); give --fps to have it found and projected out"
+             was looked for at any frequency in frames rather than at the mains harmonics; give \
+             --fps to have it placed and named as mains flicker"
         );
     }
 }

@@ -194,10 +194,10 @@ pub fn decode(
     )
 }
 
-/// The error an LED count mismatch of a capture without a frame rate is reported as: room
-/// lights flickering at mains harmonics are modelled only at known frequencies in frames, so
-/// without the rate their flicker shows as an extra component (a 50 Hz lamp at 2 % of full
-/// scale on 4 LEDs at 960 fps: "5 modulated LEDs") and the frame rate is what to give first.
+/// The error an LED count mismatch of a capture without a frame rate is reported as: without
+/// the rate, room-light flicker is looked for only as one periodic component of unknown
+/// frequency in frames, so flicker that escaped that search shows as an extra component, and
+/// the frame rate is what to give first.
 fn without_frame_rate(error: DemodError) -> DemodError {
     match error {
         DemodError::LedCountMismatch {
@@ -207,7 +207,8 @@ fn without_frame_rate(error: DemodError) -> DemodError {
             problems: format!(
                 "{requested} LEDs requested and the video shows {detected} modulated \
                  components; its frame rate is unknown (image files carry none), so flicker of \
-                 room lights on the mains, the usual cause, could not be modelled"
+                 room lights on the mains, the usual cause, could be looked for only by its \
+                 frequency in frames"
             ),
             advice: format!(
                 "give the camera's frame rate (--fps, or fps= in Python) so mains flicker is \

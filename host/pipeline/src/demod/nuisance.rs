@@ -7,7 +7,9 @@
 //! [0, ½]); f_m is free within ±0.5 % of 50 or 60 Hz, which over a window of F frames moves the
 //! phase by up to 0.005·h·2·f_m·F/fps cycles, so each harmonic is modelled by four columns,
 //! cos, sin, τ·cos and τ·sin (τ the centred frame time): the first-order expansion of a
-//! sinusoid of slightly unknown frequency and slowly varying amplitude. An auto-exposure that
+//! sinusoid of slightly unknown frequency and slowly varying amplitude. At an unknown frame rate
+//! (image files) the fundamental is scanned over the whole band in cycles per frame, a quarter
+//! bin apart (the frequency holding the most energy), and tested the same way. An auto-exposure that
 //! drifts multiplies the frame by g(j) ≈ 1 + g₁·τ + g₂·τ²; on the background B(p) that is
 //! B(p)·(g(j) − 1), spanned by the Legendre columns τ and τ² − mean.
 //!
@@ -67,13 +69,21 @@ const SEPARABLE_SHARE: f64 = 0.5;
 /// Harmonics of each carrier removed before testing (as [`super::quality`]'s subspaces).
 const CARRIER_HARMONICS: usize = 4;
 
+/// Steps per frequency bin (1/F) of the scan for flicker at an unknown frame rate.
+const ANY_RATE_STEPS_PER_BIN: usize = 4;
+
 /// Flicker found in a window.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct Flicker {
-    /// Nominal flicker fundamental of the family, Hz (100 for 50 Hz mains, 120 for 60 Hz).
+    /// Nominal flicker fundamental of the family, Hz (100 for 50 Hz mains, 120 for 60 Hz; 0
+    /// when the frame rate is unknown and the flicker was found by its frequency in frames).
     pub nominal_hz: f64,
-    /// Best-fitting flicker fundamental, Hz (twice the mains frequency).
+    /// Best-fitting flicker fundamental, Hz (twice the mains frequency; 0 when the frame rate
+    /// is unknown).
     pub frequency_hz: f64,
+    /// Where the fundamental lands, cycles per frame (aliased into [0, ½]).
+    #[serde(default)]
+    pub cycles_per_frame: f64,
     /// Harmonics (multiples of the fundamental) found and projected out.
     pub harmonics: Vec<usize>,
     /// Amplitude of the strongest harmonic, RMS over the sampled pixels, fraction of full scale.
@@ -233,7 +243,7 @@ pub struct Window<'a> {
 }
 
 /// Finds mains flicker and exposure drift in `window` (module docs): `fps` the camera rate
-/// (0 when unknown: then the drift only),
+/// (0 when unknown: then flicker of any frequency in frames, scanned over the whole band),
 /// `rate` the chips per frame, `leds` the LEDs whose carriers' strongest lines are removed
 /// before testing, and `fitted` further columns removed with them (a timing fit's templates).
 pub fn detect(
@@ -248,8 +258,8 @@ pub fn detect(
     if f < 16 || pixels < 2 {
         return Nuisance::default();
     }
-    // Mains flicker lies at known frequencies in Hz, so only at a known frame rate; a drift
-    // is smooth in frames and is looked for either way.
+    // Mains flicker lies at known frequencies in Hz, which a known frame rate places in
+    // frames; a drift is smooth in frames.
     let rate_known = fps.is_finite() && fps > 0.0;
     let mut carriers = carrier_columns(rate, leds, f);
     carriers = orthonormal(
@@ -281,13 +291,25 @@ pub fn detect(
     // The family with more energy at its harmonics is tested first; the other is tested with
     // the first's columns set aside too (at some camera rates harmonics of 100 and 120 Hz
     // alias onto the same frequencies).
-    let mut families: Vec<(f64, f64, f64)> = FLICKER_FAMILIES_HZ
-        .iter()
-        .filter(|_| rate_known)
-        .filter_map(|&nominal| {
-            scan_family(nominal, fps, f, &whole).map(|(at, total)| (nominal, at, total))
-        })
-        .collect();
+    // At an unknown frame rate a lamp's flicker is a periodic component of unknown frequency
+    // in frames: its fundamental is scanned over the whole band, in cycles per frame (a rate of
+    // one frame per "second"), as one family of nominal 0.
+    let (families, fps) = if rate_known {
+        let families = FLICKER_FAMILIES_HZ
+            .iter()
+            .filter_map(|&nominal| {
+                scan_family(nominal, fps, f, &whole).map(|(at, total)| (nominal, at, total))
+            })
+            .collect();
+        (families, fps)
+    } else {
+        let families = scan_any_rate(f, &whole)
+            .map(|(at, total)| (0.0, at, total))
+            .into_iter()
+            .collect();
+        (families, 1.0)
+    };
+    let mut families: Vec<(f64, f64, f64)> = families;
     families.sort_by(|a, b| b.2.total_cmp(&a.2));
     for (nominal, fundamental, _) in families {
         let found = if columns.is_empty() {
@@ -435,6 +457,25 @@ fn scan_family(nominal: f64, fps: f64, f: usize, whole: &Evidence<'_>) -> Option
     best
 }
 
+/// The frequency in cycles per frame, anywhere a window of `f` frames resolves, that holds the
+/// most energy in `whole`, and that energy: the fundamental of a flicker of unknown frequency
+/// (a lamp's flicker is strongest there; summing higher harmonics as [`scan_family`] does would
+/// favour a subharmonic, whose second harmonic is the flicker's fundamental).
+fn scan_any_rate(f: usize, whole: &Evidence<'_>) -> Option<(f64, f64)> {
+    let bin = 1.0 / f as f64;
+    let step = bin / ANY_RATE_STEPS_PER_BIN as f64;
+    let mut best: Option<(f64, f64)> = None;
+    let mut fundamental = 1.5 * bin + step;
+    while fundamental < 0.5 - 0.5 * bin {
+        let total = whole.energy(&pair(fundamental, f)).0;
+        if best.is_none_or(|(_, e)| total > e) {
+            best = Some((fundamental, total));
+        }
+        fundamental += step;
+    }
+    best
+}
+
 /// The harmonics h ≤ [`MAX_HARMONICS`] of `fundamental` Hz and where they land (cycles per
 /// frame) that a window of bins `bin` resolves, each more than [`ALIAS_BINS`] bins from the
 /// lower ones (a harmonic aliased onto a lower one's frequency adds no column of its own).
@@ -454,7 +495,8 @@ fn harmonics_of(fundamental: f64, fps: f64, bin: f64) -> Vec<(usize, f64)> {
     found
 }
 
-/// The flicker of fundamental `fundamental` Hz (family `nominal`), if found: its report and
+/// The flicker of fundamental `fundamental` Hz (family `nominal`; at an unknown frame rate
+/// nominal 0, `fps` 1 and the fundamental in cycles per frame), if found: its report and
 /// its columns. A harmonic counts when it stands out against its controls in the whole sample
 /// and, by `consistent`, in each half of it.
 fn flicker_at(
@@ -524,10 +566,12 @@ fn flicker_at(
     }
     harmonics.sort_unstable();
     let on_lines: Vec<usize> = on_lines.into_iter().map(|(h, _)| h).collect();
+    let rate_known = nominal > 0.0;
     Some((
         Flicker {
             nominal_hz: nominal,
-            frequency_hz: fundamental,
+            frequency_hz: if rate_known { fundamental } else { 0.0 },
+            cycles_per_frame: alias(fundamental / fps),
             harmonics,
             amplitude,
             on_carrier_lines: on_lines,
@@ -752,6 +796,45 @@ mod tests {
             noise,
         };
         assert!(detect(&quiet, 960.0, 1.0, 4, &[]).is_empty());
+    }
+
+    #[test]
+    fn finds_flicker_at_an_unknown_frame_rate_by_its_frequency_in_frames() {
+        let (pixels, f, sigma) = (400, 128, 0.01);
+        let noise = pixels as f64 * sigma * sigma;
+        let nu = 100.3 / 960.0;
+        let (values, means, gram) = window_of(pixels, f, sigma, |p, j| {
+            let a = 0.01 * (0.5 + p as f64 / pixels as f64);
+            a * (TAU * nu * j as f64 + 0.7).cos()
+        });
+        let window = Window {
+            values: &values,
+            means: &means,
+            gram: &gram,
+            frames: f,
+            noise,
+        };
+        let found = detect(&window, 0.0, 1.0, 4, &[]);
+        assert_eq!(found.flicker.len(), 1, "{found:?}");
+        let flicker = &found.flicker[0];
+        assert_eq!((flicker.nominal_hz, flicker.frequency_hz), (0.0, 0.0));
+        assert!(
+            (flicker.cycles_per_frame - nu).abs() < 0.25 / f as f64,
+            "{flicker:?}"
+        );
+        assert!(flicker.harmonics.contains(&1), "{flicker:?}");
+        let mut v: Vec<f64> = (0..f).map(|j| (TAU * nu * j as f64 + 0.7).cos()).collect();
+        found.project(&mut v);
+        assert!(dot(&v, &v) < 1e-3 * f as f64, "{}", dot(&v, &v));
+        let (values, means, gram) = window_of(pixels, f, sigma, |_, _| 0.0);
+        let quiet = Window {
+            values: &values,
+            means: &means,
+            gram: &gram,
+            frames: f,
+            noise,
+        };
+        assert!(detect(&quiet, 0.0, 1.0, 4, &[]).is_empty());
     }
 
     #[test]
