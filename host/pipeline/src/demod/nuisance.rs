@@ -9,9 +9,9 @@
 //! cos, sin, τ·cos and τ·sin (τ the centred frame time): the first-order expansion of a
 //! sinusoid of slightly unknown frequency and slowly varying amplitude. At an unknown frame rate
 //! (image files) the fundamental is scanned over the whole band in cycles per frame, a quarter
-//! bin apart (the frequency holding the most energy), and tested the same way. An auto-exposure that
-//! drifts multiplies the frame by g(j) ≈ 1 + g₁·τ + g₂·τ²; on the background B(p) that is
-//! B(p)·(g(j) − 1), spanned by the Legendre columns τ and τ² − mean.
+//! bin apart (the frequency holding the most energy), and tested the same way. An
+//! auto-exposure that drifts multiplies the frame by g(j) ≈ 1 + g₁·τ + g₂·τ²; on the
+//! background B(p) that is B(p)·(g(j) − 1), spanned by the Legendre columns τ and τ² − mean.
 //!
 //! Each pixel then reads r = 1·b + T·a + P·c + noise, P the nuisance columns (orthonormal,
 //! orthogonal to the constant) and T the LEDs' templates. By the Frisch–Waugh–Lovell theorem
@@ -294,7 +294,7 @@ pub fn detect(
     // At an unknown frame rate a lamp's flicker is a periodic component of unknown frequency
     // in frames: its fundamental is scanned over the whole band, in cycles per frame (a rate of
     // one frame per "second"), as one family of nominal 0.
-    let (families, fps) = if rate_known {
+    let (mut families, fps): (Vec<(f64, f64, f64)>, f64) = if rate_known {
         let families = FLICKER_FAMILIES_HZ
             .iter()
             .filter_map(|&nominal| {
@@ -309,7 +309,6 @@ pub fn detect(
             .collect();
         (families, 1.0)
     };
-    let mut families: Vec<(f64, f64, f64)> = families;
     families.sort_by(|a, b| b.2.total_cmp(&a.2));
     for (nominal, fundamental, _) in families {
         let found = if columns.is_empty() {
