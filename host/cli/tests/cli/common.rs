@@ -203,3 +203,40 @@ pub fn names(dir: &Path) -> Vec<String> {
     names.sort();
     names
 }
+
+/// Least-squares gains of the four decoded LED images in the decode folder `decoded` against
+/// the simulator's truth in the capture folder `capture`, over the pixels lit above 10 % of each
+/// LED's brightest that the decoder did not flag as saturated or underexposed.
+pub fn folder_gains(decoded: &Path, capture: &Path) -> Vec<f64> {
+    let flagged = |name: &str| -> Option<ndarray::Array2<bool>> {
+        ndarray_npy::read_npy(decoded.join(name)).ok()
+    };
+    let (saturated, underexposed) = (flagged("saturated.npy"), flagged("underexposed.npy"));
+    let kept = |p: (usize, usize)| {
+        ![&saturated, &underexposed]
+            .iter()
+            .any(|f| f.as_ref().is_some_and(|f| f[p]))
+    };
+    (1..=4)
+        .map(|i| {
+            let image: ndarray::Array2<f32> =
+                ndarray_npy::read_npy(decoded.join(format!("led{i}.npy"))).unwrap();
+            let truth: ndarray::Array2<f32> =
+                ndarray_npy::read_npy(capture.join(format!("led{i}_true.npy"))).unwrap();
+            let top = truth.iter().copied().fold(0.0f32, f32::max);
+            let (mut dt, mut tt) = (0.0f64, 0.0f64);
+            for ((p, d), t) in image.indexed_iter().zip(&truth) {
+                if *t > 0.1 * top && kept(p) {
+                    dt += f64::from(*d) * f64::from(*t);
+                    tt += f64::from(*t) * f64::from(*t);
+                }
+            }
+            dt / tt
+        })
+        .collect()
+}
+
+/// The decode report (`decode.json`) of the decode folder `decoded`.
+pub fn decode_report(decoded: &Path) -> serde_json::Value {
+    serde_json::from_str(&std::fs::read_to_string(decoded.join("decode.json")).unwrap()).unwrap()
+}

@@ -7,8 +7,9 @@
 //! The capture: 320×180 at 960 fps, a Ø60 mm sphere on a ground plane, read noise 1 %, a
 //! steady background of 0.15 of full scale, the brightest LED peaking at `peak` on the sphere.
 
-use crate::common::{self, OUT_OF_PLANE_LEDS, arg, ffmpeg_available, meb, rig_toml, stderr_of};
-use ndarray::Array2;
+use crate::common::{
+    self, OUT_OF_PLANE_LEDS, arg, ffmpeg_available, folder_gains, meb, rig_toml, stderr_of,
+};
 use std::path::{Path, PathBuf};
 use std::process::Command;
 
@@ -75,34 +76,9 @@ fn encode(capture: &Path, codec: &str, crf: u32, dir: &Path, name: &str) -> Path
     out
 }
 
-/// Least-squares gains of the decoded LED images in `decoded` against the simulator's truth
-/// in `capture`, over the pixels lit above 10 % of each LED's brightest.
-fn gains(decoded: &Path, capture: &Path) -> Vec<f64> {
-    (1..=4)
-        .map(|i| {
-            let image: Array2<f32> =
-                ndarray_npy::read_npy(decoded.join(format!("led{i}.npy"))).unwrap();
-            let truth: Array2<f32> =
-                ndarray_npy::read_npy(capture.join(format!("led{i}_true.npy"))).unwrap();
-            let top = truth.iter().copied().fold(0.0f32, f32::max);
-            let (mut dt, mut tt) = (0.0f64, 0.0f64);
-            for (d, t) in image.iter().zip(&truth) {
-                if *t > 0.1 * top {
-                    dt += f64::from(*d) * f64::from(*t);
-                    tt += f64::from(*t) * f64::from(*t);
-                }
-            }
-            dt / tt
-        })
-        .collect()
-}
-
 /// The `compression` entry of a decode folder's decode.json.
 fn compression(decoded: &Path) -> serde_json::Value {
-    let report: serde_json::Value =
-        serde_json::from_str(&std::fs::read_to_string(decoded.join("decode.json")).unwrap())
-            .unwrap();
-    report["compression"].clone()
+    common::decode_report(decoded)["compression"].clone()
 }
 
 #[test]
@@ -152,7 +128,7 @@ fn a_strong_modulation_in_a_lossy_video_is_decoded_and_the_codec_recorded() {
     assert_eq!(found["codec"], "hevc", "{found}");
     let bpp = found["bits_per_pixel"].as_f64().unwrap();
     assert!(bpp > 0.0 && bpp < 1.0, "{found}");
-    let gains = gains(&out, &strong);
+    let gains = folder_gains(&out, &strong);
     let mean = gains.iter().sum::<f64>() / gains.len() as f64;
     eprintln!("HEVC CRF 23: gains {gains:.4?}");
     for (i, g) in gains.iter().enumerate() {

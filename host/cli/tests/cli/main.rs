@@ -7,6 +7,7 @@ mod camera_calibration;
 mod capture_readers;
 mod common;
 mod compressed_video;
+mod container_clock;
 mod decode_moving;
 mod decode_simulated;
 mod decode_start;

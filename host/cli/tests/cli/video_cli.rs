@@ -1183,3 +1183,39 @@ fn videos_written_together_each_get_their_own_pictures() {
     let left: Vec<_> = std::fs::read_dir(tmp.path()).unwrap().collect();
     assert_eq!(left.len(), 3, "only the three videos are left");
 }
+
+#[test]
+fn a_frame_dropped_or_repeated_while_the_object_turns_costs_no_window_of_two_periods() {
+    // Windows of 80 frames (72 decoded) while the ellipsoid turns: the window holding the
+    // break is re-aligned and decoded from the 32 frames on the far side of it. The turning
+    // surface leaves more than noise unexplained, which kept such a break from counting and
+    // the window was refused with "use --leds 5".
+    let tmp = tempfile::tempdir().unwrap();
+    let rig = dynamic_rig(tmp.path(), 320, 180);
+    for (name, option, at, kind) in [
+        ("dropped", "--drop-frame", "100", ("dropped", 16)),
+        ("repeated", "--duplicate-frame", "120", ("repeated", 37)),
+    ] {
+        let clip = ellipsoid_with(tmp.path(), &rig, name, 160, 7.5, "0,1,0", &[option, at]);
+        let out = tmp.path().join(format!("{name}-video"));
+        let truth = s(&clip);
+        let options = ["--window", "80", "--drop", "4", "--ground-truth", &truth];
+        video_ok(&clip.join("capture.y4m"), &rig, &out, &options);
+        let json = video_json(&out);
+        let records = frames(&json);
+        assert_eq!(records.len(), 2, "{name}: {:#}", json["frames"]);
+        for record in records {
+            assert_eq!(record["status"], "reconstructed", "{name}: {record}");
+            let rmse = record["accuracy"]["rmse_mm"].as_f64().unwrap();
+            assert!(rmse < 1.0, "{name}: RMSE {rmse} mm in {record}");
+        }
+        assert!(records[0]["decode"].get("room").is_none(), "{}", records[0]);
+        let (kind, frame) = kind;
+        assert_eq!(
+            records[1]["decode"]["room"]["timing_breaks"],
+            serde_json::json!([{ "frame": frame, "kind": kind }]),
+            "{name}: {}",
+            records[1]
+        );
+    }
+}

@@ -263,6 +263,10 @@ impl FrameSource for BinnedSource {
         self.inner.lossy_compression()
     }
 
+    fn timestamp_gaps(&self) -> Vec<super::clock::TimestampGap> {
+        self.inner.timestamp_gaps()
+    }
+
     fn read_frame_into(&mut self, samples: &mut Samples) -> Result<Option<usize>, CaptureError> {
         let Some(index) = self.inner.read_frame_into(&mut self.full)? else {
             return Ok(None);

@@ -8,6 +8,7 @@
 //! ("tv") range video keeps its codes; its black and white levels (16·2^(b−8) and
 //! 235·2^(b−8)) go into the [`FrameFormat`], so decoded images do not depend on the range.
 
+use super::clock::{FrameClock, TimestampGap};
 use super::{CaptureError, Frame, FrameFormat, FrameSource, LossyCompression, Samples};
 use std::io::{BufReader, Read};
 use std::path::{Path, PathBuf};
@@ -105,18 +106,12 @@ fn is_limited_range(color_range: Option<&str>, pix_fmt: &str) -> bool {
     }
 }
 
-/// Runs `ffprobe` on `path`.
-pub fn probe(path: &Path) -> Result<VideoInfo, CaptureError> {
+/// Runs `ffprobe -v error -select_streams v:0 ENTRIES -of json` on `path`; its JSON output.
+fn ffprobe_json(path: &Path, entries: &[&str]) -> Result<serde_json::Value, CaptureError> {
     let output = Command::new("ffprobe")
-        .args([
-            "-v",
-            "error",
-            "-select_streams",
-            "v:0",
-            "-show_streams",
-            "-of",
-            "json",
-        ])
+        .args(["-v", "error", "-select_streams", "v:0"])
+        .args(entries)
+        .args(["-of", "json"])
         .arg(path)
         .stdin(Stdio::null())
         .output()
@@ -131,8 +126,17 @@ pub fn probe(path: &Path) -> Result<VideoInfo, CaptureError> {
             String::from_utf8_lossy(&output.stderr).trim()
         )));
     }
-    let json: serde_json::Value = serde_json::from_slice(&output.stdout)
-        .map_err(|e| bad(format!("unreadable ffprobe output: {e}")))?;
+    serde_json::from_slice(&output.stdout)
+        .map_err(|e| bad(format!("unreadable ffprobe output: {e}")))
+}
+
+/// Runs `ffprobe` on `path`.
+pub fn probe(path: &Path) -> Result<VideoInfo, CaptureError> {
+    let json = ffprobe_json(path, &["-show_streams"])?;
+    let bad = |reason: String| CaptureError::Format {
+        path: path.to_path_buf(),
+        reason,
+    };
     let stream = json
         .get("streams")
         .and_then(|s| s.get(0))
@@ -172,10 +176,44 @@ pub fn probe(path: &Path) -> Result<VideoInfo, CaptureError> {
     })
 }
 
+/// The presentation times (seconds, sorted) of the first video stream's packets in `path`
+/// and the seconds per tick of its time base (0 when unknown), from `ffprobe`.
+pub fn frame_times(path: &Path) -> Result<(Vec<f64>, f64), CaptureError> {
+    let json = ffprobe_json(path, &["-show_entries", "stream=time_base:packet=pts"])?;
+    let tick = json
+        .get("streams")
+        .and_then(|s| s.get(0))
+        .and_then(|s| s.get("time_base"))
+        .and_then(|t| t.as_str())
+        .and_then(|t| {
+            let (n, d) = t.split_once('/')?;
+            let (n, d) = (n.parse::<f64>().ok()?, d.parse::<f64>().ok()?);
+            (n > 0.0 && d > 0.0).then_some(n / d)
+        })
+        .unwrap_or(0.0);
+    let mut times: Vec<f64> = json
+        .get("packets")
+        .and_then(|p| p.as_array())
+        .map(|packets| {
+            packets
+                .iter()
+                .filter_map(|p| p.get("pts").and_then(serde_json::Value::as_i64))
+                .map(|pts| pts as f64 * tick)
+                .collect()
+        })
+        .unwrap_or_default();
+    if tick == 0.0 {
+        times.clear();
+    }
+    times.sort_by(f64::total_cmp);
+    Ok((times, tick))
+}
+
 /// A video decoded by an `ffmpeg` child process, one frame at a time from its pipe.
 pub struct FfmpegSource {
     format: FrameFormat,
     info: VideoInfo,
+    gaps: Vec<TimestampGap>,
     path: PathBuf,
     child: Child,
     stdout: BufReader<ChildStdout>,
@@ -185,9 +223,32 @@ pub struct FfmpegSource {
 }
 
 impl FfmpegSource {
-    /// Probes and starts decoding `path`; `fps` overrides the container's rate.
+    /// Probes and starts decoding `path`; `fps` overrides the container's rate. Without it,
+    /// the container's timestamps are judged ([`FrameClock`]): a variable frame rate is
+    /// refused, and frames missing between them are kept as [`FrameSource::timestamp_gaps`].
     pub fn open(path: &Path, fps: Option<f64>) -> Result<Self, CaptureError> {
         let info = probe(path)?;
+        let gaps = if fps.is_some() {
+            Vec::new()
+        } else {
+            let (times, tick) = frame_times(path)?;
+            match FrameClock::judge(&times, tick) {
+                FrameClock::Regular => Vec::new(),
+                FrameClock::Gaps(gaps) => gaps,
+                FrameClock::Irregular {
+                    frame,
+                    periods,
+                    period_s,
+                } => {
+                    return Err(CaptureError::IrregularFrameTimes {
+                        path: path.to_path_buf(),
+                        frame,
+                        periods,
+                        period_ms: period_s * 1e3,
+                    });
+                }
+            }
+        };
         let pix_fmt = match info.bit_depth {
             8 => "gray",
             10 => "gray10le",
@@ -233,6 +294,7 @@ impl FfmpegSource {
         Ok(Self {
             format,
             info,
+            gaps,
             path: path.to_path_buf(),
             child,
             stdout: BufReader::with_capacity(1 << 20, stdout),
@@ -327,6 +389,10 @@ impl FrameSource for FfmpegSource {
 
     fn lossy_compression(&self) -> Option<LossyCompression> {
         self.info.lossy_compression()
+    }
+
+    fn timestamp_gaps(&self) -> Vec<TimestampGap> {
+        self.gaps.clone()
     }
 }
 

@@ -182,6 +182,25 @@ pub enum CaptureError {
         /// Size of the stream.
         height: usize,
     },
+    /// A container whose timestamps put frames no whole number of frame periods apart: a
+    /// variable frame rate, which the decoder's frame clock cannot model.
+    #[error(
+        "{path}: the container's timestamps show a variable frame rate: frame {frame} comes \
+         {periods:.2} frame periods (of {period_ms:.3} ms) after the one before, and the \
+         carriers can only be decoded from frames taken at a constant rate; record at a fixed \
+         frame rate (on a phone: a slow-motion mode without speed ramps), or give --fps if the \
+         frames were taken at a constant rate and only their timestamps are irregular"
+    )]
+    IrregularFrameTimes {
+        /// The file.
+        path: std::path::PathBuf,
+        /// The frame after the first irregular interval.
+        frame: usize,
+        /// That interval in frame periods.
+        periods: f64,
+        /// The median frame period, milliseconds.
+        period_ms: f64,
+    },
     /// Anything else that makes the source unusable.
     #[error("{0}")]
     Other(String),
@@ -225,6 +244,11 @@ pub trait FrameSource: Send {
     /// uncompressed and losslessly compressed sources).
     fn lossy_compression(&self) -> Option<LossyCompression> {
         None
+    }
+    /// Frame periods the container's timestamps show missing ([`clock`]); empty when the
+    /// source has no timestamps or they show none.
+    fn timestamp_gaps(&self) -> Vec<clock::TimestampGap> {
+        Vec::new()
     }
     /// Reads the next frame into `samples`, reusing its storage where the source can (a y4m
     /// or raw stream reads the luma plane straight into it), and returns the frame's index, or
@@ -314,6 +338,7 @@ fn fill(
 }
 
 pub mod binning;
+pub mod clock;
 pub mod ffmpeg;
 pub mod images;
 pub mod memory;

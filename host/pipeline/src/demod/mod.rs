@@ -97,6 +97,7 @@ pub use window::CodeMap;
 use config::FitLimits;
 use fit::{TimingFit, fit_timing, refit_timing};
 pub(crate) use matched::CodeLimits;
+use meb_core::capture::clock::TimestampGap;
 use meb_core::capture::{FrameFormat, FrameSource, Samples};
 use meb_core::types::LedImages;
 use nalgebra::DMatrix;
@@ -161,6 +162,16 @@ pub fn decode(
         });
     }
     let plan = WindowPlan::new(config, &format, decoder.roi, source.frame_count_hint());
+    // The container's gaps, counted from the first frame decoded.
+    let gaps: Vec<TimestampGap> = source
+        .timestamp_gaps()
+        .into_iter()
+        .filter(|g| g.frame > config.start)
+        .map(|g| TimestampGap {
+            frame: g.frame - config.start,
+            ..g
+        })
+        .collect();
     let mut state = Accumulated::default();
     let mut read = 0usize;
     loop {
@@ -175,6 +186,9 @@ pub fn decode(
         let got = window.frames.len();
         let added = add_window(&decoder, &window.frames, config, &mut state);
         let added = match (added, source.lossy_compression()) {
+            (Err(e), _) if gaps.iter().any(|g| g.frame < read) => {
+                Err(timing_break::explain_gaps(e, &gaps))
+            }
             (Err(e), Some(compression)) => Err(compression::explain(e, &compression)),
             (Err(e), None) if format.fps <= 0.0 => Err(without_frame_rate(e)),
             (added, _) => added,
@@ -183,7 +197,16 @@ pub fn decode(
             break;
         }
     }
-    let mut decoded = finish(config, &format, decoder.roi, state)?;
+    let gaps: Vec<TimestampGap> = gaps.into_iter().filter(|g| g.frame < read).collect();
+    let explain = |e: DemodError| {
+        if gaps.is_empty() {
+            e
+        } else {
+            timing_break::explain_gaps(e, &gaps)
+        }
+    };
+    let mut decoded = finish(config, &format, decoder.roi, state).map_err(explain)?;
+    decoded.report.room.container_gaps = gaps.clone();
     // The compression is judged on the swing the video carries, before the depths scale it.
     if let Some(compression) = source.lossy_compression() {
         compression::check(&mut decoded.report, &format, &compression);
@@ -192,6 +215,7 @@ pub fn decode(
         to_full_depth(decoded, &config.depths)?,
         config.on_implausible,
     )
+    .map_err(explain)
 }
 
 /// The error an LED count mismatch of a capture without a frame rate is reported as: without

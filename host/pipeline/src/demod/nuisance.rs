@@ -114,9 +114,21 @@ pub struct RoomReport {
     /// ([`super::timing_break`]).
     #[serde(default)]
     pub timing_breaks: Vec<super::timing_break::TimingBreak>,
+    /// Frame periods the container's timestamps show missing, frames counted from the first
+    /// frame decoded ([`meb_core::capture::clock`]).
+    #[serde(default)]
+    pub container_gaps: Vec<meb_core::capture::clock::TimestampGap>,
 }
 
 impl RoomReport {
+    /// Whether nothing of the room was found: no flicker, no drift, no timing break.
+    pub fn is_quiet(&self) -> bool {
+        self.flicker.is_empty()
+            && self.exposure_drift.is_none()
+            && self.timing_breaks.is_empty()
+            && self.container_gaps.is_empty()
+    }
+
     /// Adds one window's findings.
     pub fn add(&mut self, window: &Nuisance) {
         if window.is_empty() && window.flicker.is_empty() {

@@ -14,30 +14,35 @@
 //!
 //! gives for every (k, s) the energy of the pixel sample its templates leave unexplained,
 //! R(k, s) = tr G − tr(QᵀGQ), Q an orthonormal basis of the constant and the templates and G
-//! the Gram matrix of the centred sample (per row band when a rolling shutter was fitted). A
-//! break counts only when the best (k, s) leaves little more than noise,
-//! R ≤ [`EXPLAINED_NOISE`]·(F − 1 − N)·σ²_G: a misfit of another cause (a wrong exposure, an
-//! unmodelled nuisance) is explained by no single jump of all carriers at once. When the window
-//! was decoded plausibly with one timing, the break must also leave at least
+//! the Gram matrix of the centred sample (per row band when a rolling shutter was fitted).
+//!
+//! In a window one timing decoded plausibly, a break counts only when the best (k, s) leaves
+//! little more than noise, R ≤ [`EXPLAINED_NOISE`]·(F − 1 − N)·σ²_G, and at least
 //! [`BREAK_SIGNIFICANCE`]·σ²_G less than that timing (a likelihood-ratio test, the break's
 //! position being its one extra parameter). A break a few frames from an end is absorbed by a
 //! whole-window timing with its rate ratio and exposure off: a drop 3 frames from the start of
 //! a 128-frame window left 4.3 σ²_G more with that timing than with the break, and its gains
-//! were up to 8.5 % off. A refused window has no timing to compete with: there the break
-//! must leave at most 1/[`GAIN_OVER_UNBROKEN`] of what the same half's model leaves without
-//! a break.
+//! were up to 8.5 % off.
+//!
+//! A refused window has no timing to compete with: there the break must leave at most
+//! 1/[`GAIN_OVER_UNBROKEN`] of what the same half's model leaves without a break. A misfit of
+//! another cause (a wrong exposure or LED count, an unmodelled nuisance) is explained by no
+//! single jump of all carriers at once, so it fails this test. The noise test does not apply
+//! there: an object that turns leaves more than noise with any timing (a drop in a 64-frame
+//! window of a turning ellipsoid: 3.5–5× the noise energy with the break, 8–210× without), and
+//! the pieces the break cuts the window into must then decode plausibly on their own.
 
+use super::DemodError;
 use super::fit::TimingModel;
 use super::waveform::ReceivedWaveform;
+use meb_core::capture::clock::TimestampGap;
 use nalgebra::DMatrix;
 use serde::{Deserialize, Serialize};
 
-/// The best break leaves at most this multiple of the noise energy unexplained.
+/// In a window one timing decoded, the best break leaves at most this multiple of the noise
+/// energy unexplained …
 pub const EXPLAINED_NOISE: f64 = 1.5;
-/// … and, in a refused window, at most 1/this of what the same model leaves without a break
-/// (the halves' noise counts an LED the count leaves out, so the noise test alone passes);
-pub const GAIN_OVER_UNBROKEN: f64 = 4.0;
-/// … or, in a window one timing decoded, this many noise variances σ²_G less than that
+/// … and, in a window one timing decoded, this many noise variances σ²_G less than that
 /// timing. Over the break-free windows of the decode sweep, the room tests and the simulated
 /// decodes the best break left at most 0.06 σ²_G less; drops 3–109 frames into 128-frame
 /// windows of 320×180 captures left 4.3–290 σ²_G less. A break can leave as little as 1 σ²_G
@@ -47,6 +52,10 @@ pub const GAIN_OVER_UNBROKEN: f64 = 4.0;
 /// chip boundary of every carrier at the same frame (1.06 and 1.08 σ²_G more than the break;
 /// decoded with that timing, LED 2 came out 5 % low).
 pub const BREAK_SIGNIFICANCE: f64 = 0.5;
+/// In a refused window, the best break leaves at most 1/this of what the same model leaves
+/// without a break (the halves' noise counts an LED a wrong count leaves out, so a noise test
+/// would not tell that misfit from a break).
+pub const GAIN_OVER_UNBROKEN: f64 = 4.0;
 
 /// What the camera did at a break.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
@@ -181,11 +190,48 @@ pub fn find(
             })
             .sum::<f64>()
     });
-    let beats = match whole {
-        Some(w) => w - r >= BREAK_SIGNIFICANCE * noise,
+    match whole {
+        Some(w) => r <= EXPLAINED_NOISE * expected && w - r >= BREAK_SIGNIFICANCE * noise,
         None => r * GAIN_OVER_UNBROKEN <= unbroken,
-    };
-    (r <= EXPLAINED_NOISE * expected && beats).then_some(found)
+    }
+    .then_some(found)
+}
+
+/// `error` with the frames the container's timestamps show missing (`gaps`, non-empty) named
+/// as its likely cause: a refused window holding such a gap could not be re-aligned.
+pub fn explain_gaps(error: DemodError, gaps: &[TimestampGap]) -> DemodError {
+    let named = gaps
+        .iter()
+        .map(|g| format!("{} before frame {}", g.missing, g.frame))
+        .collect::<Vec<_>>()
+        .join(", ");
+    let problem = format!(
+        "the container's timestamps show frames missing ({named}): the camera dropped them, \
+         and every carrier's phase jumps there"
+    );
+    let advice = "decode a range of at least two carrier periods clear of the gap (--start, \
+                  --frames), or record again with the camera's frame rate fixed (no dropped \
+                  frames; on a phone, a shorter clip or a lower resolution)";
+    match error {
+        DemodError::LedCountMismatch {
+            requested,
+            detected,
+        } if detected > requested => DemodError::Implausible {
+            problems: format!(
+                "{problem}; {requested} LEDs requested and the video shows {detected} \
+                 modulated components, as a break leaves"
+            ),
+            advice: advice.into(),
+        },
+        DemodError::Implausible {
+            problems,
+            advice: a,
+        } => DemodError::Implausible {
+            problems: format!("{problem}; {problems}"),
+            advice: format!("{advice}; {a}"),
+        },
+        other => other,
+    }
 }
 
 /// The window's frames re-aligned at `found`: a repeated frame left out (one contiguous

@@ -3,6 +3,7 @@
 //! 3-D frame handed to the caller.
 
 use super::*;
+use crate::demod::nuisance::RoomReport;
 
 /// What became of a window.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
@@ -34,6 +35,11 @@ pub struct DecodeQuality {
     pub led_snr_db: Vec<f64>,
     /// The decoder's quality verdict (an implausible window is refused unless `--force`).
     pub verdict: crate::demod::quality::Verdict,
+    /// What the decoder found of the room in the window (flicker, exposure drift, frames the
+    /// camera dropped or repeated, with frames counted from the window's first decoded frame);
+    /// absent when it found nothing.
+    #[serde(default, skip_serializing_if = "RoomReport::is_quiet")]
+    pub room: RoomReport,
 }
 
 impl DecodeQuality {
@@ -48,6 +54,7 @@ impl DecodeQuality {
             median_noise: report.median_noise,
             led_snr_db: report.per_led.iter().map(|l| l.snr_db).collect(),
             verdict: report.verdict.clone(),
+            room: report.room.clone(),
         }
     }
 }
