@@ -174,9 +174,14 @@ pub(crate) fn chromium() -> Option<&'static str> {
     None
 }
 
-/// Headless Chromium with the flags a sandboxed CI needs and a throw-away profile.
+/// Headless Chromium with the flags a sandboxed CI needs and a throw-away profile. Chromium
+/// puts its singleton-socket folder in `TMPDIR`, not in the profile: it goes beside the
+/// profile, so a test leaves nothing in /tmp.
 pub(crate) fn headless(program: &str, profile: &Path) -> Command {
     let mut command = Command::new(program);
+    if let Some(beside) = profile.parent() {
+        command.env("TMPDIR", beside);
+    }
     command.args([
         "--headless",
         "--no-sandbox",

@@ -93,7 +93,10 @@ struct Browser {
 
 impl Browser {
     fn open(program: &str, profile: &Path, url: &str) -> Self {
+        // Chromium's singleton-socket folder goes to TMPDIR: beside the profile, not in /tmp.
+        let beside = profile.parent().unwrap_or(profile);
         let child = Command::new(program)
+            .env("TMPDIR", beside)
             .args([
                 "--headless",
                 "--no-sandbox",
